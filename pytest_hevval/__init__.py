@@ -1,0 +1,40 @@
+"""pytest-hevval: multi-fidelity behavioural validation of simulation models.
+
+The public API, importable without pytest or matplotlib being loaded::
+
+    from pytest_hevval import signal_characteristics, global_metric
+"""
+
+from .core import (
+    CHARACTERISTICS,
+    ScoredNode,
+    SignalCharacteristics,
+    TreeNode,
+    emergent,
+    error_origins,
+    global_metric,
+    score_tree,
+    normalised_error,
+    signal_characteristics,
+)
+from .errors import DataError, ExpressionError, HevvalError, SpecError
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "CHARACTERISTICS",
+    "DataError",
+    "ExpressionError",
+    "HevvalError",
+    "ScoredNode",
+    "SignalCharacteristics",
+    "SpecError",
+    "TreeNode",
+    "__version__",
+    "emergent",
+    "error_origins",
+    "global_metric",
+    "score_tree",
+    "normalised_error",
+    "signal_characteristics",
+]

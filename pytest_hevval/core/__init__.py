@@ -1,0 +1,37 @@
+"""The pure computational core: numpy and scipy only, no files, no pytest, no YAML."""
+
+from .characteristics import (
+    CHARACTERISTIC_LABELS,
+    CHARACTERISTICS,
+    SignalCharacteristics,
+    normalised_error,
+    signal_characteristics,
+)
+from .lag import LagSearch, correlation_curve, search_lag
+from .tree import (
+    ScoredNode,
+    TreeNode,
+    emergent,
+    error_origins,
+    global_metric,
+    iter_nodes,
+    score_tree,
+)
+
+__all__ = [
+    "CHARACTERISTICS",
+    "CHARACTERISTIC_LABELS",
+    "LagSearch",
+    "ScoredNode",
+    "SignalCharacteristics",
+    "TreeNode",
+    "correlation_curve",
+    "emergent",
+    "error_origins",
+    "global_metric",
+    "iter_nodes",
+    "score_tree",
+    "search_lag",
+    "normalised_error",
+    "signal_characteristics",
+]

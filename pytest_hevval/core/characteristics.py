@@ -1,0 +1,669 @@
+"""The six per-signal behavioural characteristics λ1–λ6 of the multi-fidelity algorithm.
+
+Pure numpy: no files, no pytest. One aligned pair (reference, simulated) sampled every ``dt``
+seconds goes in; a :class:`SignalCharacteristics` comes out.
+
+The work is done in one streaming pass over cache-sized chunks, so a 10^8-sample pair costs
+little more than reading both arrays once and needs no full-length temporaries. The lead/lag
+search then refines a coarse estimate from block means down to one sample (see
+:mod:`pytest_hevval.core.lag`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import DegenerateSignalError
+from .lag import _EXACT_LIMIT, LagSearch, _search, dot_overlap
+
+__all__ = [
+    "CHARACTERISTICS",
+    "CHARACTERISTIC_LABELS",
+    "CorrelationKind",
+    "SignalCharacteristics",
+    "normalised_error",
+    "signal_characteristics",
+]
+
+#: The seven characteristics in paper order (λ1 … λ7).
+CHARACTERISTICS: tuple[str, ...] = (
+    "lag_correlation",
+    "derivative_match",
+    "mae",
+    "rms",
+    "anomaly",
+    "error_std",
+    "emergent",
+)
+
+CHARACTERISTIC_LABELS: dict[str, str] = {
+    "lag_correlation": "λ1 lag correlation",
+    "derivative_match": "λ2 derivative match",
+    "mae": "λ3 MAE",
+    "rms": "λ4 RMS",
+    "anomaly": "λ5 anomaly (RMS−MAE)",
+    "error_std": "λ6 error spread",
+    "emergent": "λ7 emergent",
+}
+
+CorrelationKind = Literal["xcorr", "pearson"]
+
+# 2**15 float64 samples per side keep a chunk and its temporaries inside L2 cache.
+_CHUNK = 1 << 15
+# Below this many samples a single vectorised pass is faster than chunking.
+_SMALL = 1 << 17
+# Magnitudes beyond these would overflow or underflow sums of squares; rescale by a power of 2.
+_TOO_BIG = 2.0**400
+_TOO_SMALL = 2.0**-400
+
+
+@dataclass(frozen=True)
+class SignalCharacteristics:
+    """λ1–λ6 of one signal pair, with the physical errors they are built from.
+
+    Attributes
+    ----------
+    lambdas:
+        (λ1, …, λ6) in paper order: lag correlation, derivative match, MAE, RMS, anomaly,
+        error spread. Each lies in [0, 1]; 1 is a perfect match.
+    lag_s:
+        Lag of the peak of the mean-removed cross-correlation, in seconds. Negative means the
+        simulated signal lags the reference.
+    peak_correlation:
+        The normalised cross-correlation (same form as λ1) at ``lag_s``.
+    mae, rms, delta_e, error_std:
+        E_MAE, E_RMS, ΔE = E_RMS − E_MAE and σ (N−1) of e = y_ref − y_sim, in the signal's units.
+    mean_error:
+        Mean of e (bias), in the signal's units.
+    reference_range:
+        The normalising range R (y_ref,max − y_ref,min, or the declared range).
+    """
+
+    lambdas: tuple[float, float, float, float, float, float]
+    lag_s: float
+    peak_correlation: float
+    mae: float
+    rms: float
+    delta_e: float
+    error_std: float
+    mean_error: float
+    reference_range: float
+    n_samples: int
+    dt: float
+    correlation: CorrelationKind = "xcorr"
+    lag_search: LagSearch | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def lag_correlation(self) -> float:
+        return self.lambdas[0]
+
+    @property
+    def derivative_match(self) -> float:
+        return self.lambdas[1]
+
+    @property
+    def lambda_mae(self) -> float:
+        return self.lambdas[2]
+
+    @property
+    def lambda_rms(self) -> float:
+        return self.lambdas[3]
+
+    @property
+    def anomaly(self) -> float:
+        return self.lambdas[4]
+
+    @property
+    def lambda_error_std(self) -> float:
+        return self.lambdas[5]
+
+    def as_dict(self) -> dict[str, float | int | str | list[float]]:
+        return {
+            "lambdas": list(self.lambdas),
+            "lag_s": self.lag_s,
+            "peak_correlation": self.peak_correlation,
+            "mae": self.mae,
+            "rms": self.rms,
+            "delta_e": self.delta_e,
+            "error_std": self.error_std,
+            "mean_error": self.mean_error,
+            "reference_range": self.reference_range,
+            "n_samples": self.n_samples,
+            "dt": self.dt,
+            "correlation": self.correlation,
+        }
+
+
+@dataclass
+class _Sums:
+    """Running sums of one pass; merged across chunks and threads."""
+
+    n: int = 0
+    abs_error: float = 0.0
+    sq_error: float = 0.0
+    # Chan et al. running mean / M2 of the error, stable when the bias dwarfs the spread.
+    error_mean: float = 0.0
+    error_m2: float = 0.0
+    ref_sum: float = 0.0
+    sim_sum: float = 0.0
+    ref_sq: float = 0.0
+    sim_sq: float = 0.0
+    cross: float = 0.0
+    ref_min: float = math.inf
+    ref_max: float = -math.inf
+    sim_min: float = math.inf
+    sim_max: float = -math.inf
+    sign_matches: int = 0
+
+    def merge(self, other: _Sums) -> None:
+        if other.n == 0:
+            return
+        n = self.n + other.n
+        delta = other.error_mean - self.error_mean
+        self.error_m2 += other.error_m2 + delta * delta * self.n * other.n / n
+        self.error_mean += delta * other.n / n
+        self.n = n
+        self.abs_error += other.abs_error
+        self.sq_error += other.sq_error
+        self.ref_sum += other.ref_sum
+        self.sim_sum += other.sim_sum
+        self.ref_sq += other.ref_sq
+        self.sim_sq += other.sim_sq
+        self.cross += other.cross
+        self.ref_min = min(self.ref_min, other.ref_min)
+        self.ref_max = max(self.ref_max, other.ref_max)
+        self.sim_min = min(self.sim_min, other.sim_min)
+        self.sim_max = max(self.sim_max, other.sim_max)
+        self.sign_matches += other.sign_matches
+
+
+FloatArray = npt.NDArray[np.float64]
+AnyFloatArray = npt.NDArray[np.floating]
+
+
+class _Scratch:
+    """Chunk-sized buffers owned by one thread, reused for every chunk it processes."""
+
+    def __init__(self, size: int, convert: bool) -> None:
+        self.error = np.empty(size, dtype=np.float64)
+        self.ones = np.ones(size, dtype=np.float64)
+        self.up = np.empty(size, dtype=np.bool_)
+        self.down = np.empty(size, dtype=np.bool_)
+        self.key = np.empty(size, dtype=np.int8)
+        self.ref = np.empty(size, dtype=np.float64) if convert else None
+        self.sim = np.empty(size, dtype=np.float64) if convert else None
+
+
+def _as_float64(x: AnyFloatArray, scale: float, buffer: FloatArray | None) -> FloatArray:
+    if buffer is None:
+        return x  # type: ignore[return-value]  # float64 and unscaled: used in place
+    out = buffer[: x.shape[0]]
+    if scale != 1.0:
+        np.multiply(x, scale, out=out, dtype=np.float64)
+    else:
+        np.copyto(out, x)
+    return out
+
+
+def _derivative_key(
+    y: AnyFloatArray, i0: int, i1: int, scratch: _Scratch, out: npt.NDArray[np.int8]
+) -> npt.NDArray[np.int8]:
+    """sign(y[i+1] − y[i−1]) for i in [i0, i1) as int8, from two comparisons.
+
+    For finite floats a − b > 0 exactly when a > b (gradual underflow never rounds a nonzero
+    difference to 0), so comparing the neighbours gives the sign of the central difference
+    without forming it, and the comparison is the same before and after an exact rescale.
+    """
+    m = i1 - i0
+    up = scratch.up[:m]
+    down = scratch.down[:m]
+    np.greater(y[i0 + 1 : i1 + 1], y[i0 - 1 : i1 - 1], out=up)
+    np.less(y[i0 + 1 : i1 + 1], y[i0 - 1 : i1 - 1], out=down)
+    return np.subtract(up.view(np.int8), down.view(np.int8), out=out)
+
+
+_QUARTER = np.full(4, 0.25, dtype=np.float64)
+
+
+def _chunk_sums(
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    start: int,
+    stop: int,
+    scale: float,
+    scratch: _Scratch,
+    quarter: tuple[FloatArray, FloatArray] | None,
+) -> _Sums:
+    """Sums over samples [start, stop) of the whole record.
+
+    The minimum and maximum of the simulated signal are left at ±inf: the caller derives or
+    computes them only when they can matter (see :func:`_sim_extremes_needed`).
+    """
+    n_total = ref.shape[0]
+    m = stop - start
+    r = _as_float64(ref[start:stop], scale, scratch.ref)
+    s = _as_float64(sim[start:stop], scale, scratch.sim)
+    ones = scratch.ones[:m]
+    out = _Sums(n=m)
+    e = np.subtract(r, s, out=scratch.error[:m])
+    out.sq_error = float(np.dot(e, e))
+    error_sum = float(np.dot(e, ones))
+    out.error_mean = error_sum / m
+    if out.error_mean * error_sum <= 0.5 * out.sq_error:
+        # Σe² − (Σe)²/m loses at most one bit to cancellation when the spread is at least
+        # the bias, and saves a pass over the chunk.
+        out.error_m2 = out.sq_error - out.error_mean * error_sum
+    else:
+        centred = e - out.error_mean
+        out.error_m2 = float(np.dot(centred, centred))
+    out.abs_error = float(np.dot(np.abs(e, out=e), ones))
+    out.ref_sq = float(np.dot(r, r))
+    out.sim_sq = float(np.dot(s, s))
+    out.cross = float(np.dot(r, s))
+    out.ref_min = float(r.min())
+    out.ref_max = float(r.max())
+    if quarter is not None:
+        # The block means by 4 of the lag pyramid come from the chunk while it is in cache;
+        # their sum (×4, exact) is the chunk's sum. Chunks start on multiples of 4.
+        q0 = start // 4
+        q1 = q0 + m // 4
+        whole = (m // 4) * 4
+        rq = np.matmul(r[:whole].reshape(-1, 4), _QUARTER, out=quarter[0][q0:q1])
+        sq = np.matmul(s[:whole].reshape(-1, 4), _QUARTER, out=quarter[1][q0:q1])
+        out.ref_sum = 4.0 * float(np.dot(rq, ones[: q1 - q0])) + float(r[whole:].sum())
+        out.sim_sum = 4.0 * float(np.dot(sq, ones[: q1 - q0])) + float(s[whole:].sum())
+    else:
+        out.ref_sum = float(np.dot(r, ones))
+        out.sim_sum = float(np.dot(s, ones))
+    # Central differences: the first and last sample of the record have derivative 0.
+    i0 = max(start, 1)
+    i1 = min(stop, n_total - 1)
+    if i1 > i0:
+        key_r = _derivative_key(ref, i0, i1, scratch, scratch.key[: i1 - i0])
+        key_s = _derivative_key(sim, i0, i1, scratch, scratch.up[: i1 - i0].view(np.int8))
+        out.sign_matches = int(
+            np.count_nonzero(np.equal(key_r, key_s, out=scratch.down[: i1 - i0]))
+        )
+    # Endpoints (derivative 0 on both sides) always agree.
+    out.sign_matches += int(start == 0) + int(stop == n_total and n_total > 1)
+    return out
+
+
+def _all_sums(
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    scale: float,
+    workers: int,
+    quarter: tuple[FloatArray, FloatArray] | None = None,
+) -> _Sums:
+    n = ref.shape[0]
+    convert = scale != 1.0 or ref.dtype != np.float64 or sim.dtype != np.float64
+    if n <= _SMALL:
+        with np.errstate(all="ignore"):
+            return _chunk_sums(ref, sim, 0, n, scale, _Scratch(n, convert), quarter)
+    bounds = [*range(0, n, _CHUNK), n]
+    spans = list(itertools.pairwise(bounds))
+
+    def run(part: Sequence[tuple[int, int]]) -> _Sums:
+        acc = _Sums()
+        scratch = _Scratch(_CHUNK, convert)
+        # Squares may overflow or underflow here (a rescaled pass follows) and NaN or inf
+        # input is reported by the caller, so no floating-point warning is wanted. The error
+        # state is per thread, hence set inside each worker.
+        with np.errstate(all="ignore"):
+            for start, stop in part:
+                acc.merge(_chunk_sums(ref, sim, start, stop, scale, scratch, quarter))
+        return acc
+
+    if workers <= 1:
+        return run(spans)
+    # numpy releases the GIL inside its loops, so threads share the pass across cores. Each
+    # takes one contiguous run of chunks so that the merge order stays fixed.
+    per = math.ceil(len(spans) / workers)
+    parts = [spans[i : i + per] for i in range(0, len(spans), per)]
+    total = _Sums()
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for partial in pool.map(run, parts):
+            total.merge(partial)
+    return total
+
+
+def _check_inputs(
+    reference: npt.ArrayLike, simulated: npt.ArrayLike, dt: float
+) -> tuple[FloatArray, FloatArray]:
+    ref = np.asarray(reference)
+    sim = np.asarray(simulated)
+    if ref.ndim != 1 or sim.ndim != 1:
+        raise DegenerateSignalError(
+            f"signals must be one-dimensional (got shapes {ref.shape} and {sim.shape})"
+        )
+    if ref.shape[0] != sim.shape[0]:
+        raise DegenerateSignalError(
+            f"reference and simulated signals differ in length ({ref.shape[0]} vs "
+            f"{sim.shape[0]} samples)",
+            hint="align both onto one time grid first",
+        )
+    if ref.shape[0] < 3:
+        raise DegenerateSignalError(
+            f"at least 3 samples are needed (got {ref.shape[0]})",
+            hint="widen the window or raise the sample rate",
+        )
+    for name, arr in (("reference", ref), ("simulated", sim)):
+        if not (np.issubdtype(arr.dtype, np.floating) or np.issubdtype(arr.dtype, np.integer)):
+            raise DegenerateSignalError(f"{name} signal must be numeric (got dtype {arr.dtype})")
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise DegenerateSignalError(f"dt must be a positive, finite number of seconds (got {dt!r})")
+    # Keep float32/float64 storage as is (the chunks are promoted); promote the rest.
+    if ref.dtype not in (np.float32, np.float64):
+        ref = ref.astype(np.float64)
+    if sim.dtype not in (np.float32, np.float64):
+        sim = sim.astype(np.float64)
+    return ref, sim
+
+
+def _quarter_buffers(
+    n: int, dt: float, max_lag_s: float | None
+) -> tuple[FloatArray, FloatArray] | None:
+    """Storage for the block means by 4 when the lag search will build a pyramid."""
+    if n <= _EXACT_LIMIT:
+        return None
+    if max_lag_s is not None:
+        # Invalid values are reported later, in the usual order of checks.
+        if not isinstance(max_lag_s, (int, float)) or not math.isfinite(max_lag_s):
+            return None
+        if max_lag_s < 0 or round(max_lag_s / dt) < 1:
+            return None
+    return np.empty(n // 4, dtype=np.float64), np.empty(n // 4, dtype=np.float64)
+
+
+def _sim_extremes_needed(sums: _Sums) -> bool:
+    """Whether the simulated signal's min and max can change the finiteness or rescale verdict.
+
+    A finite Σ s² below 2^800 proves every |s| < 2^400 and every s finite, so the simulated
+    peak cannot call for the downscale; it can call for the upscale only if the reference's
+    peak is itself below 2^-400 (or zero).
+    """
+    if not (math.isfinite(sums.sim_sq) and sums.sim_sq < _TOO_BIG * _TOO_BIG):
+        return True
+    if not (math.isfinite(sums.ref_min) and math.isfinite(sums.ref_max)):
+        return True
+    return max(abs(sums.ref_min), abs(sums.ref_max)) < _TOO_SMALL
+
+
+def _first_non_finite(arr: FloatArray) -> int:
+    bad = np.flatnonzero(~np.isfinite(arr))
+    return int(bad[0]) if bad.size else -1
+
+
+def normalised_error(error: float, reference_range: float) -> float:
+    """λ = 1 − E / R clipped to [0, 1] (eqs. 8, 9, 10 and 12 of the paper).
+
+    ``error`` is E_MAE, E_RMS, ΔE or σ in the signal's units and ``reference_range`` is
+    R = y_ref,max − y_ref,min (or a declared range).
+    """
+    if not reference_range > 0:
+        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
+    return float(min(1.0, max(0.0, 1.0 - error / reference_range)))
+
+
+_normalised = normalised_error
+
+
+def signal_characteristics(
+    reference: npt.ArrayLike,
+    simulated: npt.ArrayLike,
+    *,
+    dt: float,
+    max_lag_s: float | None = None,
+    correlation: CorrelationKind = "xcorr",
+    reference_range: float | None = None,
+    workers: int | None = None,
+) -> SignalCharacteristics:
+    r"""Compute λ1–λ6 for one aligned signal pair.
+
+    Parameters
+    ----------
+    reference, simulated:
+        Equal-length, one-dimensional samples on one time grid. float32 input is accepted and
+        accumulated in float64.
+    dt:
+        Sample spacing in seconds.
+    max_lag_s:
+        Half-width of the lead/lag search. ``None`` searches ±10 % of the record (at least
+        one sample).
+    correlation:
+        ``"xcorr"`` (default, the paper's form) or ``"pearson"`` for λ1.
+    reference_range:
+        Declared normalising range for λ3–λ6. Needed when the reference is constant.
+    workers:
+        Threads for long signals; default ``min(2, os.cpu_count())``.
+
+    Returns
+    -------
+    SignalCharacteristics
+
+    Raises
+    ------
+    DegenerateSignalError
+        Different lengths, fewer than 3 samples, NaN or inf, dt ≤ 0, or a constant reference
+        without a declared range.
+
+    Notes
+    -----
+    With e = y_ref − y_sim and R = max(y_ref) − min(y_ref):
+
+    * λ1 = Σ y_ref·y_sim / √(Σ y_ref² · Σ y_sim²) (MATLAB ``xcorr(ref, sim, 'coeff')`` at lag 0),
+      or Pearson's r clipped to [0, 1].
+    * λ2 = #{i : sign(ẏ_ref,i) = sign(ẏ_sim,i)} / N with central differences and ẏ = 0 at
+      both ends.
+    * λ3 = 1 − E_MAE/R, λ4 = 1 − E_RMS/R, λ5 = 1 − (E_RMS − E_MAE)/R, λ6 = 1 − σ/R with σ
+      using N − 1; each clipped to [0, 1].
+    """
+    ref, sim = _check_inputs(reference, simulated, dt)
+    n = int(ref.shape[0])
+    if workers is None:
+        import os
+
+        workers = min(2, os.cpu_count() or 1)
+
+    quarter = _quarter_buffers(n, dt, max_lag_s)
+    sums = _all_sums(ref, sim, 1.0, workers, quarter)
+    if _sim_extremes_needed(sums):
+        sums.sim_min = float(np.min(sim))
+        sums.sim_max = float(np.max(sim))
+    finite = all(math.isfinite(v) for v in (sums.ref_min, sums.ref_max, sums.sim_min, sums.sim_max))
+    if not finite:
+        for name, arr in (("reference", ref), ("simulated", sim)):
+            index = _first_non_finite(np.asarray(arr))
+            if index >= 0:
+                raise DegenerateSignalError(
+                    f"{name} signal contains NaN or inf (first at sample {index})",
+                    hint="set a gap policy (nan: omit) or clean the data",
+                )
+    # Unset simulated extremes are ±inf here only when they cannot decide the rescale below.
+    peak = max(abs(sums.ref_min), abs(sums.ref_max))
+    if math.isfinite(sums.sim_min):
+        peak = max(peak, abs(sums.sim_min), abs(sums.sim_max))
+    scale = 1.0
+    if peak > _TOO_BIG or (0.0 < peak < _TOO_SMALL):
+        # An exact power of two keeps every ratio bit-identical while the squares stay finite.
+        # Subnormal peaks need more than 2**1023; 2**1000 already makes them normal.
+        scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+        sums = _all_sums(ref, sim, scale, workers)
+
+    span = (sums.ref_max - sums.ref_min) / scale
+    if reference_range is not None:
+        if not (math.isfinite(reference_range) and reference_range > 0):
+            raise DegenerateSignalError(
+                f"reference_range must be a positive number (got {reference_range!r})"
+            )
+        span = float(reference_range)
+    elif span <= 0:
+        raise DegenerateSignalError(
+            f"the reference is constant (every sample is {sums.ref_min / scale:g}), so its "
+            "range is 0 and λ3–λ6 cannot be normalised",
+            hint="declare a normalising range (reference_range) for this signal",
+        )
+
+    mae = sums.abs_error / n / scale
+    rms = math.sqrt(sums.sq_error / n) / scale
+    # RMS ≥ MAE holds mathematically; rounding can break it by an ulp.
+    rms = max(rms, mae)
+    delta_e = rms - mae
+    error_std = math.sqrt(sums.error_m2 / (n - 1)) / scale
+    mean_error = sums.error_mean / scale
+
+    lag_correlation = _zero_lag_correlation(sums, correlation)
+    derivative_match = sums.sign_matches / n
+
+    if max_lag_s is None:
+        max_lag = max(1, n // 10)
+    else:
+        if not (math.isfinite(max_lag_s) and max_lag_s >= 0):
+            raise DegenerateSignalError(f"max_lag_s must be ≥ 0 (got {max_lag_s!r})")
+        max_lag = min(round(max_lag_s / dt), n - 1)
+    r_mean = sums.ref_sum / n / scale
+    s_mean = sums.sim_sum / n / scale
+    search, centred_peak = _search(
+        ref,
+        sim,
+        max_lag,
+        ref_mean=r_mean,
+        sim_mean=s_mean,
+        scale=scale,
+        workers=workers,
+        quarter=quarter,
+    )
+    del quarter
+    if centred_peak is None:
+        peak_correlation = _correlation_at(ref, sim, search.lag, sums, correlation, scale)
+    else:
+        peak_correlation = _correlation_from_centred(
+            ref, sim, search.lag, sums, correlation, scale, centred_peak, r_mean, s_mean
+        )
+
+    lambdas = (
+        lag_correlation,
+        derivative_match,
+        _normalised(mae, span),
+        _normalised(rms, span),
+        _normalised(delta_e, span),
+        _normalised(error_std, span),
+    )
+    return SignalCharacteristics(
+        lambdas=lambdas,
+        lag_s=search.lag * float(dt),
+        peak_correlation=peak_correlation,
+        mae=mae,
+        rms=rms,
+        delta_e=delta_e,
+        error_std=error_std,
+        mean_error=mean_error,
+        reference_range=span,
+        n_samples=n,
+        dt=float(dt),
+        correlation=correlation,
+        lag_search=search,
+    )
+
+
+def _zero_lag_correlation(sums: _Sums, kind: CorrelationKind) -> float:
+    if kind == "pearson":
+        n = sums.n
+        cov = sums.cross - sums.ref_sum * sums.sim_sum / n
+        var_r = sums.ref_sq - sums.ref_sum**2 / n
+        var_s = sums.sim_sq - sums.sim_sum**2 / n
+        return _coefficient(cov, var_r, var_s)
+    return _coefficient(sums.cross, sums.ref_sq, sums.sim_sq)
+
+
+def _coefficient(cross: float, power_a: float, power_b: float) -> float:
+    """cross / √(power_a·power_b) clipped to [0, 1], with the degenerate cases defined.
+
+    Two signals with no power (all zero, or constant for Pearson) are the same shape: 1.
+    One with power against one without share nothing: 0.
+    """
+    tiny = 1e-300
+    a_empty = power_a <= tiny
+    b_empty = power_b <= tiny
+    if a_empty and b_empty:
+        return 1.0
+    if a_empty or b_empty:
+        return 0.0
+    value = cross / math.sqrt(power_a) / math.sqrt(power_b)
+    return float(min(1.0, max(0.0, value)))
+
+
+def _correlation_at(
+    ref: FloatArray, sim: FloatArray, lag: int, sums: _Sums, kind: CorrelationKind, scale: float
+) -> float:
+    """Normalised correlation at one lag (``lag`` > 0 pairs ref[n+lag] with sim[n])."""
+    if lag == 0:
+        return _zero_lag_correlation(sums, kind)
+    n = ref.shape[0]
+    if lag > 0:
+        r = ref[lag:]
+        s = sim[: n - lag]
+    else:
+        r = ref[: n + lag]
+        s = sim[-lag:]
+    # Sums below are in the same (possibly rescaled) units as ``sums``.
+    cross = dot_overlap(r, s, scale)
+    if kind == "pearson":
+        m = r.shape[0]
+        r_sum = float(np.sum(r, dtype=np.float64)) * scale
+        s_sum = float(np.sum(s, dtype=np.float64)) * scale
+        cov = cross - r_sum * s_sum / m
+        var_r = dot_overlap(r, r, scale) - r_sum**2 / m
+        var_s = dot_overlap(s, s, scale) - s_sum**2 / m
+        return _coefficient(cov, var_r, var_s)
+    # MATLAB 'coeff' normalises by the zero-lag energies at every lag.
+    return _coefficient(cross, sums.ref_sq, sums.sim_sq)
+
+
+def _correlation_from_centred(
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    lag: int,
+    sums: _Sums,
+    kind: CorrelationKind,
+    scale: float,
+    centred: float,
+    r_mean: float,
+    s_mean: float,
+) -> float:
+    """:func:`_correlation_at` from the search's mean-removed C(lag), without another read.
+
+    Over the overlap of M samples, Σ r·s = C + μ_s·Σ r + μ_r·Σ s − M·μ_r·μ_s for the very means
+    C was centred with, and the overlap's sums are the whole record's minus the |lag| samples
+    that fall off its ends. Rounding stays that of summing Σ r·s directly.
+    """
+    if lag == 0:
+        return _zero_lag_correlation(sums, kind)
+    n = ref.shape[0]
+    k = abs(lag)
+    # lag > 0 pairs ref[lag:] with sim[:n−lag]: ref loses its head and sim its tail.
+    r_off = ref[:k] if lag > 0 else ref[n - k :]
+    s_off = sim[n - k :] if lag > 0 else sim[:k]
+    r_edge = np.asarray(r_off, dtype=np.float64) * scale
+    s_edge = np.asarray(s_off, dtype=np.float64) * scale
+    m = n - k
+    mu_r = r_mean * scale
+    mu_s = s_mean * scale
+    r_sum = sums.ref_sum - float(r_edge.sum())
+    s_sum = sums.sim_sum - float(s_edge.sum())
+    cross = centred + mu_s * r_sum + mu_r * s_sum - m * mu_r * mu_s
+    if kind == "pearson":
+        cov = cross - r_sum * s_sum / m
+        var_r = sums.ref_sq - float(np.dot(r_edge, r_edge)) - r_sum**2 / m
+        var_s = sums.sim_sq - float(np.dot(s_edge, s_edge)) - s_sum**2 / m
+        return _coefficient(cov, var_r, var_s)
+    return _coefficient(cross, sums.ref_sq, sums.sim_sq)

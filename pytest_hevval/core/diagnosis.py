@@ -1,0 +1,994 @@
+"""Residual diagnosis: which effect does the model lack, and is there one at all?
+
+Pure numpy/scipy: one aligned pair (reference, simulated) sampled every ``dt`` seconds and a
+set of explanatory candidate series go in; a :class:`Diagnosis` comes out.
+
+The residual r = reference − simulated is explained, in this order, by
+
+1. timing, gain and offset of the simulated signal itself (headline fields), and
+2. a forward selection over candidate series (measured channels, declared expressions,
+   derivatives, plus the automatic ``lag`` and ``gain`` candidates), each added only when its
+   coefficient is significant under a test that stays valid for strongly autocorrelated
+   residuals, with a family-wise correction over the candidates tried.
+
+Significance uses feasible GLS by AR(p) pre-whitening (Cochrane & Orcutt 1949) followed by a
+Newey-West (1987) HAC covariance with the Andrews (1991) plug-in bandwidth, which is the
+pre-whitened HAC estimator of Andrews & Monahan (1992). See ``docs/diagnosis.md`` for the
+formulas and the interpretation of every field.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from scipy import fft as sfft
+from scipy import signal as sps
+from scipy import stats
+
+from ..errors import DegenerateSignalError, SpecError
+from .lag import search_lag
+
+__all__ = [
+    "Candidate",
+    "CandidateFinding",
+    "Diagnosis",
+    "Whiteness",
+    "diagnose_residual",
+    "ljung_box",
+]
+
+FloatArray = npt.NDArray[np.float64]
+CandidateKind = Literal["declared", "channel", "derivative", "lag", "gain", "offset"]
+
+#: A gain error smaller than this (relative) is not material, however significant.
+GAIN_MATERIALITY = 0.005
+#: An offset smaller than this fraction of the reference range is not material.
+OFFSET_MATERIALITY = 0.005
+#: A candidate must raise the explained variance by at least this much to be selected.
+MIN_EXPLAINED_INCREASE = 0.005
+#: Ljung-Box lags, in samples of the (possibly decimated) regression grid.
+LJUNG_BOX_LAGS: tuple[int, ...] = (10, 20)
+
+# Highest AR order tried by the pre-whitening filter (chosen by BIC).
+_MAX_AR_ORDER = 10
+# Andrews & Monahan (1992) bound the AR(1) coefficient of the scores so that the plug-in
+# bandwidth stays finite when pre-whitening leaves a near-unit root.
+_RHO_CAP = 0.97
+# A standardised candidate whose variance left after projecting out the ones already kept is
+# below this fraction is a linear combination of them (|multiple correlation| > 0.999 999 5).
+_COLLINEAR = 1e-6
+# Relative singular-value cut-off when orthonormalising design matrices.
+_RCOND = 1e-10
+_DEFAULT_MAX_LAG_S = 10.0
+_N_PEAKS = 3
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One explanatory series on the aligned grid of the residual.
+
+    Attributes
+    ----------
+    name:
+        Unique label, used in findings and the summary.
+    kind:
+        Where the series comes from: a ``"declared"`` expression, a measured ``"channel"``,
+        a ``"derivative"`` of one, or one of the automatic kinds ``"lag"``, ``"gain"`` and
+        ``"offset"``.
+    values:
+        The series, one value per sample of the reference.
+    """
+
+    name: str
+    kind: CandidateKind
+    values: npt.NDArray[Any]
+
+
+@dataclass(frozen=True)
+class CandidateFinding:
+    """What one candidate explains of the residual.
+
+    Attributes
+    ----------
+    name, kind:
+        As in the :class:`Candidate` (``kind="offset"`` is the constant term).
+    explained_fraction:
+        Centred R² of the residual regressed on this candidate alone plus an intercept, at the
+        original sample rate. For the offset: the share of the residual's mean square carried
+        by its mean, mean(r)² / mean(r²).
+    joint_explained_fraction:
+        R² of the residual on all candidates selected up to and including this one; ``None``
+        when the candidate was not selected.
+    coefficient:
+        Effect size in the candidate's own units: r ≈ coefficient · candidate. For ``lag`` it is
+        the delay of the simulated signal in seconds (positive: simulated late), for ``gain``
+        it is gain − 1, for ``offset`` the offset in the signal's units. From the final joint
+        model when selected, otherwise from the candidate alone.
+    interval:
+        (1 − alpha) confidence interval of the coefficient (pre-whitened HAC).
+    p_value:
+        Two-sided p-value of coefficient = 0, unadjusted for multiplicity.
+    significant:
+        ``p_value`` is below the family-wise corrected level (Holm level at selection for
+        selected candidates, Bonferroni over all candidates otherwise).
+    selected:
+        The candidate entered the joint model (for the offset: it is significant and material).
+    rank:
+        Position in :attr:`Diagnosis.candidates`, 1 = best.
+    """
+
+    name: str
+    kind: str
+    explained_fraction: float
+    joint_explained_fraction: float | None
+    coefficient: float
+    interval: tuple[float, float]
+    p_value: float
+    significant: bool
+    selected: bool
+    rank: int
+
+
+@dataclass(frozen=True)
+class Whiteness:
+    """Ljung-Box portmanteau test of the remaining residual.
+
+    Attributes
+    ----------
+    lags:
+        The lags h at which Q(h) was evaluated, in samples of the regression grid.
+    statistic:
+        Q(h) at the lag giving the smallest p-value.
+    p_value:
+        That smallest p-value, Bonferroni-adjusted over ``lags``.
+    white:
+        ``p_value >= alpha``: no autocorrelation detected.
+    """
+
+    lags: tuple[int, ...]
+    statistic: float
+    p_value: float
+    white: bool
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Where a residual comes from. Every field is explained in ``docs/diagnosis.md``."""
+
+    lag_s: float
+    gain: float
+    gain_interval: tuple[float, float]
+    offset: float
+    offset_interval: tuple[float, float]
+    timing_significant: bool
+    gain_significant: bool
+    offset_significant: bool
+    candidates: tuple[CandidateFinding, ...]
+    explained_fraction: float
+    remaining: Whiteness
+    dominant_frequencies_hz: tuple[float, ...]
+    effective_samples: float
+    summary: str
+    notes: tuple[str, ...] = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-safe mapping: tuples become lists, non-finite floats become ``None``."""
+        result = _json_safe(asdict(self))
+        assert isinstance(result, dict)
+        return result
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        number = float(value)
+        return number if math.isfinite(number) else None
+    return value
+
+
+# ---------------------------------------------------------------------------------------------
+# Statistics on the regression grid
+# ---------------------------------------------------------------------------------------------
+
+
+def _block_means(x: FloatArray, factor: int) -> FloatArray:
+    if factor == 1:
+        return x
+    blocks = x.shape[0] // factor
+    means = x[: blocks * factor].reshape(blocks, factor).mean(axis=1)
+    return np.asarray(means, dtype=np.float64)
+
+
+def _lag_matrix(u: FloatArray, order: int) -> FloatArray:
+    """Columns u[t−1], …, u[t−order] for t = order … n−1."""
+    n = u.shape[0]
+    return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
+
+
+def _ar_order(u: FloatArray) -> int:
+    """AR order by BIC (Schwarz 1978), all orders fitted on the same sample.
+
+    One QR of the lag matrix gives every order's residual sum of squares: the first p columns
+    of Q span the AR(p) regressors.
+    """
+    n = u.shape[0]
+    top = min(_MAX_AR_ORDER, max(0, n // 10 - 1))
+    if top == 0:
+        return 0
+    y = u[top:]
+    q, _ = np.linalg.qr(_lag_matrix(u, top))
+    proj = (q.T @ y) ** 2
+    total = float(y @ y)
+    if total <= 0.0:
+        return 0
+    ssr = total - np.concatenate(([0.0], np.cumsum(proj)))
+    ssr = np.maximum(ssr, total * 1e-15)
+    m = y.shape[0]
+    bic = m * np.log(ssr / m) + np.arange(top + 1) * math.log(m)
+    return int(np.argmin(bic))
+
+
+def _ar_fit(u: FloatArray, order: int) -> FloatArray:
+    """Least-squares AR(order) coefficients φ of u (no intercept: u has mean zero).
+
+    The persistence Σφ is biased low by about (1 + 3Σφ)/n (Kendall 1954, for AR(1)); that bias
+    makes tests anti-conservative near a unit root, so it is added back to φ₁, keeping Σφ ≤ 1.
+    """
+    if order == 0 or u.shape[0] <= 2 * order + 2:
+        return np.zeros(0)
+    y = u[order:]
+    if float(y @ y) == 0.0:
+        return np.zeros(0)
+    fitted, *_ = np.linalg.lstsq(_lag_matrix(u, order), y, rcond=None)
+    phi = np.array(fitted, dtype=np.float64)
+    persistence = float(np.sum(phi))
+    if persistence > 0.0:
+        corrected = min(persistence + (1.0 + 3.0 * persistence) / y.shape[0], 1.0)
+        phi[0] += corrected - persistence
+    return phi
+
+
+def _lag1(x: FloatArray) -> FloatArray:
+    """Lag-one autocorrelation of each column about its mean; 1 for a constant column."""
+    centred = x - x.mean(axis=0)
+    num = np.einsum("ij,ij->j", centred[1:], centred[:-1])
+    den = np.einsum("ij,ij->j", centred, centred)
+    scale = np.einsum("ij,ij->j", x, x)
+    constant = den <= 1e-24 * np.maximum(scale, 1e-300)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(constant, 1.0, num / np.where(constant, 1.0, den))
+    return np.asarray(np.clip(rho, -1.0, 1.0), dtype=np.float64)
+
+
+def _effective_df(n: int, k: int, phi: FloatArray, rho: FloatArray) -> npt.NDArray[np.int64]:
+    """Degrees of freedom n (1 − φρ)/(1 + φρ) − k per regressor (Bretherton et al. 1999).
+
+    φ is the persistence of the noise (Σφ of its AR model) and ρ the lag-one autocorrelation
+    of the regressor: a slowly varying regressor in persistent noise offers few independent
+    comparisons however many samples there are, and the estimated filter is least accurate
+    exactly there.
+    """
+    persistence = float(np.clip(np.sum(phi), 0.0, 1.0)) if phi.shape[0] else 0.0
+    prod = np.clip(persistence * rho, 0.0, 1.0)
+    eff = n * (1.0 - prod) / (1.0 + prod) - k
+    return np.asarray(np.clip(np.floor(eff), 1, max(n - k, 1)), dtype=np.int64)
+
+
+def _whiten(x: FloatArray, phi: FloatArray) -> FloatArray:
+    """x_t − Σ φ_i x_{t−i} for t = p … n−1, on a vector or on every column of a matrix."""
+    p = phi.shape[0]
+    if p == 0:
+        return x
+    n = x.shape[0]
+    out = np.array(x[p:], dtype=np.float64, copy=True)
+    for i in range(1, p + 1):
+        out -= phi[i - 1] * x[p - i : n - i]
+    return out
+
+
+def _orthonormal(x: FloatArray) -> FloatArray:
+    """Orthonormal basis of the column space of x, dropping numerically null directions."""
+    if x.shape[1] == 0:
+        return x
+    u, s, _ = np.linalg.svd(x, full_matrices=False)
+    keep = s > _RCOND * max(float(s[0]), 1e-300)
+    return np.asarray(u[:, keep], dtype=np.float64)
+
+
+def _autocovariances(scores: FloatArray, max_lag: int) -> FloatArray:
+    """Σ_t s_t s_{t−l} for l = 0 … max_lag, per column, by FFT."""
+    n = scores.shape[0]
+    size = sfft.next_fast_len(2 * n)
+    spectrum = np.fft.rfft(scores, n=size, axis=0)
+    acov = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)
+    return np.asarray(acov[: max_lag + 1], dtype=np.float64)
+
+
+def _andrews_bandwidth(scores: FloatArray) -> float:
+    """Andrews (1991) AR(1) plug-in bandwidth S_T for the Bartlett kernel.
+
+    α(1) = Σ_a 4ρ_a²σ_a⁴ / ((1−ρ_a)⁶(1+ρ_a)²) / Σ_a σ_a⁴ / (1−ρ_a)⁴ and
+    S_T = 1.1447 (α(1) T)^{1/3}, with ρ_a, σ_a² the AR(1) coefficient and innovation variance
+    of score column a.
+    """
+    n = scores.shape[0]
+    lagged = scores[:-1]
+    lead = scores[1:]
+    denom = np.einsum("ij,ij->j", lagged, lagged)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.einsum("ij,ij->j", lagged, lead) / denom
+    rho = np.clip(np.nan_to_num(rho, nan=0.0), -_RHO_CAP, _RHO_CAP)
+    innovations = lead - lagged * rho
+    sigma2 = np.einsum("ij,ij->j", innovations, innovations) / max(n - 1, 1)
+    num = float(np.sum(4 * rho**2 * sigma2**2 / ((1 - rho) ** 6 * (1 + rho) ** 2)))
+    den = float(np.sum(sigma2**2 / (1 - rho) ** 4))
+    if den <= 0.0:
+        return 1.0
+    return float(1.1447 * (num / den * n) ** (1.0 / 3.0))
+
+
+def _bartlett_weights(bandwidth: float, max_lag: int) -> FloatArray:
+    lags = np.arange(max_lag + 1, dtype=np.float64)
+    return np.asarray(np.clip(1.0 - lags / max(bandwidth, 1.0), 0.0, None), dtype=np.float64)
+
+
+def _long_run_sums(scores: FloatArray) -> FloatArray:
+    """Newey-West long-run variance Σ_t s_t² + 2 Σ_l w_l Σ_t s_t s_{t−l}, per column.
+
+    Each column gets its own Andrews bandwidth.
+    """
+    n = scores.shape[0]
+    bandwidths = np.array(
+        [_andrews_bandwidth(scores[:, [j]]) for j in range(scores.shape[1])], dtype=np.float64
+    )
+    max_lag = int(min(n - 1, math.ceil(float(np.max(bandwidths, initial=1.0)))))
+    acov = _autocovariances(scores, max_lag)
+    lags = np.arange(max_lag + 1, dtype=np.float64)[:, None]
+    weights = np.clip(1.0 - lags / np.maximum(bandwidths, 1.0)[None, :], 0.0, None)
+    weights[0] = 0.5
+    return np.asarray(np.maximum(2.0 * np.sum(weights * acov, axis=0), 0.0), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """Pre-whitened OLS with a HAC covariance."""
+
+    beta: FloatArray
+    cov: FloatArray
+    df: npt.NDArray[np.int64]
+    phi: FloatArray
+
+
+def _hac_fit(y: FloatArray, x: FloatArray, order: int) -> _Fit:
+    """Feasible GLS: OLS, AR(order) of its residual, filter y and X, OLS, Newey-West sandwich.
+
+    cov(β) = (X*ᵀX*)⁺ S (X*ᵀX*)⁺ · n/(n−k), S = Γ₀ + Σ_l w_l (Γ_l + Γ_lᵀ), Γ_l = Σ_t g_t g_{t−l}ᵀ,
+    g_t = x*_t e*_t.
+    """
+    beta0, *_ = np.linalg.lstsq(x, y, rcond=None)
+    phi = _ar_fit(y - x @ beta0, order)
+    ys = _whiten(y, phi)
+    xs = _whiten(x, phi)
+    beta, *_ = np.linalg.lstsq(xs, ys, rcond=_RCOND)
+    e = ys - xs @ beta
+    g = xs * e[:, None]
+    n, k = xs.shape
+    bandwidth = _andrews_bandwidth(g)
+    max_lag = int(min(n - 1, math.ceil(bandwidth)))
+    weights = _bartlett_weights(bandwidth, max_lag)
+    s = g.T @ g
+    for lag in range(1, max_lag + 1):
+        if weights[lag] <= 0.0:
+            break
+        gamma = g[lag:].T @ g[:-lag]
+        s += weights[lag] * (gamma + gamma.T)
+    bread = np.linalg.pinv(xs.T @ xs, rcond=_RCOND)
+    cov = bread @ s @ bread * (n / max(n - k, 1))
+    return _Fit(
+        beta=np.asarray(beta, dtype=np.float64),
+        cov=np.asarray(cov, dtype=np.float64),
+        df=_effective_df(y.shape[0], k, phi, _lag1(x)),
+        phi=phi,
+    )
+
+
+@dataclass(frozen=True)
+class _Screen:
+    """Per-candidate coefficient, standard error and p-value when added to a base model."""
+
+    beta: FloatArray
+    se: FloatArray
+    p: FloatArray
+    df: npt.NDArray[np.int64]
+
+
+def _screen(y: FloatArray, base: FloatArray, z: FloatArray, phi: FloatArray) -> _Screen:
+    """Test every column of z, one at a time, added to the base design, in one vectorised pass.
+
+    By Frisch-Waugh-Lovell the coefficient of z_j in the whitened joint model is
+    β_j = z̃_jᵀỹ / z̃_jᵀz̃_j, with ỹ, z̃_j the whitened series with the whitened base projected
+    out, and its HAC variance is LRV(z̃_j e_j) / (z̃_jᵀz̃_j)².
+    """
+    ys = _whiten(y, phi)
+    q = _orthonormal(_whiten(base, phi))
+    zs = _whiten(z, phi)
+    y_t = ys - q @ (q.T @ ys)
+    z_t = zs - q @ (q.T @ zs)
+    zz = np.einsum("ij,ij->j", z_t, z_t)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        beta = (z_t.T @ y_t) / zz
+        beta = np.where(zz > 0, beta, 0.0)
+        e = y_t[:, None] - z_t * beta[None, :]
+        lrv = _long_run_sums(z_t * e)
+        n = ys.shape[0]
+        k = q.shape[1] + 1
+        se = np.sqrt(lrv * (n / max(n - k, 1))) / zz
+        t = np.abs(beta) / se
+    df = _effective_df(y.shape[0], k, phi, _lag1(z))
+    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
+    p = np.where(zz > 0, p, 1.0)
+    return _Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+
+
+def _effective_samples(u: FloatArray, order: int) -> float:
+    """n γ₀ (1 − Σφ)² / σ²: samples of white noise giving the same variance of the mean."""
+    n = u.shape[0]
+    centred = u - float(np.mean(u))
+    gamma0 = float(centred @ centred) / n
+    phi = _ar_fit(centred, order)
+    if gamma0 <= 0.0 or phi.shape[0] == 0:
+        return float(n)
+    residual = _whiten(centred, phi)
+    sigma2 = float(residual @ residual) / residual.shape[0]
+    if sigma2 <= 0.0:
+        return 1.0
+    eff = n * gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2
+    return float(min(max(eff, 1.0), n))
+
+
+def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> Whiteness:
+    """Ljung-Box (1978) portmanteau test of no autocorrelation up to each lag h.
+
+    Notes
+    -----
+    Q(h) = n (n + 2) Σ_{k=1}^{h} ρ̂_k² / (n − k), which is χ²(h) under white noise. The reported
+    statistic is the Q(h) with the smallest p-value; that p-value is multiplied by the number
+    of lags (Bonferroni), so that testing several lags does not inflate the error rate.
+    """
+    u = np.asarray(x, dtype=np.float64)
+    n = u.shape[0]
+    use = tuple(sorted({int(h) for h in lags if 1 <= int(h) < n}))
+    if not use:
+        return Whiteness(lags=(), statistic=0.0, p_value=1.0, white=True)
+    centred = u - float(np.mean(u))
+    acov = _autocovariances(centred[:, None], max(use))[:, 0]
+    if acov[0] <= 0.0:
+        return Whiteness(lags=use, statistic=0.0, p_value=1.0, white=True)
+    rho = acov[1:] / acov[0]
+    terms = rho**2 / (n - np.arange(1, max(use) + 1))
+    best_q, best_p = 0.0, 1.0
+    for h in use:
+        q = float(n * (n + 2) * np.sum(terms[:h]))
+        p = float(stats.chi2.sf(q, h))
+        if p < best_p or h == use[0]:
+            best_q, best_p = q, p
+    adjusted = min(1.0, best_p * len(use))
+    return Whiteness(lags=use, statistic=best_q, p_value=adjusted, white=adjusted >= alpha)
+
+
+def _dominant_frequencies(u: FloatArray, dt: float) -> tuple[float, ...]:
+    """The largest local maxima (DC excluded) of the Welch (1967) spectrum, in Hz."""
+    n = u.shape[0]
+    if n < 8 or not np.any(u != u[0]):
+        return ()
+    freqs, power = sps.welch(u, fs=1.0 / dt, nperseg=min(n, 4096))
+    if power.shape[0] < 3 or float(np.max(power)) <= 0.0:
+        return ()
+    padded = np.concatenate(([-np.inf], power[1:], [-np.inf]))
+    peaks, _ = sps.find_peaks(padded)
+    peaks = peaks[(peaks >= 1) & (peaks < power.shape[0])]
+    if peaks.shape[0] == 0:
+        return ()
+    top = peaks[np.argsort(power[peaks])[::-1][:_N_PEAKS]]
+    return tuple(float(freqs[i]) for i in top)
+
+
+# ---------------------------------------------------------------------------------------------
+# Diagnosis
+# ---------------------------------------------------------------------------------------------
+
+
+def _as_signal(values: npt.ArrayLike, what: str) -> FloatArray:
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DegenerateSignalError(f"{what} is not numeric: {exc}") from exc
+    if array.ndim != 1:
+        raise DegenerateSignalError(f"{what} must be one-dimensional, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        bad = int(np.count_nonzero(~np.isfinite(array)))
+        raise DegenerateSignalError(
+            f"{what} contains {bad} NaN or infinite value(s)",
+            hint="fill or drop the gaps before diagnosing the residual",
+        )
+    return array
+
+
+@dataclass
+class _Series:
+    name: str
+    kind: str
+    full: FloatArray
+    grid: FloatArray
+    mean: float
+    std: float
+
+
+def _format_pct(fraction: float) -> str:
+    return f"{100.0 * fraction:.0f} %"
+
+
+def _interval(beta: float, se: float, df: int, alpha: float) -> tuple[float, float]:
+    half = float(stats.t.ppf(1.0 - alpha / 2.0, df)) * se
+    return (beta - half, beta + half)
+
+
+def _full_rate_r2(r: FloatArray, columns: Sequence[FloatArray]) -> float:
+    """Centred R² of r on an intercept and ``columns``, from their Gram matrix."""
+    if not columns:
+        return 0.0
+    rc = r - float(np.mean(r))
+    total = float(rc @ rc)
+    if total <= 0.0:
+        return 0.0
+    centred = [c - float(np.mean(c)) for c in columns]
+    k = len(centred)
+    gram = np.empty((k, k))
+    cross = np.empty(k)
+    for i in range(k):
+        cross[i] = float(centred[i] @ rc)
+        for j in range(i, k):
+            gram[i, j] = gram[j, i] = float(centred[i] @ centred[j])
+    coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
+    return float(min(max(float(coef @ cross) / total, 0.0), 1.0))
+
+
+def _exact_match(n: int, dt: float, alpha: float) -> Diagnosis:
+    return Diagnosis(
+        lag_s=0.0,
+        gain=1.0,
+        gain_interval=(1.0, 1.0),
+        offset=0.0,
+        offset_interval=(0.0, 0.0),
+        timing_significant=False,
+        gain_significant=False,
+        offset_significant=False,
+        candidates=(),
+        explained_fraction=0.0,
+        remaining=Whiteness(lags=(), statistic=0.0, p_value=1.0, white=True),
+        dominant_frequencies_hz=(),
+        effective_samples=float(n),
+        summary="the model matches the reference exactly: the residual is zero",
+    )
+
+
+def diagnose_residual(
+    reference: npt.ArrayLike,
+    simulated: npt.ArrayLike,
+    *,
+    dt: float,
+    candidates: Sequence[Candidate] = (),
+    max_lag_s: float | None = None,
+    alpha: float = 0.05,
+    max_selected: int = 5,
+    max_samples: int = 20000,
+) -> Diagnosis:
+    """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
+
+    Parameters
+    ----------
+    reference, simulated:
+        The aligned measured and simulated signal, same length, finite.
+    dt:
+        Sample interval in seconds.
+    candidates:
+        Explanatory series on the same grid. Automatic ``lag`` (d/dt simulated) and ``gain``
+        (simulated) candidates are added unless a candidate of that kind is given.
+    max_lag_s:
+        Half-width of the lag search window; default min(10 s, a quarter of the record).
+    alpha:
+        Family-wise significance level; intervals are (1 − alpha) intervals.
+    max_selected:
+        At most this many candidates enter the joint model.
+    max_samples:
+        Longer records are reduced by block means to at most this many samples for the
+        regressions and tests (explained fractions are computed at the original rate).
+
+    Returns
+    -------
+    Diagnosis
+
+    Raises
+    ------
+    DegenerateSignalError
+        Non-finite values, length mismatch, fewer than 10 samples, non-positive ``dt``, or a
+        candidate that is not a finite series of the same length.
+    SpecError
+        Invalid ``alpha``, ``max_selected``, ``max_samples`` or duplicate candidate names.
+
+    Notes
+    -----
+    Headline fit (on the lag-aligned pair): reference ≈ gain · simulated + offset. The gain
+    error is *significant* when its interval excludes 1 and |gain − 1| > 0.5 %; the offset
+    when its interval excludes 0 and |offset| > 0.5 % of the reference range.
+
+    Forward selection over standardised candidates z_j: at step k every remaining candidate is
+    tested in the joint model r = c + Σ_selected β z + β_j z_j; those with p_j ≤ α / (m − k)
+    (Holm 1979) and an increase of R² ≥ 0.5 % are eligible, and the one with the largest
+    increase of R² enters. Tests use AR(p) pre-whitening with p by BIC (Schwarz 1978) and φ
+    estimated on the residual of the model without z_j (Cochrane & Orcutt 1949), then a
+    Newey & West (1987) HAC variance with the Andrews (1991) bandwidth: the pre-whitened HAC
+    estimator of Andrews & Monahan (1992). Student-t reference distribution with n − k degrees
+    of freedom.
+    """
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating, np.integer)):
+        raise DegenerateSignalError(f"dt must be a number of seconds, got {dt!r}")
+    if not math.isfinite(float(dt)) or float(dt) <= 0.0:
+        raise DegenerateSignalError(f"dt must be a positive, finite number of seconds, got {dt}")
+    dt = float(dt)
+    if not 0.0 < alpha < 1.0:
+        raise SpecError(f"alpha must lie strictly between 0 and 1, got {alpha}")
+    if max_selected < 0:
+        raise SpecError(f"max_selected must be 0 or more, got {max_selected}")
+    if max_samples < 10:
+        raise SpecError(f"max_samples must be at least 10, got {max_samples}")
+    ref = _as_signal(reference, "reference")
+    sim = _as_signal(simulated, "simulated")
+    if ref.shape[0] != sim.shape[0]:
+        raise DegenerateSignalError(
+            f"reference has {ref.shape[0]} samples but simulated has {sim.shape[0]}",
+            hint="align both signals on one time grid first",
+        )
+    n = ref.shape[0]
+    if n < 10:
+        raise DegenerateSignalError(f"at least 10 samples are needed, got {n}")
+    names: set[str] = set()
+    for cand in candidates:
+        if cand.name in names:
+            raise SpecError(f"candidate name {cand.name!r} is used twice")
+        names.add(cand.name)
+    user = [
+        (c.name, str(c.kind), _as_signal(c.values, f"candidate {c.name!r}")) for c in candidates
+    ]
+    for name, _, values in user:
+        if values.shape[0] != n:
+            raise DegenerateSignalError(
+                f"candidate {name!r} has {values.shape[0]} samples, the signals have {n}",
+                key=name,
+            )
+
+    r = ref - sim
+    if not np.any(r):
+        return _exact_match(n, dt, alpha)
+
+    notes: list[str] = []
+    factor = max(1, math.ceil(n / max_samples))
+    dt_grid = dt * factor
+    lags_grid = LJUNG_BOX_LAGS
+
+    # --- timing -------------------------------------------------------------------------------
+    window_s = _DEFAULT_MAX_LAG_S if max_lag_s is None else float(max_lag_s)
+    max_lag = int(min(max(window_s, 0.0) / dt, (n - 1) if max_lag_s is not None else n // 4))
+    lag = search_lag(ref, sim, max_lag).lag
+    lag_s = lag * dt
+
+    # --- gain and offset on the lag-aligned pair ----------------------------------------------
+    if lag >= 0:
+        ref_a, sim_a = ref[lag:], sim[: n - lag]
+    else:
+        ref_a, sim_a = ref[: n + lag], sim[-lag:]
+    factor_a = max(1, math.ceil(ref_a.shape[0] / max_samples))
+    ref_g = _block_means(ref_a, factor_a)
+    sim_g = _block_means(sim_a, factor_a)
+    ref_range = float(np.ptp(ref)) or float(np.max(np.abs(ref))) or 1.0
+    r_g = _block_means(r, factor)
+    order = _ar_order(r_g - float(np.mean(r_g)))
+    sim_varies = float(np.ptp(sim_g)) > 1e-12 * max(float(np.max(np.abs(sim_g))), 1e-300)
+    design = (
+        np.column_stack([np.ones_like(sim_g), sim_g])
+        if sim_varies
+        else np.ones((sim_g.shape[0], 1))
+    )
+    head = _hac_fit(ref_g if sim_varies else ref_g - sim_g, design, order)
+    head_se = np.sqrt(np.maximum(np.diag(head.cov), 0.0))
+    offset = float(head.beta[0])
+    offset_interval = _interval(offset, float(head_se[0]), int(head.df[0]), alpha)
+    offset_p = _p_value(offset, float(head_se[0]), int(head.df[0]))
+    offset_significant = (
+        offset_p < alpha
+        and not (offset_interval[0] <= 0.0 <= offset_interval[1])
+        and abs(offset) > OFFSET_MATERIALITY * ref_range
+    )
+    if sim_varies:
+        gain = float(head.beta[1])
+        gain_interval = _interval(gain, float(head_se[1]), int(head.df[1]), alpha)
+        gain_significant = (
+            not (gain_interval[0] <= 1.0 <= gain_interval[1]) and abs(gain - 1.0) > GAIN_MATERIALITY
+        )
+    else:
+        gain, gain_interval, gain_significant = 1.0, (1.0, 1.0), False
+        notes.append("the simulated signal is constant: gain and lag cannot be estimated")
+
+    # --- candidate series ---------------------------------------------------------------------
+    series: list[_Series] = []
+    kinds = {kind for _, kind, _ in user}
+    auto: list[tuple[str, str, FloatArray]] = []
+    # A user channel may already be called "lag" or "gain"; the automatic one then steps aside.
+    if "lag" not in kinds:
+        auto.append((_free_name("lag", names), "lag", np.gradient(sim, dt)))
+    if "gain" not in kinds:
+        auto.append((_free_name("gain", names), "gain", sim))
+    for label, kind, values in [*auto, *user]:
+        grid = _block_means(values, factor)
+        series.append(_Series(label, kind, values, grid, float(np.mean(grid)), float(np.std(grid))))
+
+    kept: list[_Series] = []
+    basis = np.ones((r_g.shape[0], 1)) / math.sqrt(r_g.shape[0])
+    for s in series:
+        scale = max(float(np.max(np.abs(s.grid))), 1e-300)
+        if s.std <= 1e-12 * scale:
+            notes.append(f"candidate {s.name!r} is constant and was dropped")
+            continue
+        z = (s.grid - s.mean) / s.std
+        left = z - basis @ (basis.T @ z)
+        share = float(left @ left) / float(z @ z)
+        if share < _COLLINEAR:
+            others = [k.name for k in kept]
+            notes.append(
+                f"candidate {s.name!r} is a linear combination of "
+                f"{', '.join(repr(o) for o in others) or 'the constant'} and was dropped"
+            )
+            continue
+        kept.append(s)
+        basis = np.column_stack([basis, left / math.sqrt(float(left @ left))])
+
+    m = len(kept)
+    ng = r_g.shape[0]
+    z_all = np.column_stack([(s.grid - s.mean) / s.std for s in kept]) if m else np.zeros((ng, 0))
+    rc_g = r_g - float(np.mean(r_g))
+    sst_g = float(rc_g @ rc_g)
+
+    # Alone: every candidate with an intercept, noise model from the intercept-only residual.
+    ones = np.ones((ng, 1))
+    phi0 = _ar_fit(rc_g, order)
+    alone = _screen(r_g, ones, z_all, phi0) if m else None
+
+    # --- forward selection --------------------------------------------------------------------
+    selected: list[int] = []
+    holm_levels: list[float] = []
+    cumulative: list[float] = []
+    remaining_idx = list(range(m))
+    base = ones
+    current_r2 = 0.0
+    while remaining_idx and len(selected) < max_selected and sst_g > 0.0:
+        step = len(selected)
+        level = alpha / (m - step)
+        q = _orthonormal(base)
+        fitted = q @ (q.T @ r_g)
+        resid = r_g - fitted
+        z_rem = z_all[:, remaining_idx]
+        z_perp = z_rem - q @ (q.T @ z_rem)
+        zz = np.einsum("ij,ij->j", z_perp, z_perp)
+        share = zz / ng
+        with np.errstate(invalid="ignore", divide="ignore"):
+            gain_r2 = np.where(share > _COLLINEAR, (z_perp.T @ resid) ** 2 / zz / sst_g, 0.0)
+        phi = _ar_fit(resid, order)
+        screen = _screen(r_g, base, z_rem, phi)
+        eligible = (screen.p <= level) & (gain_r2 >= MIN_EXPLAINED_INCREASE)
+        if not np.any(eligible):
+            break
+        pick = int(np.argmax(np.where(eligible, gain_r2, -np.inf)))
+        chosen = remaining_idx.pop(pick)
+        selected.append(chosen)
+        holm_levels.append(level)
+        current_r2 += float(gain_r2[pick])
+        cumulative.append(current_r2)
+        base = np.column_stack([base, z_all[:, chosen]])
+
+    # --- final joint model --------------------------------------------------------------------
+    findings: list[CandidateFinding] = []
+    joint_r2_full: list[float] = []
+    full_cols: list[FloatArray] = []
+    for idx in selected:
+        full_cols.append(kept[idx].full)
+        joint_r2_full.append(_full_rate_r2(r, full_cols))
+    explained = joint_r2_full[-1] if joint_r2_full else 0.0
+
+    remaining_full = r.copy()
+    remaining_grid = r_g.copy()
+    if selected:
+        # Intervals of selected candidates use the noise model of the final joint model.
+        joint = _hac_fit(r_g, base, order)
+        se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
+        for pos, idx in enumerate(selected):
+            s = kept[idx]
+            b_std = float(joint.beta[pos + 1])
+            se_std = float(se[pos + 1])
+            coef = b_std / s.std
+            df = int(joint.df[pos + 1])
+            p = _p_value(b_std, se_std, df)
+            remaining_full -= coef * (s.full - s.mean)
+            remaining_grid -= coef * (s.grid - s.mean)
+            findings.append(
+                CandidateFinding(
+                    name=s.name,
+                    kind=s.kind,
+                    explained_fraction=_full_rate_r2(r, [s.full]),
+                    joint_explained_fraction=joint_r2_full[pos],
+                    coefficient=coef,
+                    interval=_interval(coef, se_std / s.std, df, alpha),
+                    p_value=p,
+                    significant=p <= holm_levels[pos],
+                    selected=True,
+                    rank=0,
+                )
+            )
+    if alone is not None:
+        for j, s in enumerate(kept):
+            if j in selected:
+                continue
+            coef = float(alone.beta[j]) / s.std
+            p = float(alone.p[j])
+            findings.append(
+                CandidateFinding(
+                    name=s.name,
+                    kind=s.kind,
+                    explained_fraction=_full_rate_r2(r, [s.full]),
+                    joint_explained_fraction=None,
+                    coefficient=coef,
+                    interval=_interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha),
+                    p_value=p,
+                    significant=p <= alpha / m,
+                    selected=False,
+                    rank=0,
+                )
+            )
+
+    mean_sq = float(r @ r) / n
+    offset_finding = CandidateFinding(
+        name=_free_name("offset", names),
+        kind="offset",
+        explained_fraction=min(1.0, float(np.mean(r)) ** 2 / mean_sq),
+        joint_explained_fraction=None,
+        coefficient=offset,
+        interval=offset_interval,
+        p_value=offset_p,
+        significant=offset_significant,
+        selected=offset_significant,
+        rank=0,
+    )
+    ordered = _rank([*findings, offset_finding])
+
+    # --- timing significance ------------------------------------------------------------------
+    timing_significant = False
+    lag_finding = next((f for f in ordered if f.kind == "lag"), None)
+    if lag_finding is not None and lag != 0:
+        excludes_zero = not (lag_finding.interval[0] <= 0.0 <= lag_finding.interval[1])
+        agrees = (lag_finding.coefficient > 0) == (lag < 0)
+        timing_significant = (
+            excludes_zero
+            and lag_finding.p_value < alpha
+            and agrees
+            and abs(lag_finding.coefficient) >= dt / 2.0
+        )
+
+    remaining = ljung_box(remaining_grid, lags_grid, alpha=alpha)
+    frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
+    effective = _effective_samples(r_g, order)
+    if factor > 1:
+        notes.append(f"regressions use block means of {factor} samples ({dt_grid:g} s)")
+
+    summary = _summary(
+        ordered,
+        lag_s=lag_s,
+        timing_significant=timing_significant,
+        gain=gain,
+        gain_significant=gain_significant,
+        remaining=remaining,
+    )
+    return Diagnosis(
+        lag_s=lag_s,
+        gain=gain,
+        gain_interval=gain_interval,
+        offset=offset,
+        offset_interval=offset_interval,
+        timing_significant=timing_significant,
+        gain_significant=gain_significant,
+        offset_significant=offset_significant,
+        candidates=tuple(ordered),
+        explained_fraction=explained,
+        remaining=remaining,
+        dominant_frequencies_hz=frequencies,
+        effective_samples=effective,
+        summary=summary,
+        notes=tuple(notes),
+    )
+
+
+def _rank(findings: Sequence[CandidateFinding]) -> list[CandidateFinding]:
+    """Selected findings in order of entry, then the rest by explained fraction.
+
+    A significant offset is not part of the forward selection; it goes before the first
+    selected candidate that it out-explains.
+    """
+    chosen = [f for f in findings if f.selected and f.kind != "offset"]
+    rest = sorted((f for f in findings if not f.selected), key=lambda f: -f.explained_fraction)
+    for f in findings:
+        if f.selected and f.kind == "offset":
+            at = next(
+                (i for i, c in enumerate(chosen) if f.explained_fraction > c.explained_fraction),
+                len(chosen),
+            )
+            chosen.insert(at, f)
+    return [replace(f, rank=i + 1) for i, f in enumerate([*chosen, *rest])]
+
+
+def _free_name(name: str, taken: set[str]) -> str:
+    return name if name not in taken else f"{name} (automatic)"
+
+
+def _p_value(beta: float, se: float, df: int) -> float:
+    if se <= 0.0 or not math.isfinite(se):
+        return 0.0 if beta != 0.0 and se == 0.0 else 1.0
+    return float(2.0 * stats.t.sf(abs(beta) / se, df))
+
+
+def _summary(
+    findings: Sequence[CandidateFinding],
+    *,
+    lag_s: float,
+    timing_significant: bool,
+    gain: float,
+    gain_significant: bool,
+    remaining: Whiteness,
+) -> str:
+    parts: list[str] = []
+    for f in findings:
+        if not (f.selected and f.significant):
+            continue
+        half = (f.interval[1] - f.interval[0]) / 2.0
+        if f.kind == "offset":
+            parts.append(
+                f"offset {f.coefficient:+.3g} ± {half:.2g} carries "
+                f"{_format_pct(f.explained_fraction)} of the residual's mean square"
+            )
+        else:
+            parts.append(
+                f"{f.name} explains {_format_pct(f.explained_fraction)} of the residual "
+                f"(coef {f.coefficient:.3g} ± {half:.2g})"
+            )
+    if timing_significant:
+        direction = "lags" if lag_s < 0 else "leads"
+        parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
+    if gain_significant:
+        parts.append(f"gain error {100.0 * (gain - 1.0):+.1f} %")
+    if not parts:
+        text = "no significant effect found: the residual is indistinguishable from noise"
+        if not remaining.white:
+            text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
+        return text
+    if not remaining.white:
+        parts.append("the remaining residual is still autocorrelated")
+    return "; ".join(parts)

@@ -1,0 +1,263 @@
+"""One common time grid for the reference and the model output.
+
+The grid runs at ``rate_hz`` (default: the reference's own median rate) over the overlap of
+both records, or over a declared window. Each channel is interpolated onto it with a named
+method: ``linear`` for continuous signals, ``previous`` (zero-order hold) for discrete or
+slowly logged ones, which is how slow CAN signals are upsampled. A time offset between the two
+records is either declared or found by cross-correlating one channel on both sides.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..core.lag import search_lag
+from ..errors import DataError
+from .record import Channel, Record
+
+__all__ = ["AlignedData", "Grid", "align_records", "find_offset", "median_step"]
+
+FloatArray = npt.NDArray[np.float64]
+Method = Literal["linear", "previous"]
+
+
+@dataclass(frozen=True)
+class Grid:
+    start_s: float
+    rate_hz: float
+    n_samples: int
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.rate_hz
+
+    @property
+    def stop_s(self) -> float:
+        return self.start_s + (self.n_samples - 1) / self.rate_hz
+
+    def times(self) -> FloatArray:
+        return self.start_s + np.arange(self.n_samples, dtype=np.float64) / self.rate_hz
+
+
+@dataclass
+class AlignedData:
+    """Both records on one grid; channels are interpolated on first use and kept."""
+
+    grid: Grid
+    reference: Record
+    model: Record
+    offset_s: float
+    offset_found: bool
+    nan_policy: Literal["raise", "omit"] = "raise"
+    _cache: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
+    #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
+    gap_mask: npt.NDArray[np.bool_] | None = None
+
+    @property
+    def time(self) -> FloatArray:
+        return self.grid.times()
+
+    def column(self, side: Literal["reference", "model"], name: str, method: Method) -> FloatArray:
+        key = (side, name, method)
+        cached = self._cache.get(key)
+        if cached is not None:
+            return cached
+        record = self.reference if side == "reference" else self.model
+        channel = record.channel(name)
+        shift = self.offset_s if side == "model" else 0.0
+        values, gaps = _interpolate(
+            channel, self.time, shift, method, record.source, name, self.nan_policy
+        )
+        if gaps is not None:
+            self.gap_mask = gaps if self.gap_mask is None else (self.gap_mask | gaps)
+        self._cache[key] = values
+        return values
+
+    def columns(
+        self, side: Literal["reference", "model"], names: Iterable[str], method: Method
+    ) -> dict[str, FloatArray]:
+        return {name: self.column(side, name, method) for name in names}
+
+    @property
+    def coverage(self) -> float:
+        if self.gap_mask is None or self.grid.n_samples == 0:
+            return 1.0
+        return float(1.0 - self.gap_mask.mean())
+
+
+def median_step(time: FloatArray) -> float:
+    if time.shape[0] < 2:
+        return math.nan
+    return float(np.median(np.diff(time)))
+
+
+def _span(records: Iterable[tuple[Record, Iterable[str], float]]) -> tuple[float, float]:
+    start = -math.inf
+    stop = math.inf
+    for record, names, shift in records:
+        for name in names:
+            channel = record.channel(name)
+            if channel.time.shape[0] == 0:
+                raise DataError("the column has no samples", file=record.source, column=name)
+            start = max(start, float(channel.time[0]) + shift)
+            stop = min(stop, float(channel.time[-1]) + shift)
+    return start, stop
+
+
+def find_offset(
+    reference: Channel,
+    model: Channel,
+    *,
+    rate_hz: float,
+    max_offset_s: float,
+) -> float:
+    """Time shift to add to the model's time so that ``model`` lines up with ``reference``.
+
+    Both channels are put on one grid at ``rate_hz`` over their common span and the peak of
+    the mean-removed cross-correlation within ±max_offset_s gives the shift.
+    """
+    start = max(float(reference.time[0]), float(model.time[0]) - max_offset_s)
+    stop = min(float(reference.time[-1]), float(model.time[-1]) + max_offset_s)
+    n = int(math.floor((stop - start) * rate_hz + 1e-9)) + 1
+    if n < 16:
+        raise DataError("the records overlap too little to find a time offset")
+    grid = start + np.arange(n) / rate_hz
+    ref = np.interp(grid, reference.time, np.asarray(reference.values, dtype=np.float64))
+    sim = np.interp(grid, model.time, np.asarray(model.values, dtype=np.float64))
+    max_lag = min(round(max_offset_s * rate_hz), n - 1)
+    lag = search_lag(ref, sim, max_lag).lag
+    return lag / rate_hz
+
+
+def align_records(
+    reference: Record,
+    model: Record,
+    *,
+    reference_columns: Iterable[str],
+    model_columns: Iterable[str],
+    rate_hz: float | None = None,
+    window: tuple[float, float] | None = None,
+    offset_s: float = 0.0,
+    offset_from: tuple[str, str] | None = None,
+    max_offset_s: float = 30.0,
+    nan_policy: Literal["raise", "omit"] = "raise",
+) -> AlignedData:
+    """Build the common grid for the channels a spec uses."""
+    ref_names = list(dict.fromkeys(reference_columns))
+    model_names = list(dict.fromkeys(model_columns))
+    for name in ref_names:
+        reference.channel(name)
+    for name in model_names:
+        model.channel(name)
+
+    if rate_hz is None:
+        steps = [median_step(reference.channel(n).time) for n in ref_names] or [
+            median_step(c.time) for c in reference.channels.values()
+        ]
+        finite = [s for s in steps if math.isfinite(s) and s > 0]
+        if not finite:
+            raise DataError(
+                "cannot infer the sample rate (fewer than 2 samples)",
+                file=reference.source,
+                hint="declare alignment.rate_hz",
+            )
+        rate_hz = 1.0 / min(finite)
+
+    found = False
+    if offset_from is not None:
+        ref_channel = reference.channel(offset_from[0])
+        model_channel = model.channel(offset_from[1])
+        offset_s = offset_s + find_offset(
+            ref_channel,
+            Channel(model_channel.time + offset_s, model_channel.values),
+            rate_hz=rate_hz,
+            max_offset_s=max_offset_s,
+        )
+        found = True
+
+    start, stop = _span([(reference, ref_names, 0.0), (model, model_names, offset_s)])
+    if window is not None:
+        if window[0] < start - 1e-9 or window[1] > stop + 1e-9:
+            raise DataError(
+                f"the window [{window[0]:g}, {window[1]:g}] s is not covered by both records "
+                f"(their overlap is [{start:g}, {stop:g}] s)",
+                file=reference.source,
+                hint="shrink alignment.window to the overlap",
+            )
+        start, stop = window
+    if not stop > start:
+        raise DataError(
+            f"the reference and the model output do not overlap in time "
+            f"(reference {_range(reference, ref_names)}, model {_range(model, model_names, offset_s)})",
+            file=model.source,
+            hint="check both time columns, their units (time_scale) and alignment.offset_s",
+        )
+    n = int(math.floor((stop - start) * rate_hz + 1e-9)) + 1
+    if n < 3:
+        raise DataError(
+            f"the overlap [{start:g}, {stop:g}] s holds fewer than 3 samples at {rate_hz:g} Hz",
+            file=reference.source,
+            hint="raise alignment.rate_hz or widen the window",
+        )
+    return AlignedData(
+        grid=Grid(start_s=float(start), rate_hz=float(rate_hz), n_samples=n),
+        reference=reference,
+        model=model,
+        offset_s=float(offset_s),
+        offset_found=found,
+        nan_policy=nan_policy,
+    )
+
+
+def _range(record: Record, names: list[str], shift: float = 0.0) -> str:
+    if not names:
+        return "no columns"
+    channel = record.channel(names[0])
+    return f"{float(channel.time[0]) + shift:g}–{float(channel.time[-1]) + shift:g} s"
+
+
+def _interpolate(
+    channel: Channel,
+    grid: FloatArray,
+    shift: float,
+    method: Method,
+    source: str,
+    name: str,
+    nan_policy: Literal["raise", "omit"],
+) -> tuple[FloatArray, npt.NDArray[np.bool_] | None]:
+    time = channel.time + shift if shift else channel.time
+    values = np.asarray(channel.values, dtype=np.float64)
+    bad = ~np.isfinite(values)
+    gaps = None
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        if nan_policy == "raise":
+            raise DataError(
+                f"{int(bad.sum())} NaN or inf values (first at t = {float(time[first]):g} s)",
+                file=source,
+                column=name,
+                hint="set alignment.nan: omit to score only where data exists",
+            )
+        keep = ~bad
+        if not keep.any():
+            raise DataError("every value is NaN or inf", file=source, column=name)
+        # A grid point is in a gap when it lies between a bad sample's neighbours.
+        gap_start = np.r_[-np.inf, time][:-1][bad]
+        gap_stop = np.r_[time, np.inf][1:][bad]
+        idx = np.searchsorted(gap_start, grid, side="left") - 1
+        inside = idx >= 0
+        gaps = np.zeros(grid.shape[0], dtype=bool)
+        gaps[inside] = grid[inside] < gap_stop[idx[inside]]
+        time = time[keep]
+        values = values[keep]
+    if method == "previous":
+        index = np.searchsorted(time, grid, side="right") - 1
+        np.clip(index, 0, time.shape[0] - 1, out=index)
+        return values[index], gaps
+    return np.interp(grid, time, values), gaps

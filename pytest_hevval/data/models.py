@@ -1,0 +1,165 @@
+"""Models that run themselves: a Python callable given the measured inputs.
+
+A spec is trusted code, like a ``conftest.py``: naming ``callable: "pkg.mod:function"`` imports
+and runs that function. Nothing runs unless a spec names it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import DataError, HevvalError
+from .record import Channel, Record
+
+__all__ = ["import_callable", "record_from_frame", "reference_frame", "run_callable"]
+
+
+@contextmanager
+def _search_path(folders: Iterable[Path]) -> Iterator[None]:
+    added = [str(f) for f in folders if str(f) not in sys.path]
+    sys.path[:0] = added
+    try:
+        yield
+    finally:
+        for folder in added:
+            if folder in sys.path:
+                sys.path.remove(folder)
+
+
+def import_callable(reference: str, folders: Iterable[Path], *, source: str) -> Callable[..., Any]:
+    """Import ``module:function`` with ``folders`` (the spec's folder, the rootdir) importable."""
+    module_name, _, attribute = reference.partition(":")
+    with _search_path(folders):
+        try:
+            module = importlib.import_module(module_name)
+        except Exception as exc:
+            raise DataError(
+                f"cannot import the model module {module_name!r}: {type(exc).__name__}: {exc}",
+                file=source,
+                key="model.callable",
+                hint="the module path is resolved from the spec's folder and the rootdir",
+            ) from None
+    target: Any = module
+    for part in attribute.split("."):
+        if not hasattr(target, part):
+            raise DataError(
+                f"module {module_name!r} has no attribute {attribute!r}",
+                file=source,
+                key="model.callable",
+            )
+        target = getattr(target, part)
+    if not callable(target):
+        raise DataError(f"{reference!r} is not callable", file=source, key="model.callable")
+    return target  # type: ignore[no-any-return]
+
+
+def reference_frame(reference: Record, inputs: Iterable[str], time_name: str) -> Any:
+    """The measured inputs as a pandas DataFrame on the reference's own time base."""
+    import pandas as pd
+
+    names = list(dict.fromkeys(inputs))
+    channels = [reference.channel(n) for n in names]
+    base = _finest(channels) if channels else _finest(list(reference.channels.values()))
+    data: dict[str, Any] = {time_name: base}
+    for name, channel in zip(names, channels, strict=True):
+        if channel.time is base or np.array_equal(channel.time, base):
+            data[name] = np.asarray(channel.values)
+        else:
+            data[name] = np.interp(base, channel.time, np.asarray(channel.values, dtype=float))
+    return pd.DataFrame(data)
+
+
+def _finest(channels: list[Channel]) -> np.ndarray:
+    if not channels:
+        raise DataError("the reference has no channels to hand to the model")
+    return max(channels, key=lambda c: c.time.shape[0]).time
+
+
+def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
+    """Convert a model's returned DataFrame into a :class:`Record`, checking its shape."""
+    import pandas as pd
+
+    if not isinstance(frame, pd.DataFrame):
+        raise DataError(
+            f"the model returned {type(frame).__name__}, not a pandas DataFrame",
+            file=source,
+            hint="return a DataFrame with a time column and one column per signal",
+        )
+    if time_name not in frame.columns:
+        from .record import missing_column
+
+        error = missing_column(source, time_name, [str(c) for c in frame.columns])
+        raise DataError(
+            "the model output has no time column " + repr(time_name),
+            file=source,
+            column=time_name,
+            hint=(error.hint or "") + "; set model.time to its name",
+        )
+    time = np.asarray(pd.to_numeric(frame[time_name], errors="coerce"), dtype=np.float64)
+    if time.shape[0] < 2 or not np.all(np.isfinite(time)) or not np.all(np.diff(time) > 0):
+        raise DataError(
+            "the model output's time column must be finite and strictly increasing",
+            file=source,
+            column=time_name,
+        )
+    channels: dict[str, Channel] = {}
+    numeric: list[str] = []
+    for column in frame.columns:
+        name = str(column)
+        if name == time_name:
+            continue
+        series = frame[column]
+        if not (pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series)):
+            continue
+        values = np.asarray(series, dtype=np.float64)
+        channels[name] = Channel(time=time, values=values)
+        numeric.append(name)
+    return Record(
+        source=source,
+        channels=channels,
+        available=tuple(str(c) for c in frame.columns),
+        numeric=tuple(numeric),
+    )
+
+
+def run_callable(
+    reference_to: str,
+    reference: Record,
+    *,
+    inputs: Iterable[str],
+    params: dict[str, Any],
+    reference_time: str,
+    model_time: str,
+    folders: Iterable[Path],
+    spec_file: str,
+) -> Record:
+    """Run ``module:function(reference_frame, **params)`` and return its output as a Record."""
+    function = import_callable(reference_to, folders, source=spec_file)
+    frame = reference_frame(reference, inputs, reference_time)
+    label = f"model {reference_to}"
+    try:
+        with _search_path(folders):
+            output = function(frame, **params)
+    except HevvalError:
+        raise
+    except Exception as exc:
+        frames = traceback.extract_tb(exc.__traceback__)[1:]
+        where = ""
+        if frames:
+            last = frames[-1]
+            where = f" at {Path(last.filename).name}:{last.lineno}"
+        raise DataError(
+            f"the model raised {type(exc).__name__}: {exc}{where}",
+            file=spec_file,
+            key="model.callable",
+            hint=f"run {reference_to} on the reference data directly to debug it",
+        ) from None
+    return record_from_frame(output, model_time, label)

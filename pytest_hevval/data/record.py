@@ -1,0 +1,85 @@
+"""The in-memory shape every reader returns: named channels, each with its own time base.
+
+Files with one shared time column (CSV, Parquet, MAT, HDF5 tables) give every channel the same
+time array object; MDF files may give each channel its own rate. Alignment onto the common grid
+happens later, in :mod:`pytest_hevval.data.align`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import DataError, did_you_mean
+
+__all__ = ["Channel", "Reader", "Record", "SourceOptions", "missing_column"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One measured or simulated signal: strictly increasing ``time`` [s] and ``values``."""
+
+    time: FloatArray
+    values: npt.NDArray[np.floating]
+    unit: str | None = None
+
+
+@dataclass
+class Record:
+    """Channels read from one file (or produced by one model run)."""
+
+    source: str
+    channels: dict[str, Channel]
+    #: Every channel name the source holds, read or not: for suggestions and diagnosis.
+    available: tuple[str, ...] = ()
+    #: Numeric channels the source holds (candidates for automatic diagnosis).
+    numeric: tuple[str, ...] = ()
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def channel(self, name: str) -> Channel:
+        try:
+            return self.channels[name]
+        except KeyError:
+            raise missing_column(self.source, name, self.available or self.channels) from None
+
+
+@dataclass(frozen=True)
+class SourceOptions:
+    """How to read one file; every field is optional in the spec."""
+
+    time: str | None = None
+    format: str | None = None
+    sep: str | None = None
+    encoding: str | None = None
+    decimal: str | None = None
+    #: HDF5 group / MAT struct / table key that holds the channels.
+    group: str | None = None
+    #: Multiply the time column by this to get seconds (e.g. 0.001 for ms).
+    time_scale: float = 1.0
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+
+class Reader(Protocol):
+    """A format reader: read only ``columns`` (all numeric ones when None)."""
+
+    def __call__(
+        self, path: str, columns: Iterable[str] | None, options: SourceOptions
+    ) -> Record: ...
+
+
+def missing_column(source: str, name: str, available: Iterable[str]) -> DataError:
+    """The error for a column that is not in a file, with the nearest names as a suggestion."""
+    names = list(available)
+    suggestion = did_you_mean(name, names)
+    hint = suggestion or (
+        f"the file has {len(names)} columns: " + ", ".join(repr(n) for n in names[:12])
+        if names
+        else "the file has no columns"
+    )
+    return DataError("no such column in this file", file=source, column=name, hint=hint)

@@ -1,0 +1,476 @@
+"""The engine: spec → data → core → tree/Φ → result.
+
+Used identically by the pytest items, the ``hevval`` CLI and Dask workers. It computes; it
+never prints, and it writes nothing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .core.characteristics import CHARACTERISTICS, SignalCharacteristics, signal_characteristics
+from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from .data.align import AlignedData, align_records
+from .data.record import Record, SourceOptions
+from .errors import DataError, DegenerateSignalError, ExpressionError, HevvalError
+from .result import Failure, SignalResult, SpecResult
+from .spec.expressions import Expression
+from .spec.model import SignalSpec, SourceSpec, Spec
+
+__all__ = ["DataCache", "Evaluation", "evaluate_spec", "file_digest"]
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
+    from .data.formats import read_record
+
+    return read_record
+
+
+def file_digest(path: str) -> str:
+    """SHA-256 of a data file (hex), so history can tell when the measurements changed."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 22), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class DataCache:
+    """Reads each data file once per session, with the union of the columns every spec needs.
+
+    Specs declare their columns at collection time (:meth:`declare`); the first :meth:`read` of
+    a file then reads all declared columns in one go.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._records: dict[tuple[str, str], Record] = {}
+        self._declared: dict[tuple[str, str], set[str]] = {}
+        self._digests: dict[str, str] = {}
+        #: How many times each file was actually read (tests and benchmarks check it).
+        self.reads: dict[str, int] = {}
+
+    @staticmethod
+    def _key(source: SourceSpec) -> tuple[str, str]:
+        options = source.options
+        return (
+            str(source.path),
+            repr(
+                (
+                    options.time,
+                    options.format,
+                    options.sep,
+                    options.encoding,
+                    options.decimal,
+                    options.group,
+                    options.time_scale,
+                    sorted(options.extra.items()),
+                )
+            ),
+        )
+
+    def declare(self, source: SourceSpec, columns: Iterable[str]) -> None:
+        if source.kind != "file":
+            return
+        with self._lock:
+            self._declared.setdefault(self._key(source), set()).update(columns)
+
+    def read(self, source: SourceSpec, columns: Iterable[str]) -> Record:
+        key = self._key(source)
+        wanted = set(columns)
+        with self._lock:
+            cached = self._records.get(key)
+            if cached is not None and wanted <= set(cached.channels):
+                return cached
+            union = wanted | self._declared.get(key, set())
+            if cached is not None:
+                union |= set(cached.channels)
+            record = _reader()(str(source.path), sorted(union), source.options)
+            self.reads[key[0]] = self.reads.get(key[0], 0) + 1
+            self._records[key] = record
+            return record
+
+    def digest(self, path: str) -> str:
+        with self._lock:
+            if path not in self._digests:
+                try:
+                    self._digests[path] = file_digest(path)
+                except OSError:
+                    self._digests[path] = ""
+            return self._digests[path]
+
+
+@dataclass
+class Evaluation:
+    """A scored spec plus what diagnosis and reports need from the data."""
+
+    spec: Spec
+    result: SpecResult
+    aligned: AlignedData
+    arrays: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    characteristics: dict[str, SignalCharacteristics] = field(default_factory=dict)
+
+
+def _load_model(
+    spec: Spec, reference: Record, cache: DataCache, folders: list[Path]
+) -> tuple[Record, dict[str, Any]]:
+    model = spec.model
+    if model.kind == "file":
+        record = cache.read(model, spec.model_columns())
+        return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "file"}
+    if model.kind == "callable":
+        from .data.models import run_callable
+
+        inputs = list(model.inputs) or sorted(spec.reference_columns())
+        record = run_callable(
+            str(model.callable),
+            reference,
+            inputs=inputs,
+            params=dict(model.params),
+            reference_time=spec.reference.options.time or "time",
+            model_time=model.options.time or "time",
+            folders=folders,
+            spec_file=str(spec.path),
+        )
+        return record, {"callable": model.callable, "params": dict(model.params), "kind": "callable"}
+    from .data.fmu import run_fmu
+
+    times = [c.time for c in reference.channels.values() if c.time.shape[0]]
+    if not times:
+        raise DataError("the reference has no samples to drive the FMU", file=str(spec.path))
+    start = max(float(t[0]) for t in times)
+    stop = min(float(t[-1]) for t in times)
+    record = run_fmu(
+        str(model.path),
+        reference,
+        dict(model.fmu_inputs),
+        dict(model.fmu_outputs),
+        start_time=start,
+        stop_time=stop,
+        step_size=model.step_size,
+        parameters={k: float(v) for k, v in model.params.items()},
+    )
+    return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "fmu"}
+
+
+def _columns_of(expression: Expression, record: Record) -> tuple[str, ...]:
+    """Columns an expression reads; a whole-string column name wins over a parse of it."""
+    if not expression.is_column and expression.source in record.channels:
+        return (expression.source,)
+    return expression.columns
+
+
+def _signal_values(
+    aligned: AlignedData,
+    side: str,
+    expression: Expression,
+    node: SignalSpec,
+) -> FloatArray:
+    record = aligned.reference if side == "reference" else aligned.model
+    method = node.interpolation
+    names = _columns_of(expression, record)
+    columns = aligned.columns(side, names, method)  # type: ignore[arg-type]
+    if expression.is_column or names == (expression.source,):
+        values = columns[names[0]]
+    else:
+        values = np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
+    unit_from = node.ref_unit if side == "reference" else node.sim_unit
+    if unit_from and node.unit and unit_from != node.unit:
+        values = _convert_units(values, unit_from, node.unit, node, side)
+    scale = node.ref_scale if side == "reference" else node.sim_scale
+    offset = node.ref_offset if side == "reference" else node.sim_offset
+    if scale != 1.0 or offset != 0.0:
+        values = values * scale + offset
+    return values
+
+
+def _convert_units(
+    values: FloatArray, source_unit: str, target_unit: str, node: SignalSpec, side: str
+) -> FloatArray:
+    try:
+        import pint
+    except ImportError:
+        from .errors import MissingExtraError
+
+        raise MissingExtraError.for_extra("unit conversion", "units", "pint") from None
+    registry = _unit_registry()
+    try:
+        quantity = registry.Quantity(values, source_unit)
+        return np.asarray(quantity.to(target_unit).magnitude, dtype=np.float64)
+    except (pint.errors.PintError, ValueError, TypeError) as exc:
+        key = "ref_unit" if side == "reference" else "sim_unit"
+        raise ExpressionError(
+            f"cannot convert {source_unit!r} to {target_unit!r}: {exc}",
+            key=f"{node.key}.{key}",
+            line=node.line,
+        ) from None
+
+
+_REGISTRY: Any = None
+
+
+def _unit_registry() -> Any:
+    global _REGISTRY
+    if _REGISTRY is None:
+        import pint
+
+        _REGISTRY = pint.UnitRegistry()
+    return _REGISTRY
+
+
+def _signature(node: SignalSpec) -> tuple[Any, ...]:
+    """Two nodes with the same signature are the same signal: score it once."""
+    return (
+        node.ref.source,
+        node.sim.source,
+        node.interpolation,
+        node.reference_range,
+        node.unit,
+        node.ref_unit,
+        node.sim_unit,
+        node.ref_scale,
+        node.ref_offset,
+        node.sim_scale,
+        node.sim_offset,
+    )
+
+
+def evaluate_spec(
+    spec: Spec,
+    *,
+    cache: DataCache | None = None,
+    rootdir: Path | None = None,
+    figures: bool = False,
+    keep_arrays: bool = False,
+    workers: int | None = None,
+) -> Evaluation:
+    """Score every signal of ``spec`` against its reference. Raises HevvalError on bad input."""
+    try:
+        return _evaluate(spec, cache or DataCache(), rootdir, figures, keep_arrays, workers)
+    except HevvalError as exc:
+        raise exc.with_context(file=str(spec.path)) from None
+
+
+def _evaluate(
+    spec: Spec,
+    cache: DataCache,
+    rootdir: Path | None,
+    figures: bool,
+    keep_arrays: bool,
+    workers: int | None,
+) -> Evaluation:
+    folders = [spec.path.parent] + ([rootdir] if rootdir else [])
+    reference = cache.read(spec.reference, spec.reference_columns())
+    model_record, model_info = _load_model(spec, reference, cache, folders)
+
+    nodes = list(spec.walk())
+    ref_columns: set[str] = set()
+    model_columns: set[str] = set()
+    for _, _, node in nodes:
+        ref_columns.update(_columns_of(node.ref, reference))
+        model_columns.update(_columns_of(node.sim, model_record))
+    alignment = spec.alignment
+    aligned = align_records(
+        reference,
+        model_record,
+        reference_columns=sorted(ref_columns),
+        model_columns=sorted(model_columns),
+        rate_hz=alignment.rate_hz,
+        window=alignment.window,
+        offset_s=alignment.offset_s,
+        offset_from=alignment.offset_from,
+        max_offset_s=alignment.max_offset_s,
+        nan_policy=alignment.nan,
+    )
+
+    # Evaluate each distinct signal once, even when it appears in several sets.
+    unique: dict[tuple[Any, ...], SignalSpec] = {}
+    for _, _, node in nodes:
+        unique.setdefault(_signature(node), node)
+    values: dict[tuple[Any, ...], tuple[FloatArray, FloatArray]] = {}
+    for signature, node in unique.items():
+        try:
+            values[signature] = (
+                _signal_values(aligned, "reference", node.ref, node),
+                _signal_values(aligned, "model", node.sim, node),
+            )
+        except ExpressionError as exc:
+            side = "ref" if exc.column in reference.channels else "sim"
+            raise exc.with_context(line=node.line, key=f"{node.key}.{side}") from None
+    if aligned.gap_mask is not None and aligned.gap_mask.any():
+        keep = ~aligned.gap_mask
+        values = {k: (r[keep], s[keep]) for k, (r, s) in values.items()}
+
+    dt = aligned.grid.dt
+    max_lag_s = alignment.max_lag_s
+    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+
+    def score(item: tuple[tuple[Any, ...], SignalSpec]) -> tuple[tuple[Any, ...], Any]:
+        signature, node = item
+        ref, sim = values[signature]
+        try:
+            result: Any = signal_characteristics(
+                ref,
+                sim,
+                dt=dt,
+                max_lag_s=max_lag_s,
+                correlation=spec.correlation,
+                reference_range=node.reference_range,
+                workers=1 if len(unique) > 1 else n_workers,
+            )
+        except DegenerateSignalError as exc:
+            result = exc.with_context(line=node.line, key=node.key)
+        return signature, result
+
+    items = list(unique.items())
+    if n_workers > 1 and len(items) > 1:
+        # numpy releases the GIL in its loops, so signals score in parallel on threads.
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            scored = dict(pool.map(score, items))
+    else:
+        scored = dict(map(score, items))
+    for outcome in scored.values():
+        if isinstance(outcome, HevvalError):
+            raise outcome
+
+    by_path: dict[tuple[str, ...], SignalCharacteristics] = {
+        path: scored[_signature(node)] for _, path, node in nodes
+    }
+    roots: list[ScoredNode] = []
+    for index, root in enumerate(spec.sets, start=1):
+        tree = _tree_of(root)
+        roots.append(
+            score_tree(
+                tree,
+                lambda path: by_path[path].lambdas,
+                set_index=index,
+                variant=spec.emergent,
+            )
+        )
+
+    node_specs = {path: node for _, path, node in nodes}
+    failures: dict[tuple[str, ...], list[Failure]] = {}
+    for scored_node in iter_nodes(roots):
+        thresholds = spec.thresholds_for(scored_node.path, node_specs[scored_node.path])
+        failures[scored_node.path] = [
+            Failure(name, scored_node.lambdas[CHARACTERISTICS.index(name)], limit)
+            for name, limit in thresholds.items()
+            if scored_node.lambdas[CHARACTERISTICS.index(name)] < limit
+        ]
+
+    def failed(node: ScoredNode) -> bool:
+        return bool(failures[node.path])
+
+    signals: list[SignalResult] = []
+    arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
+    characteristics: dict[str, SignalCharacteristics] = {}
+    for scored_node in iter_nodes(roots):
+        path = scored_node.path
+        node = node_specs[path]
+        chars = by_path[path]
+        origins = error_origins(scored_node, failed)
+        path_str = "/".join(path)
+        ref, sim = values[_signature(node)]
+        figure_payload = None
+        if figures:
+            from .report.figures import figure_data
+
+            figure_payload = figure_data(
+                ref,
+                sim,
+                dt=dt,
+                start_s=aligned.grid.start_s,
+                max_lag=chars.lag_search.max_lag if chars.lag_search else 0,
+            )
+        signals.append(
+            SignalResult(
+                path=path_str,
+                name=node.name,
+                set=scored_node.set_index,
+                level=scored_node.level,
+                position=scored_node.position,
+                alpha=scored_node.alpha,
+                line=node.line,
+                lambdas=scored_node.lambdas,
+                lag_s=chars.lag_s,
+                peak_correlation=chars.peak_correlation,
+                mae=chars.mae,
+                rms=chars.rms,
+                delta_e=chars.delta_e,
+                error_std=chars.error_std,
+                mean_error=chars.mean_error,
+                reference_range=chars.reference_range,
+                n_samples=chars.n_samples,
+                thresholds=spec.thresholds_for(path, node),
+                failures=failures[path],
+                unit=node.unit,
+                description=node.description,
+                origin=bool(failures[path]) and origins == (scored_node,),
+                origins=["/".join(o.path) for o in origins],
+                children=["/".join(c.path) for c in scored_node.children],
+                figures=figure_payload,
+            )
+        )
+        characteristics[path_str] = chars
+        if keep_arrays:
+            arrays[path_str] = (ref, sim)
+
+    phi = global_metric(((s.alpha, s.lambdas) for s in signals), spec.weights)
+    result = SpecResult(
+        name=spec.name,
+        spec=str(spec.path),
+        spec_hash=spec.text_hash,
+        phi=phi,
+        min_phi=spec.min_phi,
+        min_phi_line=spec.min_phi_line,
+        weights=spec.weights,
+        signals=signals,
+        data={
+            "reference": {
+                "path": spec.reference.path,
+                "sha256": cache.digest(str(spec.reference.path)),
+            },
+            "model": model_info,
+        },
+        alignment={
+            "rate_hz": aligned.grid.rate_hz,
+            "start_s": aligned.grid.start_s,
+            "stop_s": aligned.grid.stop_s,
+            "n_samples": aligned.grid.n_samples,
+            "offset_s": aligned.offset_s,
+            "offset_found": aligned.offset_found,
+            "coverage": aligned.coverage,
+        },
+    )
+    return Evaluation(
+        spec=spec,
+        result=result,
+        aligned=aligned,
+        arrays=arrays,
+        characteristics=characteristics,
+    )
+
+
+def _tree_of(node: SignalSpec) -> TreeNode:
+    return TreeNode(
+        name=node.name,
+        alpha=node.alpha,
+        children=tuple(_tree_of(child) for child in node.children),
+    )
+
+
+def summarise_origins(result: SpecResult) -> Mapping[str, SignalResult]:
+    """The signals where errors appear, keyed by path."""
+    return {s.path: s for s in result.signals if s.origin}

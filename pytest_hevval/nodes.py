@@ -1,0 +1,124 @@
+"""pytest collectors and items: a spec file, one item per signal node, one ``Phi`` item.
+
+Items override only ``setup``/``runtest``/``repr_failure``/``reportinfo``. Unreadable data
+fails in ``setup`` so that pytest reports an ERROR; a missed threshold fails in ``runtest``,
+a FAILURE.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from _pytest._code.code import TerminalRepr
+
+from .core.characteristics import CHARACTERISTICS
+from .engine import Evaluation
+from .errors import HevvalError
+from .result import SignalResult, SpecResult
+from .session import HevvalSession, session_key
+from .spec.load import load_spec
+from .spec.model import Spec
+from .terminal import phi_report, signal_failure_report
+
+__all__ = ["PhiItem", "SignalItem", "SpecFile"]
+
+
+class ThresholdMissed(Exception):
+    """Raised by an item whose signal (or Φ) misses its gate; carries the report text."""
+
+
+def _hevval_repr(excinfo: pytest.ExceptionInfo[BaseException]) -> str | None:
+    if isinstance(excinfo.value, (HevvalError, ThresholdMissed)):
+        return str(excinfo.value)
+    return None
+
+
+class SpecFile(pytest.File):
+    """A ``*.hevval.yaml`` file."""
+
+    spec: Spec
+
+    def collect(self) -> Iterator[pytest.Item]:
+        state = self.config.stash[session_key]
+        self.spec = load_spec(self.path)
+        spec = self.spec
+        state.cache.declare(spec.reference, spec.reference_columns())
+        state.cache.declare(spec.model, spec.model_columns())
+        for _, path, node in spec.walk():
+            yield SignalItem.from_parent(self, name="/".join(path), spec=spec, line=node.line)
+        yield PhiItem.from_parent(self, name="Phi", spec=spec, line=spec.min_phi_line)
+
+    def repr_failure(  # type: ignore[override]
+        self, excinfo: pytest.ExceptionInfo[BaseException]
+    ) -> str | TerminalRepr:
+        text = _hevval_repr(excinfo)
+        return text if text is not None else super().repr_failure(excinfo)
+
+
+class _SpecItem(pytest.Item):
+    def __init__(self, *, spec: Spec, line: int, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.spec = spec
+        self.line = line
+        self.evaluation: Evaluation | None = None
+        self.hevval_payload: dict[str, Any] | None = None
+
+    @property
+    def state(self) -> HevvalSession:
+        return self.config.stash[session_key]
+
+    def setup(self) -> None:
+        self.evaluation = self.state.evaluate(self.spec)
+
+    @property
+    def result(self) -> SpecResult:
+        assert self.evaluation is not None
+        return self.evaluation.result
+
+    def _record(self, signal: SignalResult | None) -> None:
+        result = self.result
+        self.user_properties.append(("phi", f"{result.phi:.6f}"))
+        if signal is not None:
+            for index, name in enumerate(CHARACTERISTICS, start=1):
+                self.user_properties.append((f"lambda{index}_{name}", f"{signal.lambdas[index - 1]:.6f}"))
+            self.user_properties.append(("lag_s", f"{signal.lag_s:.6g}"))
+        payload = self.state.ship(result)
+        self.hevval_payload = payload
+
+    def reportinfo(self) -> tuple[Path, int, str]:
+        return self.path, max(self.line - 1, 0), f"hevval {self.spec.name}: {self.name}"
+
+    def repr_failure(  # type: ignore[override]
+        self,
+        excinfo: pytest.ExceptionInfo[BaseException],
+        style: Any = None,
+    ) -> str | TerminalRepr:
+        text = _hevval_repr(excinfo)
+        return text if text is not None else super().repr_failure(excinfo, style=style)
+
+
+class SignalItem(_SpecItem):
+    """One validation signal γ(i, j, k): passes when every gated λ meets its threshold."""
+
+    def runtest(self) -> None:
+        result = self.result
+        signal = result.signal(self.name)
+        self._record(signal)
+        if signal.failures:
+            diagnosis = self.state.diagnosis_line(self.evaluation, signal)
+            raise ThresholdMissed(
+                signal_failure_report(result, signal, diagnosis_line=diagnosis)
+            )
+
+
+class PhiItem(_SpecItem):
+    """The spec's global validation metric Φ against ``min_phi``."""
+
+    def runtest(self) -> None:
+        result = self.result
+        self._record(None)
+        if not result.phi_passed:
+            raise ThresholdMissed(phi_report(result))

@@ -1,0 +1,130 @@
+"""Every ``--hevval-*`` option and its same-named ``hevval_*`` ini key, in one table.
+
+Precedence: command line > ini file (pytest.ini / pyproject / tox.ini / setup.cfg) > built-in
+default. Values are validated when read, with messages that say what to do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import pytest
+
+__all__ = ["OPTIONS", "Option", "add_options", "get_option"]
+
+Kind = Literal["bool", "string", "linelist", "choice"]
+
+
+@dataclass(frozen=True)
+class Option:
+    name: str  # without the leading "hevval" prefix, e.g. "report-dir"
+    kind: Kind
+    help: str
+    default: Any = None
+    choices: tuple[str, ...] = ()
+    #: For string options that may be given bare (``--hevval-compare``): the bare value.
+    const: str | None = None
+
+    @property
+    def flag(self) -> str:
+        return "--hevval" if not self.name else f"--hevval-{self.name}"
+
+    @property
+    def ini(self) -> str:
+        return "hevval" if not self.name else "hevval_" + self.name.replace("-", "_")
+
+    @property
+    def dest(self) -> str:
+        return self.ini
+
+
+OPTIONS: tuple[Option, ...] = (
+    Option("", "bool", "run validation specs (*.hevval.yaml) as tests", False),
+    Option(
+        "files",
+        "linelist",
+        "glob patterns of spec files (ini only)",
+        ["*.hevval.yaml", "*.hevval.yml"],
+    ),
+    Option("details", "bool", "show every node of every tree in the summary", False),
+    Option(
+        "diagnose",
+        "choice",
+        "diagnose residuals of failing signals (off, failed, all)",
+        "failed",
+        ("off", "failed", "all"),
+    ),
+    Option("report", "string", "write reports: comma-separated html,json,md", ""),
+    Option("report-dir", "string", "folder for reports", ".hevval/report"),
+    Option("no-history", "bool", "do not record this run in the history", False),
+    Option("history-dir", "string", "folder of run records", ".hevval/history"),
+    Option("model-version", "string", "model version recorded in the history", None),
+    Option(
+        "compare",
+        "string",
+        "compare with a recorded run: VERSION or latest",
+        None,
+        const="latest",
+    ),
+    Option(
+        "compare-fail",
+        "string",
+        "fail items that got worse than EXPR against the baseline, e.g. phi:0.01,lambda:0.02",
+        None,
+    ),
+    Option("create-baseline", "bool", "record a baseline when none exists (also in CI)", False),
+    Option(
+        "ratchet",
+        "string",
+        "write tightened thresholds (achieved minus MARGIN) to a sidecar file",
+        None,
+        const="0.01",
+    ),
+    Option("dask", "string", "evaluate specs on this dask.distributed scheduler address", None),
+    Option("workers", "string", "threads per spec for scoring signals (default 2)", None),
+)
+
+_BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def add_options(parser: pytest.Parser) -> None:
+    group = parser.getgroup("hevval", "multi-fidelity model validation (pytest-hevval)")
+    for option in OPTIONS:
+        if option.kind == "linelist":
+            parser.addini(option.ini, option.help, type="linelist", default=option.default)
+            continue
+        if option.kind == "bool":
+            group.addoption(option.flag, action="store_true", default=None, dest=option.dest,
+                            help=option.help)
+            parser.addini(option.ini, option.help, type="bool", default=option.default)
+            continue
+        kwargs: dict[str, Any] = {"dest": option.dest, "default": None, "help": option.help}
+        if option.choices:
+            kwargs["choices"] = option.choices
+        if option.const is not None:
+            kwargs["nargs"] = "?"
+            kwargs["const"] = option.const
+        group.addoption(option.flag, **kwargs)
+        parser.addini(option.ini, option.help, type="string",
+                      default="" if option.default is None else str(option.default))
+
+
+def get_option(config: pytest.Config, name: str) -> Any:
+    """The option's value: command line, else ini, else the built-in default."""
+    option = _BY_NAME[name]
+    if option.kind == "linelist":
+        return config.getini(option.ini)
+    cli = config.getoption(option.dest, default=None)
+    if cli is not None:
+        return cli
+    value = config.getini(option.ini)
+    if option.kind == "bool":
+        return bool(value)
+    if value in ("", None):
+        return option.default
+    if option.choices and value not in option.choices:
+        raise pytest.UsageError(
+            f"ini {option.ini} = {value!r}: must be one of {', '.join(option.choices)}"
+        )
+    return value

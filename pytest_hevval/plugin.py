@@ -1,0 +1,80 @@
+"""pytest hooks. Each is a few lines that delegate; nothing here computes.
+
+Registered through the ``pytest11`` entry point; inert unless ``--hevval`` (or ini
+``hevval = true``) is given.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Generator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from .options import add_options
+from .session import HevvalSession, session_key
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    add_options(parser)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    state = HevvalSession(config)
+    config.stash[session_key] = state
+    if state.enabled:
+        state.validate_options()
+        # The session object receives worker reports itself (pytest_runtest_logreport).
+        config.pluginmanager.register(state, "hevval-session")
+
+
+def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> pytest.Collector | None:
+    state = parent.config.stash[session_key]
+    if not state.enabled:
+        return None
+    patterns = state.option("files")
+    if any(fnmatch.fnmatch(file_path.name, pattern) for pattern in patterns):
+        from .nodes import SpecFile
+
+        return SpecFile.from_parent(parent, path=file_path)
+    return None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Generator[None, pytest.TestReport, pytest.TestReport]:
+    report = yield
+    payload = getattr(item, "hevval_payload", None)
+    if payload is not None and call.when == "call":
+        # Plain JSON-safe data rides on the report, so it reaches the xdist controller.
+        report.hevval_spec = payload  # type: ignore[attr-defined]
+    return report
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    state = session.config.stash[session_key]
+    if state.enabled and state.is_controller:
+        state.finish(session)
+
+
+def pytest_terminal_summary(
+    terminalreporter: Any, exitstatus: int, config: pytest.Config
+) -> None:
+    state = config.stash[session_key]
+    if state.enabled and state.is_controller:
+        state.summarise(terminalreporter)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """Keep every item of one spec on one worker, so each spec's data is read once."""
+    state = config.stash[session_key]
+    if not state.enabled or config.getoption("dist", "load") != "load":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    return LoadFileScheduling(config, log)
+

@@ -1,0 +1,567 @@
+"""Validation spec files → :class:`~pytest_hevval.spec.model.Spec`.
+
+Every problem becomes a :class:`~pytest_hevval.errors.SpecError` of the form
+``file:line: key.path: problem (got …); did you mean …?``. All spec error messages live here.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from ..core.characteristics import CHARACTERISTICS
+from ..data.record import SourceOptions
+from ..errors import ExpressionError, SpecError, did_you_mean
+from .expressions import Expression, parse_signal
+from .model import AlignmentSpec, SignalSpec, SourceSpec, Spec
+from .yaml_lines import LineDict, LineList, load_yaml_with_lines
+
+__all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
+
+#: ``lambda1`` … ``lambda7`` name the seven characteristics in paper order.
+THRESHOLD_ALIASES: dict[str, str] = {
+    f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)
+}
+
+_TOP_KEYS = (
+    "name",
+    "description",
+    "reference",
+    "model",
+    "alignment",
+    "thresholds",
+    "weights",
+    "min_phi",
+    "correlation",
+    "emergent",
+    "candidates",
+    "sets",
+)
+_SOURCE_KEYS = (
+    "path",
+    "time",
+    "format",
+    "sep",
+    "encoding",
+    "decimal",
+    "group",
+    "time_scale",
+)
+_MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
+_ALIGN_KEYS = ("rate_hz", "window", "max_lag_s", "offset_s", "offset_from", "max_offset_s", "nan")
+_SIGNAL_KEYS = (
+    "signal",
+    "ref",
+    "sim",
+    "alpha",
+    "unit",
+    "description",
+    "interpolation",
+    "reference_range",
+    "thresholds",
+    "ref_unit",
+    "sim_unit",
+    "ref_scale",
+    "ref_offset",
+    "sim_scale",
+    "sim_offset",
+    "children",
+)
+_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf")
+
+T = TypeVar("T")
+
+
+def characteristic_name(name: str) -> str | None:
+    """Canonical characteristic name for a name or alias, or None."""
+    if name in CHARACTERISTICS:
+        return name
+    return THRESHOLD_ALIASES.get(name)
+
+
+class _Context:
+    """Location bookkeeping while walking the YAML tree."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+
+    def error(
+        self, line: int, key: str, problem: str, *, got: Any = None, hint: str | None = None
+    ) -> SpecError:
+        text = problem if got is None else f"{problem} (got {_show(got)})"
+        return SpecError(text, file=self.file, line=line, key=key or None, hint=hint)
+
+    def mapping(self, value: Any, line: int, key: str) -> LineDict:
+        if not isinstance(value, LineDict):
+            raise self.error(line, key, "must be a mapping of keys to values", got=value)
+        return value
+
+    def check_keys(self, mapping: LineDict, allowed: tuple[str, ...], key: str) -> None:
+        for name in mapping:
+            if name not in allowed:
+                suggestion = did_you_mean(name, allowed)
+                raise self.error(
+                    mapping.line_of(name),
+                    _join(key, name),
+                    "unknown key",
+                    hint=suggestion or "allowed keys: " + ", ".join(allowed),
+                )
+
+    def get(
+        self,
+        mapping: LineDict,
+        name: str,
+        key: str,
+        convert: Callable[[Any, int, str], T],
+        default: T,
+    ) -> T:
+        if name not in mapping or mapping[name] is None:
+            return default
+        return convert(mapping[name], mapping.line_of(name), _join(key, name))
+
+    # Converters -----------------------------------------------------------------------------
+    def text(self, value: Any, line: int, key: str) -> str:
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise self.error(line, key, "must be text", got=value)
+        return str(value)
+
+    def number(self, value: Any, line: int, key: str) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.error(line, key, "must be a number", got=value)
+        if not math.isfinite(value):
+            raise self.error(line, key, "must be a finite number", got=value)
+        return float(value)
+
+    def positive(self, value: Any, line: int, key: str) -> float:
+        number = self.number(value, line, key)
+        if number <= 0:
+            raise self.error(line, key, "must be greater than 0", got=value)
+        return number
+
+    def non_negative(self, value: Any, line: int, key: str) -> float:
+        number = self.number(value, line, key)
+        if number < 0:
+            raise self.error(line, key, "must be 0 or more", got=value)
+        return number
+
+    def unit_interval(self, value: Any, line: int, key: str) -> float:
+        number = self.number(value, line, key)
+        if not 0.0 <= number <= 1.0:
+            raise self.error(line, key, "must lie between 0 and 1", got=value)
+        return number
+
+    def choice(self, options: tuple[str, ...]) -> Callable[[Any, int, str], str]:
+        def convert(value: Any, line: int, key: str) -> str:
+            text = self.text(value, line, key)
+            if text not in options:
+                raise self.error(
+                    line,
+                    key,
+                    "must be one of " + ", ".join(options),
+                    got=value,
+                    hint=did_you_mean(text, options) or None,
+                )
+            return text
+
+        return convert
+
+
+def _show(value: Any) -> str:
+    if isinstance(value, LineDict):
+        return "a mapping"
+    if isinstance(value, LineList):
+        return "a list"
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _join(key: str, name: str | int) -> str:
+    if isinstance(name, int):
+        return f"{key}[{name}]"
+    return f"{key}.{name}" if key else name
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read and validate one spec file."""
+    spec_path = Path(path)
+    try:
+        raw = spec_path.read_bytes()
+    except OSError as exc:
+        raise SpecError(
+            f"cannot read the spec file ({exc.strerror or exc})", file=str(spec_path)
+        ) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SpecError(
+            f"the spec file is not UTF-8 text (byte {exc.start})",
+            file=str(spec_path),
+            hint="save it as UTF-8",
+        ) from None
+    return parse_spec_text(text, spec_path, hashlib.sha256(raw).hexdigest())
+
+
+def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec:
+    """Validate spec text as if it were the file ``path`` (relative paths resolve from it)."""
+    file = str(path)
+    context = _Context(file)
+    try:
+        document = load_yaml_with_lines(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark is not None else None
+        problem = (exc.problem or "malformed YAML").strip()
+        raise SpecError(f"invalid YAML: {problem}", file=file, line=line) from None
+    except yaml.YAMLError as exc:
+        raise SpecError(f"invalid YAML: {exc}", file=file) from None
+    if document is None:
+        raise SpecError(
+            "the spec file is empty", file=file, line=1, hint="see docs/spec.md for the format"
+        )
+    top = context.mapping(document, 1, "")
+    context.check_keys(top, _TOP_KEYS, "")
+    for required in ("reference", "model", "sets"):
+        if required not in top:
+            raise context.error(
+                top.line,
+                required,
+                "is required",
+                hint="see docs/spec.md for the format",
+            )
+    base = path.parent
+    reference = _source(context, top["reference"], top.line_of("reference"), "reference", base)
+    model = _source(context, top["model"], top.line_of("model"), "model", base)
+    alignment = _alignment(context, top)
+    thresholds = _thresholds(context, top, "thresholds", "thresholds")
+    weights = _weights(context, top)
+    min_phi = context.get(top, "min_phi", "", context.unit_interval, None)
+    correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
+    emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
+    candidates = _candidates(context, top)
+    sets_value = top["sets"]
+    sets_line = top.line_of("sets")
+    if not isinstance(sets_value, LineList) or not sets_value:
+        raise context.error(sets_line, "sets", "must be a non-empty list of signals", got=sets_value)
+    roots = tuple(
+        _signal(context, item, sets_value.line_of(i), f"sets[{i}]")
+        for i, item in enumerate(sets_value)
+    )
+    _check_unique_paths(context, roots)
+    name = context.get(top, "name", "", context.text, _default_name(path))
+    return Spec(
+        path=path,
+        name=name,
+        text_hash=text_hash or hashlib.sha256(text.encode()).hexdigest(),
+        reference=reference,
+        model=model,
+        sets=roots,
+        alignment=alignment,
+        description=context.get(top, "description", "", context.text, None),
+        thresholds=thresholds,
+        weights=weights,
+        min_phi=min_phi,
+        min_phi_line=top.line_of("min_phi"),
+        correlation=correlation,  # type: ignore[arg-type]
+        emergent=emergent,  # type: ignore[arg-type]
+        candidates=candidates,
+    )
+
+
+def _default_name(path: Path) -> str:
+    name = path.name
+    for suffix in (".hevval.yaml", ".hevval.yml", ".yaml", ".yml"):
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> SourceSpec:
+    if isinstance(value, str):
+        # Shorthand: `reference: data/trip.csv`.
+        mapping = LineDict(path=value)
+        mapping.line = line
+        mapping.key_lines = {"path": line}
+        value = mapping
+    mapping = context.mapping(value, line, key)
+    allowed = _MODEL_KEYS if key == "model" else _SOURCE_KEYS
+    context.check_keys(mapping, allowed, key)
+    kinds = [k for k in ("path", "callable", "fmu") if k in mapping]
+    if key == "model" and len(kinds) != 1:
+        problem = "needs exactly one of path, callable or fmu"
+        raise context.error(mapping.line, key, problem, got=kinds or None)
+    if key == "reference" and not kinds:
+        raise context.error(mapping.line, key, "needs a path to the measured data file")
+    kind = kinds[0]
+    fmt = context.get(mapping, "format", key, context.choice(_FORMATS), None)
+    options = SourceOptions(
+        time=context.get(mapping, "time", key, context.text, None),
+        format=fmt,
+        sep=context.get(mapping, "sep", key, context.text, None),
+        encoding=context.get(mapping, "encoding", key, context.text, None),
+        decimal=context.get(mapping, "decimal", key, context.text, None),
+        group=context.get(mapping, "group", key, context.text, None),
+        time_scale=context.get(mapping, "time_scale", key, context.positive, 1.0),
+    )
+    path: str | None = None
+    if kind in ("path", "fmu"):
+        raw = context.text(mapping[kind], mapping.line_of(kind), _join(key, kind))
+        path = raw if "://" in raw else str((base / raw).resolve())
+    callable_ref = None
+    if kind == "callable":
+        callable_ref = context.text(mapping["callable"], mapping.line_of("callable"), key)
+        module, sep, function = callable_ref.partition(":")
+        if not sep or not module or not function:
+            raise context.error(
+                mapping.line_of("callable"),
+                _join(key, "callable"),
+                "must look like 'package.module:function'",
+                got=callable_ref,
+            )
+    params = context.get(mapping, "params", key, _plain_mapping(context), {})
+    inputs: tuple[str, ...] = ()
+    fmu_inputs: dict[str, str] = {}
+    if "inputs" in mapping:
+        raw_inputs = mapping["inputs"]
+        input_key = _join(key, "inputs")
+        input_line = mapping.line_of("inputs")
+        if kind == "fmu":
+            fmu_inputs = _string_mapping(context, raw_inputs, input_line, input_key)
+        elif isinstance(raw_inputs, LineList):
+            inputs = tuple(
+                context.text(v, raw_inputs.line_of(i), _join(input_key, i))
+                for i, v in enumerate(raw_inputs)
+            )
+        else:
+            raise context.error(input_line, input_key, "must be a list of column names", got=raw_inputs)
+    fmu_outputs: dict[str, str] = {}
+    if "outputs" in mapping:
+        fmu_outputs = _string_mapping(
+            context, mapping["outputs"], mapping.line_of("outputs"), _join(key, "outputs")
+        )
+    return SourceSpec(
+        kind="file" if kind == "path" else kind,  # type: ignore[arg-type]
+        path=path,
+        options=options,
+        line=mapping.line,
+        callable=callable_ref,
+        params=params,
+        inputs=inputs,
+        fmu_inputs=fmu_inputs,
+        fmu_outputs=fmu_outputs,
+        step_size=context.get(mapping, "step_size", key, context.positive, None),
+    )
+
+
+def _plain_mapping(context: _Context) -> Callable[[Any, int, str], dict[str, Any]]:
+    def convert(value: Any, line: int, key: str) -> dict[str, Any]:
+        return dict(context.mapping(value, line, key))
+
+    return convert
+
+
+def _string_mapping(context: _Context, value: Any, line: int, key: str) -> dict[str, str]:
+    mapping = context.mapping(value, line, key)
+    return {
+        str(k): context.text(v, mapping.line_of(k), _join(key, str(k))) for k, v in mapping.items()
+    }
+
+
+def _alignment(context: _Context, top: LineDict) -> AlignmentSpec:
+    if "alignment" not in top or top["alignment"] is None:
+        return AlignmentSpec()
+    mapping = context.mapping(top["alignment"], top.line_of("alignment"), "alignment")
+    context.check_keys(mapping, _ALIGN_KEYS, "alignment")
+    key = "alignment"
+    window = None
+    if "window" in mapping:
+        raw = mapping["window"]
+        line = mapping.line_of("window")
+        if not isinstance(raw, LineList) or len(raw) != 2:
+            raise context.error(
+                line, "alignment.window", "must be [start, stop] in seconds", got=raw
+            )
+        start = context.number(raw[0], line, "alignment.window[0]")
+        stop = context.number(raw[1], line, "alignment.window[1]")
+        if stop <= start:
+            raise context.error(
+                line, "alignment.window", "stop must be later than start", got=[start, stop]
+            )
+        window = (start, stop)
+    offset_from = None
+    if "offset_from" in mapping:
+        raw = mapping["offset_from"]
+        line = mapping.line_of("offset_from")
+        if isinstance(raw, str):
+            offset_from = (raw, raw)
+        elif isinstance(raw, LineDict) and set(raw) == {"ref", "sim"}:
+            offset_from = (
+                context.text(raw["ref"], line, "alignment.offset_from.ref"),
+                context.text(raw["sim"], line, "alignment.offset_from.sim"),
+            )
+        else:
+            raise context.error(
+                line,
+                "alignment.offset_from",
+                "must be a column name or {ref: column, sim: column}",
+                got=raw,
+            )
+    return AlignmentSpec(
+        rate_hz=context.get(mapping, "rate_hz", key, context.positive, None),
+        window=window,
+        max_lag_s=context.get(mapping, "max_lag_s", key, context.non_negative, None),
+        offset_s=context.get(mapping, "offset_s", key, context.number, 0.0),
+        offset_from=offset_from,
+        max_offset_s=context.get(mapping, "max_offset_s", key, context.positive, 30.0),
+        nan=context.get(mapping, "nan", key, context.choice(("raise", "omit")), "raise"),  # type: ignore[arg-type]
+    )
+
+
+def _thresholds(context: _Context, mapping: LineDict, name: str, key: str) -> dict[str, float]:
+    if name not in mapping or mapping[name] is None:
+        return {}
+    table = context.mapping(mapping[name], mapping.line_of(name), key)
+    out: dict[str, float] = {}
+    allowed = (*CHARACTERISTICS, *THRESHOLD_ALIASES)
+    for raw_name, value in table.items():
+        canonical = characteristic_name(raw_name)
+        line = table.line_of(raw_name)
+        if canonical is None:
+            raise context.error(
+                line,
+                _join(key, raw_name),
+                "unknown characteristic",
+                hint=did_you_mean(raw_name, allowed)
+                or "use one of " + ", ".join(CHARACTERISTICS) + " (or lambda1…lambda7)",
+            )
+        if canonical in out:
+            raise context.error(line, _join(key, raw_name), f"repeats {canonical}")
+        out[canonical] = context.unit_interval(value, line, _join(key, raw_name))
+    return out
+
+
+def _weights(context: _Context, top: LineDict) -> tuple[float, ...]:
+    if "weights" not in top or top["weights"] is None:
+        return (1.0,) * 7
+    table = context.mapping(top["weights"], top.line_of("weights"), "weights")
+    values = dict.fromkeys(CHARACTERISTICS, 1.0)
+    for raw_name, value in table.items():
+        canonical = characteristic_name(raw_name)
+        line = table.line_of(raw_name)
+        if canonical is None:
+            raise context.error(
+                line,
+                _join("weights", raw_name),
+                "unknown characteristic",
+                hint=did_you_mean(raw_name, (*CHARACTERISTICS, *THRESHOLD_ALIASES)) or None,
+            )
+        values[canonical] = context.non_negative(value, line, _join("weights", raw_name))
+    if not any(values.values()):
+        raise context.error(top.line_of("weights"), "weights", "cannot all be 0")
+    return tuple(values[name] for name in CHARACTERISTICS)
+
+
+def _expression(context: _Context, value: Any, line: int, key: str) -> Expression:
+    text = context.text(value, line, key)
+    try:
+        return parse_signal(text)
+    except ExpressionError as exc:
+        raise SpecError(
+            f"{exc.problem} (got {text!r})", file=context.file, line=line, key=key, hint=exc.hint
+        ) from None
+
+
+def _candidates(context: _Context, top: LineDict) -> dict[str, Expression]:
+    if "candidates" not in top or top["candidates"] is None:
+        return {}
+    table = context.mapping(top["candidates"], top.line_of("candidates"), "candidates")
+    return {
+        str(name): _expression(context, value, table.line_of(name), _join("candidates", name))
+        for name, value in table.items()
+    }
+
+
+def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
+    mapping = context.mapping(value, line, key)
+    context.check_keys(mapping, _SIGNAL_KEYS, key)
+    if "signal" not in mapping:
+        raise context.error(mapping.line, _join(key, "signal"), "is required (the signal's name)")
+    name = context.text(mapping["signal"], mapping.line_of("signal"), _join(key, "signal"))
+    if not name.strip() or "/" in name or "::" in name:
+        raise context.error(
+            mapping.line_of("signal"),
+            _join(key, "signal"),
+            "must be a non-empty name without '/' or '::'",
+            got=name,
+        )
+    ref = _expression(context, mapping.get("ref", name), mapping.line_of("ref"), _join(key, "ref"))
+    sim = _expression(context, mapping.get("sim", name), mapping.line_of("sim"), _join(key, "sim"))
+    children_value = mapping.get("children")
+    children: tuple[SignalSpec, ...] = ()
+    if children_value is not None:
+        children_line = mapping.line_of("children")
+        if not isinstance(children_value, LineList):
+            raise context.error(
+                children_line, _join(key, "children"), "must be a list of signals", got=children_value
+            )
+        children = tuple(
+            _signal(context, item, children_value.line_of(i), f"{key}.children[{i}]")
+            for i, item in enumerate(children_value)
+        )
+    return SignalSpec(
+        name=name,
+        ref=ref,
+        sim=sim,
+        line=mapping.line,
+        key=key,
+        alpha=context.get(mapping, "alpha", key, context.non_negative, 1.0),
+        unit=context.get(mapping, "unit", key, context.text, None),
+        description=context.get(mapping, "description", key, context.text, None),
+        interpolation=context.get(  # type: ignore[arg-type]
+            mapping, "interpolation", key, context.choice(("linear", "previous")), "linear"
+        ),
+        reference_range=context.get(mapping, "reference_range", key, context.positive, None),
+        thresholds=_thresholds(context, mapping, "thresholds", _join(key, "thresholds")),
+        ref_unit=context.get(mapping, "ref_unit", key, context.text, None),
+        sim_unit=context.get(mapping, "sim_unit", key, context.text, None),
+        ref_scale=context.get(mapping, "ref_scale", key, context.number, 1.0),
+        ref_offset=context.get(mapping, "ref_offset", key, context.number, 0.0),
+        sim_scale=context.get(mapping, "sim_scale", key, context.number, 1.0),
+        sim_offset=context.get(mapping, "sim_offset", key, context.number, 0.0),
+        children=children,
+    )
+
+
+def _check_unique_paths(context: _Context, roots: tuple[SignalSpec, ...]) -> None:
+    """Item ids are signal paths, so two siblings (or two set roots) may not share a name."""
+    seen: dict[str, SignalSpec] = {}
+
+    def visit(node: SignalSpec, path: str) -> None:
+        if path in seen:
+            first = seen[path]
+            raise context.error(
+                node.line,
+                node.key,
+                f"duplicate signal path {path!r} (first defined at line {first.line})",
+                hint="give it another name",
+            )
+        seen[path] = node
+        for child in node.children:
+            visit(child, f"{path}/{child.name}")
+
+    for root in roots:
+        visit(root, root.name)
+
+
+def thresholds_mapping(values: Mapping[str, float]) -> dict[str, float]:
+    """Canonicalise a name→value mapping that may use lambda1…lambda7 aliases."""
+    out: dict[str, float] = {}
+    for name, value in values.items():
+        canonical = characteristic_name(name)
+        if canonical is not None:
+            out[canonical] = float(value)
+    return out

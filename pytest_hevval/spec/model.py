@@ -1,0 +1,150 @@
+"""Typed, validated validation specs (frozen dataclasses built by :mod:`.load`)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from ..core.characteristics import CHARACTERISTICS
+from ..data.record import SourceOptions
+from .expressions import Expression
+
+__all__ = [
+    "AlignmentSpec",
+    "Interpolation",
+    "ModelKind",
+    "SignalSpec",
+    "SourceSpec",
+    "Spec",
+]
+
+Interpolation = Literal["linear", "previous"]
+ModelKind = Literal["file", "callable", "fmu"]
+NanPolicy = Literal["raise", "omit"]
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    """Where one side's data comes from: a file, a Python callable or an FMU."""
+
+    kind: ModelKind
+    #: Absolute path of the data file or FMU (None for a callable).
+    path: str | None
+    options: SourceOptions
+    line: int
+    callable: str | None = None
+    params: Mapping[str, Any] = field(default_factory=dict)
+    #: Callable: reference channels handed over. FMU: FMU input name → reference channel.
+    inputs: tuple[str, ...] = ()
+    fmu_inputs: Mapping[str, str] = field(default_factory=dict)
+    #: FMU: signal column → FMU output variable.
+    fmu_outputs: Mapping[str, str] = field(default_factory=dict)
+    step_size: float | None = None
+
+    @property
+    def describe(self) -> str:
+        if self.kind == "callable":
+            return f"callable {self.callable}"
+        return str(self.path)
+
+
+@dataclass(frozen=True)
+class AlignmentSpec:
+    rate_hz: float | None = None
+    window: tuple[float, float] | None = None
+    max_lag_s: float | None = None
+    offset_s: float = 0.0
+    #: (reference channel, model channel) cross-correlated to find the time offset.
+    offset_from: tuple[str, str] | None = None
+    max_offset_s: float = 30.0
+    nan: NanPolicy = "raise"
+
+
+@dataclass(frozen=True)
+class SignalSpec:
+    """One validation signal γ(i, j, k) as written in the spec."""
+
+    name: str
+    ref: Expression
+    sim: Expression
+    line: int
+    key: str
+    alpha: float = 1.0
+    unit: str | None = None
+    description: str | None = None
+    interpolation: Interpolation = "linear"
+    reference_range: float | None = None
+    thresholds: Mapping[str, float] = field(default_factory=dict)
+    ref_unit: str | None = None
+    sim_unit: str | None = None
+    ref_scale: float = 1.0
+    ref_offset: float = 0.0
+    sim_scale: float = 1.0
+    sim_offset: float = 0.0
+    children: tuple[SignalSpec, ...] = ()
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A whole validation spec: data sources, the signal sets and the gates."""
+
+    path: Path
+    name: str
+    text_hash: str
+    reference: SourceSpec
+    model: SourceSpec
+    sets: tuple[SignalSpec, ...]
+    alignment: AlignmentSpec = AlignmentSpec()
+    description: str | None = None
+    thresholds: Mapping[str, float] = field(default_factory=dict)
+    weights: tuple[float, ...] = (1.0,) * 7
+    min_phi: float | None = None
+    min_phi_line: int = 1
+    correlation: Literal["xcorr", "pearson"] = "xcorr"
+    emergent: Literal["V1", "V2"] = "V2"
+    candidates: Mapping[str, Expression] = field(default_factory=dict)
+    #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
+    ratchet: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+
+    def walk(self) -> Iterator[tuple[int, tuple[str, ...], SignalSpec]]:
+        """(set index from 1, path of names, node) for every signal, parents first."""
+
+        def visit(
+            node: SignalSpec, path: tuple[str, ...], index: int
+        ) -> Iterator[tuple[int, tuple[str, ...], SignalSpec]]:
+            yield index, path, node
+            for child in node.children:
+                yield from visit(child, (*path, child.name), index)
+
+        for index, root in enumerate(self.sets, start=1):
+            yield from visit(root, (root.name,), index)
+
+    def thresholds_for(self, path: tuple[str, ...], node: SignalSpec) -> dict[str, float]:
+        """Effective thresholds of one node: spec defaults < node < ratchet (only if stricter)."""
+        merged = {**self.thresholds, **node.thresholds}
+        for name, value in self.ratchet.get("/".join(path), {}).items():
+            if name in CHARACTERISTICS and value > merged.get(name, -1.0):
+                merged[name] = value
+        return merged
+
+    def reference_columns(self) -> set[str]:
+        columns: set[str] = set()
+        for _, _, node in self.walk():
+            columns.update(node.ref.columns)
+        for expression in self.candidates.values():
+            columns.update(expression.columns)
+        columns.update(self.model.inputs)
+        columns.update(self.model.fmu_inputs.values())
+        if self.alignment.offset_from:
+            columns.add(self.alignment.offset_from[0])
+        return columns
+
+    def model_columns(self) -> set[str]:
+        columns: set[str] = set()
+        for _, _, node in self.walk():
+            columns.update(node.sim.columns)
+        if self.alignment.offset_from:
+            columns.add(self.alignment.offset_from[1])
+        return columns

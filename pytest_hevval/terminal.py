@@ -1,0 +1,112 @@
+"""Text for people: failure reports of items and the signal-tree summary.
+
+Pure functions over :mod:`pytest_hevval.result` objects; no pytest, no I/O.
+"""
+
+from __future__ import annotations
+
+import shlex
+from collections.abc import Iterable
+
+from .core.characteristics import CHARACTERISTICS
+from .result import SignalResult, SpecResult
+
+__all__ = ["phi_report", "signal_failure_report", "tree_summary"]
+
+_SHORT = ("λ1", "λ2", "λ3", "λ4", "λ5", "λ6", "λ7")
+
+
+def _location(spec: str, line: int) -> str:
+    return f"{spec}:{line}"
+
+
+def signal_failure_report(
+    result: SpecResult, signal: SignalResult, *, diagnosis_line: str | None = None
+) -> str:
+    lines = [
+        f"{signal.path} missed its thresholds ({_location(result.spec, signal.line)})",
+        f"  set {signal.set}, level {signal.level}, position {signal.position}, "
+        f"α = {signal.alpha:g}",
+    ]
+    lines.extend(f"  {text}" for text in signal.failure_lines())
+    lines.append(
+        f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
+        f"(λ1 at zero lag {signal.lambdas[0]:.4f})"
+    )
+    by_path = {s.path: s for s in result.signals}
+    if signal.origins == [signal.path]:
+        if signal.children:
+            lines.append(
+                f"  where the error appears: here, at level {signal.level}: the signals below "
+                "it pass, so the error emerges where they combine"
+            )
+        else:
+            lines.append(f"  where the error appears: here, at level {signal.level} (a leaf)")
+    elif signal.origins:
+        lines.append("  where the error appears:")
+        for path in signal.origins:
+            origin = by_path.get(path)
+            level = f" (level {origin.level}, line {origin.line})" if origin else ""
+            worst = ""
+            if origin and origin.failures:
+                first = min(origin.failures, key=lambda f: f.value - f.threshold)
+                worst = f": {first.characteristic} {first.value:.4f} < {first.threshold:g}"
+            lines.append(f"    {path}{level}{worst}")
+    if diagnosis_line:
+        lines.append(f"  diagnosis: {diagnosis_line}")
+    target = signal.origins[0] if signal.origins else signal.path
+    lines.append(
+        "  next: "
+        + f"hevval diagnose {shlex.quote(result.spec)} --signal {shlex.quote(target)}"
+        + " to trace the residual; fix the model, or adjust the thresholds in the spec"
+    )
+    return "\n".join(lines)
+
+
+def phi_report(result: SpecResult) -> str:
+    gate = "no min_phi set" if result.min_phi is None else f"min_phi {result.min_phi:g}"
+    lines = [
+        f"Φ = {result.phi:.4f} < {gate} ({_location(result.spec, result.min_phi_line)})"
+        if not result.phi_passed
+        else f"Φ = {result.phi:.4f} ({gate})",
+        "  signals that pull Φ down most (share of 1 − Φ):",
+    ]
+    deficit = max(1.0 - result.phi, 1e-12)
+    for path, pull in result.phi_contributions()[:5]:
+        signal = result.signal(path)
+        worst = min(range(7), key=lambda q: signal.lambdas[q])
+        lines.append(
+            f"    {path}: {100 * pull / deficit:.0f} % (weakest {CHARACTERISTICS[worst]} "
+            f"{signal.lambdas[worst]:.4f})"
+        )
+    lines.append("  next: improve the signals above, or run hevval diagnose on them")
+    return "\n".join(lines)
+
+
+def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> list[str]:
+    """The signal tree of every spec with its λ values and Φ."""
+    lines: list[str] = []
+    for result in results:
+        verdict = "PASS" if result.passed else "FAIL"
+        gate = "" if result.min_phi is None else f" (min {result.min_phi:g})"
+        lines.append(f"{result.name}: Φ = {result.phi:.4f}{gate} {verdict}  [{result.spec}]")
+        if details:
+            lines.append("    " + " " * 28 + "  ".join(f"{s:>6}" for s in _SHORT))
+        for signal in result.signals:
+            if not details and signal.passed:
+                continue
+            indent = "  " * signal.level
+            mark = "✗" if signal.failures else "✓"
+            origin = "  ← error appears here" if signal.origin else ""
+            label = f"{indent}{mark} {signal.name}"
+            if details:
+                values = "  ".join(f"{v:6.4f}" for v in signal.lambdas)
+                lines.append(f"  {label:<30}{values}{origin}")
+            else:
+                failed = ", ".join(
+                    f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures
+                )
+                lines.append(f"  {label} [{signal.path}] {failed}{origin}")
+        if not details and result.passed:
+            lines.append(f"  all {len(result.signals)} signals pass")
+    return lines
