@@ -13,8 +13,8 @@ from .core import (
     emergent,
     error_origins,
     global_metric,
-    score_tree,
     normalised_error,
+    score_tree,
     signal_characteristics,
 )
 from .errors import DataError, ExpressionError, HevvalError, SpecError
@@ -34,7 +34,7 @@ __all__ = [
     "emergent",
     "error_origins",
     "global_metric",
-    "score_tree",
     "normalised_error",
+    "score_tree",
     "signal_characteristics",
 ]

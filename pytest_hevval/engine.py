@@ -144,7 +144,11 @@ def _load_model(
             folders=folders,
             spec_file=str(spec.path),
         )
-        return record, {"callable": model.callable, "params": dict(model.params), "kind": "callable"}
+        return record, {
+            "callable": model.callable,
+            "params": dict(model.params),
+            "kind": "callable",
+        }
     from .data.fmu import run_fmu
 
     times = [c.time for c in reference.channels.values() if c.time.shape[0]]

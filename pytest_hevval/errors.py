@@ -66,7 +66,7 @@ class HevvalError(Exception):
 
     def with_context(self, **fields: Any) -> HevvalError:
         """Return a copy with missing location fields filled in (existing ones win)."""
-        values = {
+        values: dict[str, Any] = {
             "file": self.file,
             "line": self.line,
             "key": self.key,

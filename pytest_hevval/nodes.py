@@ -71,7 +71,11 @@ class _SpecItem(pytest.Item):
         return self.config.stash[session_key]
 
     def setup(self) -> None:
-        self.evaluation = self.state.evaluate(self.spec)
+        try:
+            self.evaluation = self.state.evaluate(self.spec)
+        except HevvalError as exc:
+            # An ERROR (setup), shown as the message alone: the data, not the code, is at fault.
+            pytest.fail(str(exc), pytrace=False)
 
     @property
     def result(self) -> SpecResult:
@@ -83,7 +87,9 @@ class _SpecItem(pytest.Item):
         self.user_properties.append(("phi", f"{result.phi:.6f}"))
         if signal is not None:
             for index, name in enumerate(CHARACTERISTICS, start=1):
-                self.user_properties.append((f"lambda{index}_{name}", f"{signal.lambdas[index - 1]:.6f}"))
+                self.user_properties.append(
+                    (f"lambda{index}_{name}", f"{signal.lambdas[index - 1]:.6f}")
+                )
             self.user_properties.append(("lag_s", f"{signal.lag_s:.6g}"))
         payload = self.state.ship(result)
         self.hevval_payload = payload
@@ -91,7 +97,7 @@ class _SpecItem(pytest.Item):
     def reportinfo(self) -> tuple[Path, int, str]:
         return self.path, max(self.line - 1, 0), f"hevval {self.spec.name}: {self.name}"
 
-    def repr_failure(  # type: ignore[override]
+    def repr_failure(
         self,
         excinfo: pytest.ExceptionInfo[BaseException],
         style: Any = None,
@@ -109,9 +115,7 @@ class SignalItem(_SpecItem):
         self._record(signal)
         if signal.failures:
             diagnosis = self.state.diagnosis_line(self.evaluation, signal)
-            raise ThresholdMissed(
-                signal_failure_report(result, signal, diagnosis_line=diagnosis)
-            )
+            raise ThresholdMissed(signal_failure_report(result, signal, diagnosis_line=diagnosis))
 
 
 class PhiItem(_SpecItem):

@@ -95,8 +95,9 @@ def add_options(parser: pytest.Parser) -> None:
             parser.addini(option.ini, option.help, type="linelist", default=option.default)
             continue
         if option.kind == "bool":
-            group.addoption(option.flag, action="store_true", default=None, dest=option.dest,
-                            help=option.help)
+            group.addoption(
+                option.flag, action="store_true", default=None, dest=option.dest, help=option.help
+            )
             parser.addini(option.ini, option.help, type="bool", default=option.default)
             continue
         kwargs: dict[str, Any] = {"dest": option.dest, "default": None, "help": option.help}
@@ -106,8 +107,12 @@ def add_options(parser: pytest.Parser) -> None:
             kwargs["nargs"] = "?"
             kwargs["const"] = option.const
         group.addoption(option.flag, **kwargs)
-        parser.addini(option.ini, option.help, type="string",
-                      default="" if option.default is None else str(option.default))
+        parser.addini(
+            option.ini,
+            option.help,
+            type="string",
+            default="" if option.default is None else str(option.default),
+        )
 
 
 def get_option(config: pytest.Config, name: str) -> Any:

@@ -60,9 +60,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         state.finish(session)
 
 
-def pytest_terminal_summary(
-    terminalreporter: Any, exitstatus: int, config: pytest.Config
-) -> None:
+def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
     state = config.stash[session_key]
     if state.enabled and state.is_controller:
         state.summarise(terminalreporter)
@@ -77,4 +75,3 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     from xdist.scheduler import LoadFileScheduling
 
     return LoadFileScheduling(config, log)
-

@@ -195,7 +195,8 @@ class SpecResult:
         pulls = [
             (
                 s.path,
-                s.alpha * sum(b * (1.0 - v) for b, v in zip(self.weights, s.lambdas, strict=True))
+                s.alpha
+                * sum(b * (1.0 - v) for b, v in zip(self.weights, s.lambdas, strict=True))
                 / total,
             )
             for s in self.signals

@@ -75,7 +75,7 @@ def test_normalisation_reproduces_table_2_and_4(
 
 
 def test_delta_e_of_table_2() -> None:
-    assert 1.08002 - 0.56119 == pytest.approx(0.51883, abs=1e-9)
+    assert pytest.approx(0.51883, abs=1e-9) == 1.08002 - 0.56119
 
 
 def test_emergent_formula_goldens_from_table_4() -> None:
@@ -217,17 +217,18 @@ def test_lag_is_argmax_of_full_correlation(n: int) -> None:
 def test_degenerate_input_raises_clear_errors(
     reference: list, simulated: list, dt: float, message: str
 ) -> None:
-    with pytest.raises(DegenerateSignalError, match=message.replace("(", r"\(").replace(")", r"\)")):
+    with pytest.raises(
+        DegenerateSignalError, match=message.replace("(", r"\(").replace(")", r"\)")
+    ):
         signal_characteristics(np.array(reference), np.array(simulated), dt=dt)
 
 
 def test_constant_reference_with_declared_range() -> None:
-    got = signal_characteristics(
-        np.full(10, 5.0), np.full(10, 5.5), dt=1.0, reference_range=10.0
-    )
+    got = signal_characteristics(np.full(10, 5.0), np.full(10, 5.5), dt=1.0, reference_range=10.0)
     assert got.mae == pytest.approx(0.5)
     assert got.lambdas[2] == pytest.approx(0.95)
-    assert got.lambdas[4] == 1.0 and got.lambdas[5] == 1.0
+    assert got.lambdas[4] == 1.0
+    assert got.lambdas[5] == 1.0
 
 
 def test_all_zero_signals_are_identical() -> None:
@@ -265,10 +266,12 @@ def test_huge_and_tiny_magnitudes(magnitude: float) -> None:
 def test_constant_offset_gives_the_paper_synthetic_values() -> None:
     reference = np.sin(np.linspace(0, 10, 500)) * 3
     got = signal_characteristics(reference, reference - 0.4, dt=0.1)
-    assert got.mae == pytest.approx(0.4) and got.rms == pytest.approx(0.4)
+    assert got.mae == pytest.approx(0.4)
+    assert got.rms == pytest.approx(0.4)
     assert got.delta_e == pytest.approx(0.0, abs=1e-12)
     assert got.error_std == pytest.approx(0.0, abs=1e-12)
-    assert got.lambdas[4] == pytest.approx(1.0) and got.lambdas[5] == pytest.approx(1.0)
+    assert got.lambdas[4] == pytest.approx(1.0)
+    assert got.lambdas[5] == pytest.approx(1.0)
 
 
 # --- Properties --------------------------------------------------------------------------------

@@ -30,8 +30,8 @@ __all__ = [
     "error_origins",
     "global_metric",
     "iter_nodes",
+    "normalised_error",
     "score_tree",
     "search_lag",
-    "normalised_error",
     "signal_characteristics",
 ]

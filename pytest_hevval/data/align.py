@@ -124,7 +124,7 @@ def find_offset(
     """
     start = max(float(reference.time[0]), float(model.time[0]) - max_offset_s)
     stop = min(float(reference.time[-1]), float(model.time[-1]) + max_offset_s)
-    n = int(math.floor((stop - start) * rate_hz + 1e-9)) + 1
+    n = math.floor((stop - start) * rate_hz + 1e-9) + 1
     if n < 16:
         raise DataError("the records overlap too little to find a time offset")
     grid = start + np.arange(n) / rate_hz
@@ -194,11 +194,12 @@ def align_records(
     if not stop > start:
         raise DataError(
             f"the reference and the model output do not overlap in time "
-            f"(reference {_range(reference, ref_names)}, model {_range(model, model_names, offset_s)})",
+            f"(reference {_range(reference, ref_names)}, "
+            f"model {_range(model, model_names, offset_s)})",
             file=model.source,
             hint="check both time columns, their units (time_scale) and alignment.offset_s",
         )
-    n = int(math.floor((stop - start) * rate_hz + 1e-9)) + 1
+    n = math.floor((stop - start) * rate_hz + 1e-9) + 1
     if n < 3:
         raise DataError(
             f"the overlap [{start:g}, {stop:g}] s holds fewer than 3 samples at {rate_hz:g} Hz",

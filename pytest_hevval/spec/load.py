@@ -10,7 +10,7 @@ import hashlib
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import yaml
 
@@ -18,7 +18,7 @@ from ..core.characteristics import CHARACTERISTICS
 from ..data.record import SourceOptions
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
-from .model import AlignmentSpec, SignalSpec, SourceSpec, Spec
+from .model import AlignmentSpec, Interpolation, SignalSpec, SourceSpec, Spec
 from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 
 __all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
@@ -246,7 +246,9 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     sets_value = top["sets"]
     sets_line = top.line_of("sets")
     if not isinstance(sets_value, LineList) or not sets_value:
-        raise context.error(sets_line, "sets", "must be a non-empty list of signals", got=sets_value)
+        raise context.error(
+            sets_line, "sets", "must be a non-empty list of signals", got=sets_value
+        )
     roots = tuple(
         _signal(context, item, sets_value.line_of(i), f"sets[{i}]")
         for i, item in enumerate(sets_value)
@@ -322,7 +324,8 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
                 "must look like 'package.module:function'",
                 got=callable_ref,
             )
-    params = context.get(mapping, "params", key, _plain_mapping(context), {})
+    no_params: dict[str, Any] = {}
+    params = context.get(mapping, "params", key, _plain_mapping(context), no_params)
     inputs: tuple[str, ...] = ()
     fmu_inputs: dict[str, str] = {}
     if "inputs" in mapping:
@@ -337,7 +340,9 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
                 for i, v in enumerate(raw_inputs)
             )
         else:
-            raise context.error(input_line, input_key, "must be a list of column names", got=raw_inputs)
+            raise context.error(
+                input_line, input_key, "must be a list of column names", got=raw_inputs
+            )
     fmu_outputs: dict[str, str] = {}
     if "outputs" in mapping:
         fmu_outputs = _string_mapping(
@@ -506,7 +511,10 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         children_line = mapping.line_of("children")
         if not isinstance(children_value, LineList):
             raise context.error(
-                children_line, _join(key, "children"), "must be a list of signals", got=children_value
+                children_line,
+                _join(key, "children"),
+                "must be a list of signals",
+                got=children_value,
             )
         children = tuple(
             _signal(context, item, children_value.line_of(i), f"{key}.children[{i}]")
@@ -521,8 +529,11 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         alpha=context.get(mapping, "alpha", key, context.non_negative, 1.0),
         unit=context.get(mapping, "unit", key, context.text, None),
         description=context.get(mapping, "description", key, context.text, None),
-        interpolation=context.get(  # type: ignore[arg-type]
-            mapping, "interpolation", key, context.choice(("linear", "previous")), "linear"
+        interpolation=cast(
+            Interpolation,
+            context.get(
+                mapping, "interpolation", key, context.choice(("linear", "previous")), "linear"
+            ),
         ),
         reference_range=context.get(mapping, "reference_range", key, context.positive, None),
         thresholds=_thresholds(context, mapping, "thresholds", _join(key, "thresholds")),

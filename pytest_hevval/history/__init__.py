@@ -1,0 +1,117 @@
+"""Validation results over model versions: records, an append-only store, comparison with a
+baseline, regression rules, a threshold ratchet, and trends.
+
+Pure functions plus :class:`HistoryStore`; nothing here imports pytest or matplotlib at import
+time. See ``docs/history.md`` for the record format and the option names.
+"""
+
+from ._base import ERROR_FIELDS, HistoryError
+from .cli import compare_main, history_main, load_side
+from .compare import (
+    RULE_FIELDS,
+    BaselineDecision,
+    Comparison,
+    FieldDelta,
+    Regression,
+    Rule,
+    SignalComparison,
+    SpecComparison,
+    compare,
+    is_ci,
+    missing_baseline,
+    parse_compare_fail,
+    regressions,
+    specs_of,
+)
+from .ratchet import (
+    DEFAULT_MARGIN,
+    RatchetOutcome,
+    Thresholds,
+    load_sidecar,
+    merge_thresholds,
+    parse_margin,
+    ratchet_spec,
+    ratchet_thresholds,
+    render_sidecar,
+    sidecar_path,
+    write_sidecar,
+)
+from .records import (
+    MODEL_VERSION_ENV,
+    SCHEMA_VERSION,
+    default_tool_versions,
+    format_utc,
+    make_record,
+    migrate_record,
+    parse_utc,
+    resolve_model_version,
+    validate_record,
+)
+from .render import comparison_json, comparison_markdown, comparison_table
+from .store import DEFAULT_HISTORY_DIR, HistoryStore, StoredRecord, StoreProblem, slugify
+from .trends import (
+    HistoryRow,
+    Step,
+    detect_steps,
+    history_table,
+    noise_sigma,
+    plot_history,
+    render_history_table,
+)
+
+__all__ = [
+    "DEFAULT_HISTORY_DIR",
+    "DEFAULT_MARGIN",
+    "ERROR_FIELDS",
+    "MODEL_VERSION_ENV",
+    "RULE_FIELDS",
+    "SCHEMA_VERSION",
+    "BaselineDecision",
+    "Comparison",
+    "FieldDelta",
+    "HistoryError",
+    "HistoryRow",
+    "HistoryStore",
+    "RatchetOutcome",
+    "Regression",
+    "Rule",
+    "SignalComparison",
+    "SpecComparison",
+    "Step",
+    "StoreProblem",
+    "StoredRecord",
+    "Thresholds",
+    "compare",
+    "compare_main",
+    "comparison_json",
+    "comparison_markdown",
+    "comparison_table",
+    "default_tool_versions",
+    "detect_steps",
+    "format_utc",
+    "history_main",
+    "history_table",
+    "is_ci",
+    "load_side",
+    "load_sidecar",
+    "make_record",
+    "merge_thresholds",
+    "migrate_record",
+    "missing_baseline",
+    "noise_sigma",
+    "parse_compare_fail",
+    "parse_margin",
+    "parse_utc",
+    "plot_history",
+    "ratchet_spec",
+    "ratchet_thresholds",
+    "regressions",
+    "render_history_table",
+    "render_sidecar",
+    "resolve_model_version",
+    "sidecar_path",
+    "slugify",
+    "specs_of",
+    "validate_record",
+    "write_sidecar",
+]

@@ -1,0 +1,247 @@
+"""``hevval history`` and ``hevval compare``: argparse front ends returning exit codes.
+
+Exit codes: 0 success; 1 regressions found (``compare --fail``) or no matching records
+(``history``); 2 bad arguments or unreadable input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, NoReturn, TextIO
+
+from ..errors import HevvalError, did_you_mean
+from ._base import CHARACTERISTICS, HistoryError
+from .compare import compare, parse_compare_fail, regressions, specs_of
+from .records import migrate_record
+from .render import FORMATS, render
+from .store import DEFAULT_HISTORY_DIR, HistoryStore
+from .trends import (
+    HistoryRow,
+    detect_steps,
+    history_table,
+    plot_history,
+    render_history_table,
+    row_series,
+)
+
+__all__ = ["compare_main", "history_main", "load_side"]
+
+_HISTORY_PREFIX = "history:"
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser that reports errors by exception instead of exiting the process."""
+
+    def error(self, message: str) -> NoReturn:
+        raise HistoryError(message, hint=f"see `{self.prog} --help`")
+
+
+def _run(main: Callable[[list[str]], int], argv: Sequence[str], prog: str, stderr: TextIO) -> int:
+    try:
+        code = main(list(argv))
+    except HevvalError as exc:
+        print(f"{prog}: error: {exc}", file=stderr)
+        return 2
+    except SystemExit as exc:  # --help
+        return exc.code if isinstance(exc.code, int) else 0
+    return code
+
+
+def _write(text: str, output: str | None) -> None:
+    if output is None or output == "-":
+        sys.stdout.write(text)
+        return
+    try:
+        Path(output).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise HistoryError(
+            f"cannot write: {exc.strerror or exc}", file=output, hint="choose another --output"
+        ) from None
+
+
+def _report_problems(store: HistoryStore) -> None:
+    for problem in store.problems:
+        print(f"skipped {problem}", file=sys.stderr)
+
+
+# -- hevval history -------------------------------------------------------------------------
+
+
+def history_main(argv: Sequence[str]) -> int:
+    """``hevval history [--dir D] [--spec S] [--signal PATH] [--plot FILE] [--json PATH]``."""
+    return _run(_history, argv, "hevval history", sys.stderr)
+
+
+def _history(argv: list[str]) -> int:
+    parser = _Parser(
+        prog="hevval history",
+        description="Show Φ (and λ1–λ7 of a signal) over the recorded model versions, "
+        "and flag lasting drops.",
+    )
+    parser.add_argument("--dir", default=DEFAULT_HISTORY_DIR, help="history folder")
+    parser.add_argument("--spec", help="spec path or name (shell glob allowed)")
+    parser.add_argument("--signal", help="signal path or name (shell glob allowed)")
+    parser.add_argument("--plot", metavar="FILE", help="write a PNG or SVG plot")
+    parser.add_argument("--json", metavar="PATH", help="write the rows as JSON ('-' = stdout)")
+    parser.add_argument(
+        "--min-step",
+        type=float,
+        default=0.01,
+        help="smallest change of Φ or λ reported as a step (default 0.01)",
+    )
+    args = parser.parse_args(argv)
+    store = HistoryStore(Path(args.dir))
+    records = store.records()
+    _report_problems(store)
+    rows = history_table(records, spec=args.spec, signal=args.signal)
+    if not rows:
+        what = "no readable records" if not records else "no recorded runs match"
+        print(f"hevval history: {what} in {args.dir}", file=sys.stderr)
+        return 1
+    if args.json is not None:
+        document = {"rows": [row.to_dict() for row in rows]}
+        _write(json.dumps(document, indent=2, ensure_ascii=False) + "\n", args.json)
+    if args.json != "-":
+        sys.stdout.write(render_history_table(rows) + "\n")
+        steps = _step_report(rows, args.min_step)
+        if steps:
+            sys.stdout.write("\n" + "\n".join(steps) + "\n")
+    if args.plot is not None:
+        plot_history(rows, Path(args.plot))
+        print(f"wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
+    lines = []
+    for (spec, signal), series in row_series(rows).items():
+        fields = ["phi"] if signal is None else ["phi", *CHARACTERISTICS]
+        for field in fields:
+            for step in detect_steps([r.value(field) for r in series], min_size=min_size):
+                if not step.regression:
+                    continue
+                at = series[step.index]
+                label = "Φ" if field == "phi" else field
+                where = spec if signal is None else f"{spec}::{signal}"
+                lines.append(
+                    f"drop: {where} {label} {step.before:.4f} → {step.after:.4f} "
+                    f"from model version {at.model_version} ({at.started_utc[:10]})"
+                )
+    return sorted(set(lines))
+
+
+# -- hevval compare -------------------------------------------------------------------------
+
+
+def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
+    """Resolve a compare operand to (spec results, label).
+
+    ``ref`` is ``history:latest``, ``history:previous`` (the record before the latest),
+    ``history:<model version>`` (looked up in ``directory``),
+    a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
+    """
+    if ref.startswith(_HISTORY_PREFIX):
+        wanted = ref[len(_HISTORY_PREFIX) :]
+        store = HistoryStore(directory)
+        if wanted in ("latest", "previous"):
+            entries = store.entries()
+            position = -1 if wanted == "latest" else -2
+            record = entries[position].record if len(entries) >= -position else None
+        else:
+            record = store.find(wanted)
+        _report_problems(store)
+        if record is None and wanted == "previous" and store.versions():
+            raise HistoryError(
+                f"only one readable record in {directory}",
+                key=ref,
+                hint="history:previous needs two recorded runs",
+            )
+        if record is None:
+            versions = store.versions()
+            if not versions:
+                raise HistoryError(
+                    f"no readable records in {directory}",
+                    key=ref,
+                    hint="point --dir at the history folder, or record runs first",
+                )
+            suggestion = did_you_mean(wanted, versions)
+            raise HistoryError(
+                f"no record of model version {wanted!r} in {directory}"
+                + (f"; {suggestion}" if suggestion else ""),
+                key=ref,
+                hint="recorded versions: " + ", ".join(versions[-10:]),
+            )
+        return specs_of(record), record["model_version"]
+    path = Path(ref)
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise HistoryError(
+            "no such file",
+            file=ref,
+            hint="pass a JSON file, history:latest or history:<model version>",
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HistoryError(f"cannot read: {exc}", file=ref) from None
+    except json.JSONDecodeError as exc:
+        raise HistoryError(
+            f"not valid JSON at line {exc.lineno}: {exc.msg}",
+            file=ref,
+            hint="pass the output of `hevval run --json` or a history record",
+        ) from None
+    if (
+        isinstance(document, dict)
+        and "schema_version" in document
+        and ("model_version" in document or "results" in document)
+    ):
+        record = migrate_record(document, file=ref)
+        return specs_of(record), record["model_version"]
+    if isinstance(document, dict) and isinstance(document.get("specs"), list):
+        version = document.get("model_version")
+        return specs_of(document), version if isinstance(version, str) and version else path.name
+    raise HistoryError(
+        "neither a history record nor a run result (no 'specs' list)",
+        file=ref,
+        hint="pass the output of `hevval run --json` or a history record",
+    )
+
+
+def compare_main(argv: Sequence[str]) -> int:
+    """``hevval compare BEFORE AFTER [--format table|md|json] [--output PATH] [--fail EXPR]``."""
+    return _run(_compare, argv, "hevval compare", sys.stderr)
+
+
+def _compare(argv: list[str]) -> int:
+    parser = _Parser(
+        prog="hevval compare",
+        description="Compare two runs signal by signal: each λ, the physical errors and the "
+        "lag, before → after, then Φ per spec.",
+    )
+    parser.add_argument(
+        "before",
+        help="run JSON, history record, history:latest, history:previous or history:<version>",
+    )
+    parser.add_argument("after", help="same forms as BEFORE")
+    parser.add_argument("--dir", default=DEFAULT_HISTORY_DIR, help="history folder")
+    parser.add_argument("--format", choices=FORMATS, default="table")
+    parser.add_argument("--output", metavar="PATH", help="write here instead of stdout")
+    parser.add_argument(
+        "--fail",
+        metavar="EXPR",
+        help="exit 1 on regressions, e.g. phi:0.01,lambda:0.02 or mae:1%% (see docs/history.md)",
+    )
+    args = parser.parse_args(argv)
+    rules = parse_compare_fail(args.fail, option="--fail") if args.fail is not None else None
+    directory = Path(args.dir)
+    before, before_label = load_side(args.before, directory)
+    after, after_label = load_side(args.after, directory)
+    if before_label == after_label:
+        before_label, after_label = f"{before_label} (before)", f"{after_label} (after)"
+    comparison = compare(after, before, before_label=before_label, after_label=after_label)
+    found = regressions(comparison, rules) if rules is not None else None
+    _write(render(comparison, args.format, found), args.output)
+    return 1 if found else 0

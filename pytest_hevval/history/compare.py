@@ -1,0 +1,498 @@
+"""Compare a run with a baseline record, and decide which differences are regressions.
+
+``parse_compare_fail`` implements the ``--hevval-compare-fail`` grammar::
+
+    expr   := rule ("," rule)*
+    rule   := field ":" amount
+    field  := "phi" | "lambda" | "lag" | <characteristic> | "lambda1" … "lambda7"
+    amount := number          an absolute drop, in the field's own unit
+            | number "%"      a drop relative to the baseline value
+
+``phi:0.01,lambda:0.02`` fails when any Φ drops by more than 0.01 or any λ of any signal by
+more than 0.02; ``mae:1%`` fails when λ3 drops by more than 1 % of its baseline value.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from ..errors import did_you_mean
+from ._base import CHARACTERISTICS, ERROR_FIELDS, HistoryError, spec_key
+
+__all__ = [
+    "BaselineDecision",
+    "Comparison",
+    "FieldDelta",
+    "Regression",
+    "Rule",
+    "SignalComparison",
+    "SpecComparison",
+    "compare",
+    "is_ci",
+    "missing_baseline",
+    "parse_compare_fail",
+    "regressions",
+    "specs_of",
+]
+
+#: Names accepted on the left of ``:`` and what each one checks.
+RULE_FIELDS: dict[str, str] = {
+    "phi": "Φ of each spec",
+    "lambda": "every λ1–λ7 of every signal",
+    "lag": "|lag| of every signal, in seconds (a growth is a regression)",
+    **{name: f"λ{i} of every signal" for i, name in enumerate(CHARACTERISTICS, start=1)},
+    **{f"lambda{i}": f"λ{i} ({name})" for i, name in enumerate(CHARACTERISTICS, start=1)},
+}
+_ALIASES = {f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)}
+_AMOUNT = re.compile(r"^(?P<number>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<percent>%?)$")
+_EXAMPLE = "phi:0.01,lambda:0.02 or mae:1%"
+# Float noise from re-running the same model must never count as a drop.
+_TOLERANCE = 1e-12
+
+
+@dataclass(frozen=True)
+class Rule:
+    """One ``field:amount`` clause: how far ``field`` may get worse before the run fails."""
+
+    field: str
+    amount: float
+    relative: bool
+    text: str
+
+    def allowed(self, before: float) -> float:
+        """The largest acceptable worsening from ``before``."""
+        return abs(before) * self.amount / 100.0 if self.relative else self.amount
+
+    def applies_to(self, field: str) -> bool:
+        if self.field == "lambda":
+            return field in CHARACTERISTICS
+        return self.field == field
+
+
+def parse_compare_fail(expr: str, *, option: str = "--hevval-compare-fail") -> list[Rule]:
+    """Parse a compare-fail expression into rules; a bad one raises :class:`HistoryError`."""
+    clauses = [clause.strip() for clause in expr.split(",")]
+    if not expr.strip() or any(not clause for clause in clauses):
+        raise HistoryError(
+            f"empty rule in {expr!r}",
+            key=option,
+            hint=f"write comma-separated field:amount rules, e.g. {_EXAMPLE}",
+        )
+    rules = []
+    for clause in clauses:
+        name, sep, amount_text = clause.partition(":")
+        name = name.strip().lower()
+        if not sep:
+            raise HistoryError(
+                f"rule {clause!r} has no ':amount'",
+                key=option,
+                hint=f"write field:amount, e.g. {_EXAMPLE}",
+            )
+        if name not in RULE_FIELDS:
+            suggestion = did_you_mean(name, RULE_FIELDS)
+            raise HistoryError(
+                f"unknown field {name!r} in {clause!r}" + (f"; {suggestion}" if suggestion else ""),
+                key=option,
+                hint="valid fields: " + ", ".join(RULE_FIELDS),
+            )
+        match = _AMOUNT.match(amount_text.strip())
+        if match is None:
+            raise HistoryError(
+                f"amount {amount_text.strip()!r} in {clause!r} is not a non-negative number "
+                "or percentage",
+                key=option,
+                hint=f"write e.g. {_EXAMPLE}",
+            )
+        amount = float(match["number"])
+        if not math.isfinite(amount):
+            raise HistoryError(
+                f"amount in {clause!r} is not finite", key=option, hint=f"write e.g. {_EXAMPLE}"
+            )
+        rules.append(
+            Rule(
+                field=_ALIASES.get(name, name),
+                amount=amount,
+                relative=bool(match["percent"]),
+                text=clause,
+            )
+        )
+    return rules
+
+
+# -- comparison -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FieldDelta:
+    """One quantity before and after; ``None`` where it was missing or undefined."""
+
+    field: str
+    before: float | None
+    after: float | None
+
+    @property
+    def delta(self) -> float | None:
+        if self.before is None or self.after is None:
+            return None
+        return self.after - self.before
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"before": self.before, "after": self.after, "delta": self.delta}
+
+
+@dataclass(frozen=True)
+class SignalComparison:
+    """λ1–λ7 and the physical errors of one signal present in both runs."""
+
+    path: str
+    name: str
+    unit: str | None
+    lambdas: tuple[FieldDelta, ...]
+    errors: tuple[FieldDelta, ...]
+    passed_before: bool | None
+    passed_after: bool | None
+
+    def field(self, name: str) -> FieldDelta:
+        for delta in (*self.lambdas, *self.errors):
+            if delta.field == name:
+                return delta
+        raise KeyError(name)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "path": self.path,
+            "name": self.name,
+            "unit": self.unit,
+            "lambdas": {d.field: d.to_dict() for d in self.lambdas},
+            "errors": {d.field: d.to_dict() for d in self.errors},
+            "passed": {"before": self.passed_before, "after": self.passed_after},
+        }
+
+
+@dataclass(frozen=True)
+class SpecComparison:
+    """One spec present in both runs."""
+
+    key: str
+    name: str
+    phi: FieldDelta
+    passed_before: bool | None
+    passed_after: bool | None
+    signals: tuple[SignalComparison, ...]
+    added_signals: tuple[str, ...]
+    removed_signals: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.key,
+            "name": self.name,
+            "phi": self.phi.to_dict(),
+            "passed": {"before": self.passed_before, "after": self.passed_after},
+            "signals": [s.to_dict() for s in self.signals],
+            "added_signals": list(self.added_signals),
+            "removed_signals": list(self.removed_signals),
+        }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Everything that differs between a baseline and the current run, spec by spec.
+
+    Specs or signals present on one side only are listed, never counted as regressions.
+    """
+
+    before_label: str
+    after_label: str
+    specs: tuple[SpecComparison, ...]
+    added_specs: tuple[str, ...]
+    removed_specs: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "before": self.before_label,
+            "after": self.after_label,
+            "specs": [s.to_dict() for s in self.specs],
+            "added_specs": list(self.added_specs),
+            "removed_specs": list(self.removed_specs),
+        }
+
+
+def specs_of(document: Sequence[Mapping[str, Any]] | Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """The spec results of a record, a ``hevval run --json`` document, or a plain list."""
+    if isinstance(document, Mapping):
+        specs = document.get("specs", document.get("results"))
+        if not isinstance(specs, list):
+            raise HistoryError(
+                "expected a record or run result with a 'specs' list",
+                hint="pass a history record or the output of `hevval run --json`",
+            )
+        return [s for s in specs if isinstance(s, Mapping)]
+    return [s for s in document if isinstance(s, Mapping)]
+
+
+def _label(document: Sequence[Mapping[str, Any]] | Mapping[str, Any], default: str) -> str:
+    if isinstance(document, Mapping):
+        version = document.get("model_version", document.get("version"))
+        if isinstance(version, str) and version:
+            return version
+    return default
+
+
+def compare(
+    current: Sequence[Mapping[str, Any]] | Mapping[str, Any],
+    baseline_record: Sequence[Mapping[str, Any]] | Mapping[str, Any],
+    *,
+    before_label: str | None = None,
+    after_label: str | None = None,
+) -> Comparison:
+    """Compare the current spec results with a baseline (a record, run result or list).
+
+    Specs are matched by spec file path (falling back to name), signals by tree path.
+    """
+    before_specs = {spec_key(s): s for s in specs_of(baseline_record)}
+    after_specs = {spec_key(s): s for s in specs_of(current)}
+    compared = []
+    for key, after in after_specs.items():
+        before = before_specs.get(key)
+        if before is not None:
+            compared.append(_compare_spec(key, before, after))
+    return Comparison(
+        before_label=before_label or _label(baseline_record, "baseline"),
+        after_label=after_label or _label(current, "current"),
+        specs=tuple(compared),
+        added_specs=tuple(k for k in after_specs if k not in before_specs),
+        removed_specs=tuple(k for k in before_specs if k not in after_specs),
+    )
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    number = float(value)
+    return number if math.isfinite(number) else None
+
+
+def _flag(value: Any) -> bool | None:
+    return value if isinstance(value, bool) else None
+
+
+def _signals(spec: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
+    signals = spec.get("signals", [])
+    if not isinstance(signals, list):
+        return {}
+    return {
+        str(sig["path"]): sig
+        for sig in signals
+        if isinstance(sig, Mapping) and isinstance(sig.get("path"), str)
+    }
+
+
+def _lambda(signal: Mapping[str, Any], index: int) -> float | None:
+    lambdas = signal.get("lambdas")
+    if isinstance(lambdas, Mapping):  # tolerate the schema-1 mapping form
+        return _number(lambdas.get(CHARACTERISTICS[index]))
+    if isinstance(lambdas, (list, tuple)) and index < len(lambdas):
+        return _number(lambdas[index])
+    return None
+
+
+def _compare_spec(key: str, before: Mapping[str, Any], after: Mapping[str, Any]) -> SpecComparison:
+    before_signals = _signals(before)
+    after_signals = _signals(after)
+    signals = []
+    for path, sig_after in after_signals.items():
+        sig_before = before_signals.get(path)
+        if sig_before is None:
+            continue
+        signals.append(
+            SignalComparison(
+                path=path,
+                name=str(sig_after.get("name", path.rsplit("/", 1)[-1])),
+                unit=sig_after.get("unit") if isinstance(sig_after.get("unit"), str) else None,
+                lambdas=tuple(
+                    FieldDelta(name, _lambda(sig_before, i), _lambda(sig_after, i))
+                    for i, name in enumerate(CHARACTERISTICS)
+                ),
+                errors=tuple(
+                    FieldDelta(name, _number(sig_before.get(name)), _number(sig_after.get(name)))
+                    for name in ERROR_FIELDS
+                ),
+                passed_before=_flag(sig_before.get("passed")),
+                passed_after=_flag(sig_after.get("passed")),
+            )
+        )
+    return SpecComparison(
+        key=key,
+        name=str(after.get("name", key)),
+        phi=FieldDelta("phi", _number(before.get("phi")), _number(after.get("phi"))),
+        passed_before=_flag(before.get("passed")),
+        passed_after=_flag(after.get("passed")),
+        signals=tuple(signals),
+        added_signals=tuple(p for p in after_signals if p not in before_signals),
+        removed_signals=tuple(p for p in before_signals if p not in after_signals),
+    )
+
+
+# -- regressions ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Regression:
+    """A quantity that got worse by more than a rule allows."""
+
+    spec: str
+    signal: str | None
+    field: str
+    before: float
+    after: float | None
+    allowed: float
+    rule: str
+
+    def __str__(self) -> str:
+        where = self.spec if self.signal is None else f"{self.spec}::{self.signal}"
+        after = "undefined" if self.after is None else f"{self.after:.4g}"
+        if self.field == "lag":
+            change = "grew" if self.after is not None else "became undefined"
+            return (
+                f"{where}: |lag| {change} {self.before:.4g} s → {after} s "
+                f"(allowed growth {self.allowed:.4g} s, rule {self.rule!r})"
+            )
+        if self.field == "phi":
+            label = "Φ"
+        else:
+            label = f"λ{CHARACTERISTICS.index(self.field) + 1} {self.field}"
+        return (
+            f"{where}: {label} dropped {self.before:.4g} → {after} "
+            f"(allowed drop {self.allowed:.4g}, rule {self.rule!r})"
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.spec,
+            "signal": self.signal,
+            "field": self.field,
+            "before": self.before,
+            "after": self.after,
+            "allowed": self.allowed,
+            "rule": self.rule,
+        }
+
+
+def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regression]:
+    """Every quantity that worsened by more than a matching rule allows.
+
+    Φ and λ are "higher is better": a drop larger than allowed is a regression, and so is a
+    value that was defined before and is undefined (NaN) now. ``lag`` compares |lag_s|, where
+    growth is the regression. Nothing that was undefined before can regress.
+    """
+    found: list[Regression] = []
+    for spec in comparison.specs:
+        for rule in rules:
+            if rule.applies_to("phi"):
+                hit = _worsened(spec.phi.before, spec.phi.after, rule, higher_is_better=True)
+                if hit is not None:
+                    found.append(
+                        Regression(spec.key, None, "phi", spec.phi.before or 0.0, *hit, rule.text)
+                    )
+        for signal in spec.signals:
+            for rule in rules:
+                for delta in signal.lambdas:
+                    if not rule.applies_to(delta.field):
+                        continue
+                    hit = _worsened(delta.before, delta.after, rule, higher_is_better=True)
+                    if hit is not None:
+                        found.append(
+                            Regression(
+                                spec.key,
+                                signal.path,
+                                delta.field,
+                                delta.before or 0.0,
+                                *hit,
+                                rule.text,
+                            )
+                        )
+                if rule.applies_to("lag"):
+                    lag = signal.field("lag_s")
+                    before = None if lag.before is None else abs(lag.before)
+                    after = None if lag.after is None else abs(lag.after)
+                    hit = _worsened(before, after, rule, higher_is_better=False)
+                    if hit is not None:
+                        found.append(
+                            Regression(spec.key, signal.path, "lag", before or 0.0, *hit, rule.text)
+                        )
+    return found
+
+
+def _worsened(
+    before: float | None, after: float | None, rule: Rule, *, higher_is_better: bool
+) -> tuple[float | None, float] | None:
+    if before is None:
+        return None
+    allowed = rule.allowed(before)
+    if after is None:
+        return (None, allowed)
+    change = (before - after) if higher_is_better else (after - before)
+    if change > allowed + _TOLERANCE:
+        return (after, allowed)
+    return None
+
+
+# -- missing baseline -----------------------------------------------------------------------
+
+_CI_VARIABLES = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILDKITE", "JENKINS_URL", "TF_BUILD")
+
+
+def is_ci(env: Mapping[str, str]) -> bool:
+    """Whether the environment looks like a CI runner (``CI=true`` and common vendor variables)."""
+    for name in _CI_VARIABLES:
+        value = env.get(name, "").strip().lower()
+        if value and value not in ("0", "false", "no", "off"):
+            return True
+    return False
+
+
+@dataclass(frozen=True)
+class BaselineDecision:
+    """What to do when the requested baseline record does not exist.
+
+    ``action`` is ``"fail"`` (end the session with ``message`` as the error), ``"record"``
+    (this run becomes the baseline) or ``"note"`` (say so and carry on).
+    """
+
+    action: Literal["fail", "record", "note"]
+    message: str
+
+    @property
+    def fails(self) -> bool:
+        return self.action == "fail"
+
+
+def missing_baseline(
+    *, ci: bool, create_baseline: bool, directory: Path | str, wanted: str = "latest"
+) -> BaselineDecision:
+    """Decide what a missing baseline means: a failure in CI, a note locally.
+
+    ``--hevval-create-baseline`` turns both into "record this run as the baseline".
+    """
+    what = "no baseline record" if wanted == "latest" else f"no record of model version {wanted!r}"
+    where = f"{what} in {directory}"
+    if create_baseline:
+        return BaselineDecision(
+            "record", f"{where}; this run is recorded as the baseline (--hevval-create-baseline)"
+        )
+    if ci:
+        return BaselineDecision(
+            "fail",
+            f"{where}; comparison needs one. Run once with --hevval-create-baseline to record "
+            f"one, or commit the history folder ({directory}) or restore it from the CI cache",
+        )
+    return BaselineDecision(
+        "note",
+        f"{where}; nothing to compare against yet (the next run compares against this one "
+        "unless --hevval-no-history is set)",
+    )

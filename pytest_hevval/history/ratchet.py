@@ -1,0 +1,358 @@
+"""Threshold ratchet: gated λ thresholds only ever tighten, through a reviewable sidecar file.
+
+The sidecar of ``specs/trip_a01.hevval.yaml`` is ``specs/trip_a01.hevval.thresholds.yaml``::
+
+    # header: how, when, from which model version and with which margin it was produced
+    E_batt/P_batt:
+      mae: 0.9312
+      rms: 0.9125
+
+Precedence when the spec loader merges it: for each signal and characteristic the stricter
+(higher) of the spec value and the sidecar value applies, so a sidecar can tighten a spec but
+never loosen it. To loosen a threshold, lower it in the spec *and* delete the sidecar entry.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from ..errors import did_you_mean
+from ._base import CHARACTERISTICS, HistoryError
+from .records import format_utc
+
+__all__ = [
+    "DEFAULT_MARGIN",
+    "RatchetOutcome",
+    "Thresholds",
+    "load_sidecar",
+    "merge_thresholds",
+    "parse_margin",
+    "ratchet_spec",
+    "ratchet_thresholds",
+    "render_sidecar",
+    "sidecar_path",
+    "write_sidecar",
+]
+
+#: Signal path → characteristic name → minimum λ.
+Thresholds = dict[str, dict[str, float]]
+
+DEFAULT_MARGIN = 0.01
+# Thresholds are stored with four decimals, rounded down so that a proposed threshold never
+# exceeds the value that was actually achieved.
+_DECIMALS = 4
+_SCALE = 10.0**_DECIMALS
+
+
+def parse_margin(text: str | float, *, option: str = "--hevval-ratchet") -> float:
+    """Validate a ratchet margin: a number in [0, 1)."""
+    try:
+        margin = float(text)
+    except (TypeError, ValueError):
+        raise HistoryError(
+            f"margin must be a number (got {text!r})",
+            key=option,
+            hint=f"write e.g. {option}=0.01 (λ units; thresholds sit that far below achieved)",
+        ) from None
+    if not math.isfinite(margin) or not 0.0 <= margin < 1.0:
+        raise HistoryError(
+            f"margin must be in [0, 1) (got {text!r})",
+            key=option,
+            hint=f"write e.g. {option}=0.01",
+        )
+    return margin
+
+
+def _floor(value: float) -> float:
+    # The epsilon keeps 0.93 from flooring to 0.9299 through binary float error.
+    return math.floor(value * _SCALE + 1e-9) / _SCALE
+
+
+def _stricter(a: Mapping[str, float], b: Mapping[str, float]) -> dict[str, float]:
+    merged = dict(a)
+    for name, value in b.items():
+        merged[name] = max(merged[name], value) if name in merged else value
+    return merged
+
+
+def merge_thresholds(spec: Mapping[str, Mapping[str, float]], sidecar: Thresholds) -> Thresholds:
+    """Per signal and characteristic, the stricter (higher) of the spec and sidecar values."""
+    merged: Thresholds = {path: dict(values) for path, values in spec.items()}
+    for path, values in sidecar.items():
+        merged[path] = _stricter(merged.get(path, {}), values)
+    return merged
+
+
+def ratchet_thresholds(
+    spec_result: Mapping[str, Any],
+    current_thresholds: Mapping[str, Mapping[str, float]],
+    margin: float,
+) -> Thresholds:
+    """Propose thresholds: ``max(current, achieved − margin)`` per gated characteristic.
+
+    A characteristic is gated for a signal when it has a threshold in ``current_thresholds``
+    or in the signal result's own ``thresholds``; the stricter of the two is "current".
+    Ungated characteristics are never added, undefined (NaN) achievements keep the current
+    value, and no value ever goes down, so rerunning on the same result changes nothing.
+    """
+    margin = parse_margin(margin)
+    proposed: Thresholds = {}
+    signals = spec_result.get("signals", [])
+    by_path = {
+        str(sig["path"]): sig
+        for sig in (signals if isinstance(signals, list) else [])
+        if isinstance(sig, Mapping) and isinstance(sig.get("path"), str)
+    }
+    for path in sorted(set(by_path) | set(current_thresholds)):
+        signal = by_path.get(path, {})
+        own = signal.get("thresholds")
+        current = _stricter(
+            dict(current_thresholds.get(path, {})),
+            {k: float(v) for k, v in own.items()} if isinstance(own, Mapping) else {},
+        )
+        if not current:
+            continue
+        lambdas = signal.get("lambdas")
+        out = {}
+        for name in CHARACTERISTICS:
+            if name not in current:
+                continue
+            achieved = _achieved(lambdas, name)
+            value = current[name]
+            if achieved is not None:
+                value = max(value, min(1.0, max(0.0, _floor(achieved - margin))))
+            out[name] = value
+        proposed[path] = out
+    return proposed
+
+
+def _achieved(lambdas: Any, name: str) -> float | None:
+    index = CHARACTERISTICS.index(name)
+    if isinstance(lambdas, (list, tuple)) and index < len(lambdas):
+        value = lambdas[index]
+    elif isinstance(lambdas, Mapping):
+        value = lambdas.get(name)
+    else:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def sidecar_path(spec_path: Path | str) -> Path:
+    """``x.hevval.yaml`` → ``x.hevval.thresholds.yaml`` (also for ``.yml``), beside the spec.
+
+    The name does not match the ``*.hevval.yaml`` collection glob, so the sidecar is never
+    collected as a spec.
+    """
+    spec_path = Path(spec_path)
+    stem = spec_path.name
+    for suffix in (".yaml", ".yml"):
+        if stem.endswith(suffix):
+            stem = stem[: -len(suffix)]
+            break
+    return spec_path.with_name(f"{stem}.thresholds.yaml")
+
+
+def load_sidecar(spec_path: Path | str) -> Thresholds:
+    """Read the threshold sidecar of ``spec_path``; ``{}`` when there is none."""
+    path = sidecar_path(spec_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return {}
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HistoryError(
+            f"cannot read the threshold sidecar: {exc}",
+            file=str(path),
+            hint="fix its permissions or delete it",
+        ) from None
+    hint = "fix or delete the file; regenerate it with --hevval-ratchet"
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise HistoryError(
+            f"not valid YAML: {getattr(exc, 'problem', None) or exc}",
+            file=str(path),
+            line=None if mark is None else mark.line + 1,
+            hint=hint,
+        ) from None
+    if document is None:
+        return {}
+    if not isinstance(document, dict):
+        raise HistoryError(
+            f"expected a mapping of signal path to thresholds (got {type(document).__name__})",
+            file=str(path),
+            hint=hint,
+        )
+    result: Thresholds = {}
+    for signal, values in document.items():
+        if not isinstance(signal, str) or not isinstance(values, dict):
+            raise HistoryError(
+                "expected 'signal/path: {characteristic: value}'",
+                file=str(path),
+                key=str(signal),
+                hint=hint,
+            )
+        entry: dict[str, float] = {}
+        for name, value in values.items():
+            key = f"{signal}.{name}"
+            if name not in CHARACTERISTICS:
+                suggestion = did_you_mean(str(name), CHARACTERISTICS)
+                raise HistoryError(
+                    f"unknown characteristic {name!r}" + (f"; {suggestion}" if suggestion else ""),
+                    file=str(path),
+                    key=key,
+                    hint="valid: " + ", ".join(CHARACTERISTICS) + f"; {hint}",
+                )
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not 0.0 <= float(value) <= 1.0
+            ):
+                raise HistoryError(
+                    f"a λ threshold must be a number in [0, 1] (got {value!r})",
+                    file=str(path),
+                    key=key,
+                    hint=hint,
+                )
+            entry[name] = float(value)
+        result[signal] = entry
+    return result
+
+
+def render_sidecar(
+    thresholds: Thresholds, *, model_version: str, created_utc: datetime, margin: float
+) -> str:
+    """The sidecar text: an explanatory header, then signals sorted, λ in paper order."""
+    header = [
+        "# λ thresholds ratcheted by pytest-hevval (--hevval-ratchet); review and commit.",
+        f"# Produced from model version {model_version} on {format_utc(created_utc)}"
+        f" with margin {margin:g}:",
+        "# each value is max(previous threshold, achieved λ − margin), rounded down to"
+        f" {_DECIMALS} decimals.",
+        "# Values only ever rise. The stricter of this file and the spec applies; to loosen a",
+        "# threshold, lower it in the spec and delete its line here.",
+    ]
+    body: dict[str, dict[str, float]] = {}
+    for path in sorted(thresholds):
+        values = thresholds[path]
+        ordered = {name: float(values[name]) for name in CHARACTERISTICS if name in values}
+        if ordered:
+            body[path] = ordered
+    dumped = yaml.safe_dump(body, sort_keys=False, allow_unicode=True, default_flow_style=False)
+    return "\n".join(header) + "\n" + ("" if not body else dumped)
+
+
+def write_sidecar(
+    spec_path: Path | str,
+    thresholds: Thresholds,
+    *,
+    model_version: str,
+    created_utc: datetime,
+    margin: float,
+) -> Path:
+    """Write the sidecar atomically (temporary file + ``os.replace``); return its path."""
+    path = sidecar_path(spec_path)
+    text = render_sidecar(
+        thresholds, model_version=model_version, created_utc=created_utc, margin=margin
+    )
+    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+        raise
+    return path
+
+
+@dataclass(frozen=True)
+class RatchetOutcome:
+    """What :func:`ratchet_spec` did: the sidecar path, whether it was written, what rose."""
+
+    path: Path
+    written: bool
+    tightened: tuple[tuple[str, str, float | None, float], ...]
+
+    def summary(self) -> str:
+        if not self.tightened:
+            return f"{self.path}: thresholds unchanged"
+        lines = [f"{self.path}: {len(self.tightened)} threshold(s) tightened"]
+        for signal, name, old, new in self.tightened:
+            before = "unset" if old is None else f"{old:.4f}"
+            lines.append(f"  {signal} {name}: {before} → {new:.4f}")
+        return "\n".join(lines)
+
+
+def ratchet_spec(
+    spec_path: Path | str,
+    spec_result: Mapping[str, Any],
+    spec_thresholds: Mapping[str, Mapping[str, float]],
+    *,
+    margin: float,
+    model_version: str,
+    created_utc: datetime,
+) -> RatchetOutcome:
+    """Ratchet one spec and update its sidecar only when a value rises.
+
+    ``spec_thresholds`` are the thresholds written in the spec itself. Sidecar entries for
+    signals absent from this run are kept. An unchanged result leaves the file untouched, so
+    reruns are idempotent byte for byte.
+    """
+    existing = load_sidecar(spec_path)
+    current = merge_thresholds(spec_thresholds, existing)
+    proposed = ratchet_thresholds(spec_result, current, margin)
+    tightened: list[tuple[str, str, float | None, float]] = []
+    new_sidecar: Thresholds = {path: dict(values) for path, values in existing.items()}
+    for path, values in proposed.items():
+        for name, value in values.items():
+            before = _effective(current, spec_result, path, name)
+            if before is None or value > before:
+                tightened.append((path, name, before, value))
+            # Only a rise needs recording; a value the spec already enforces stays out, so the
+            # sidecar holds nothing but what the ratchet added.
+            if value > (before if before is not None else -1.0) or name in existing.get(path, {}):
+                new_sidecar.setdefault(path, {})[name] = value
+    if new_sidecar == existing:
+        return RatchetOutcome(sidecar_path(spec_path), False, tuple(tightened))
+    written = write_sidecar(
+        spec_path, new_sidecar, model_version=model_version, created_utc=created_utc, margin=margin
+    )
+    return RatchetOutcome(written, True, tuple(tightened))
+
+
+def _effective(
+    current: Thresholds, spec_result: Mapping[str, Any], path: str, name: str
+) -> float | None:
+    """The threshold in force before ratcheting: the stricter of merged and as-run values."""
+    values = [current.get(path, {}).get(name)]
+    signals = spec_result.get("signals")
+    for sig in signals if isinstance(signals, list) else []:
+        if isinstance(sig, Mapping) and sig.get("path") == path:
+            own = sig.get("thresholds")
+            if isinstance(own, Mapping):
+                values.append(_number(own.get(name)))
+    present = [v for v in values if v is not None]
+    return max(present) if present else None
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None

@@ -1,0 +1,389 @@
+"""History records: one JSON document per run, versioned, with a migration from older layouts.
+
+A record is plain JSON (see ``docs/history.md``)::
+
+    {"schema_version": 2, "model_version": "v1.4-3-gabc123", "started_utc": "...Z",
+     "tool_versions": {"pytest-hevval": "...", "numpy": "...", "scipy": "...", "python": "..."},
+     "specs": [<spec result>, ...]}
+
+Schema 1 (``version``, ``timestamp`` in POSIX seconds, ``tools``, ``results``, λ as a mapping)
+is migrated on read; records are never rewritten on disk.
+"""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+from collections.abc import Mapping, Sequence
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from ._base import CHARACTERISTICS, HistoryError, json_safe, optional_float
+
+__all__ = [
+    "MODEL_VERSION_ENV",
+    "SCHEMA_VERSION",
+    "default_tool_versions",
+    "format_utc",
+    "make_record",
+    "migrate_record",
+    "parse_utc",
+    "record_time",
+    "resolve_model_version",
+    "validate_record",
+]
+
+SCHEMA_VERSION = 2
+MODEL_VERSION_ENV = "HEVVAL_MODEL_VERSION"
+_GIT_TIMEOUT_S = 5.0
+
+# Keys kept from a spec result and from each signal result. A whitelist keeps the documented
+# record format stable and small: figures and diagnosis payloads are not archived.
+_SPEC_KEYS = (
+    "schema_version",
+    "name",
+    "spec",
+    "spec_hash",
+    "phi",
+    "min_phi",
+    "min_phi_line",
+    "passed",
+    "weights",
+    "data",
+    "alignment",
+)
+_SIGNAL_KEYS = (
+    "path",
+    "name",
+    "set",
+    "level",
+    "position",
+    "alpha",
+    "line",
+    "unit",
+    "description",
+    "lambdas",
+    "lag_s",
+    "peak_correlation",
+    "mae",
+    "rms",
+    "delta_e",
+    "error_std",
+    "mean_error",
+    "reference_range",
+    "n_samples",
+    "thresholds",
+    "failures",
+    "passed",
+    "origin",
+    "origins",
+    "children",
+)
+_HINT_CORRUPT = (
+    "the file was not written by pytest-hevval or was edited by hand; "
+    "restore it from version control or move it out of the history folder"
+)
+
+
+def format_utc(moment: datetime) -> str:
+    """ISO 8601 in UTC with microseconds and a ``Z``: ``2024-05-01T12:00:00.000000Z``."""
+    if moment.tzinfo is None or moment.utcoffset() is None:
+        raise HistoryError(
+            f"started_utc must be timezone-aware (got naive {moment.isoformat()})",
+            hint="pass datetime.now(timezone.utc)",
+        )
+    return moment.astimezone(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def parse_utc(text: Any, *, where: str = "started_utc", file: str | None = None) -> datetime:
+    """Parse the ISO 8601 time of a record into an aware UTC ``datetime``."""
+    if not isinstance(text, str):
+        raise HistoryError(
+            f"expected an ISO 8601 UTC time string (got {text!r})",
+            file=file,
+            key=where,
+            hint=_HINT_CORRUPT,
+        )
+    try:
+        # Python 3.10's fromisoformat does not accept a trailing Z.
+        moment = datetime.fromisoformat(text[:-1] + "+00:00" if text.endswith("Z") else text)
+    except ValueError:
+        raise HistoryError(
+            f"not an ISO 8601 time (got {text!r})", file=file, key=where, hint=_HINT_CORRUPT
+        ) from None
+    if moment.tzinfo is None:
+        moment = moment.replace(tzinfo=timezone.utc)
+    return moment.astimezone(timezone.utc)
+
+
+def record_time(record: Mapping[str, Any]) -> datetime:
+    """The start time of a (validated, schema 2) record."""
+    return parse_utc(record["started_utc"])
+
+
+def default_tool_versions() -> dict[str, str]:
+    """Versions of pytest-hevval, numpy, scipy and Python, for reproducing a recorded run."""
+    versions: dict[str, str] = {}
+    for dist in ("pytest-hevval", "numpy", "scipy"):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = "unknown"
+    versions["python"] = platform.python_version()
+    return versions
+
+
+def resolve_model_version(cli_value: str | None, env: Mapping[str, str], cwd: Path) -> str:
+    """The model version a run is recorded under.
+
+    Precedence: the ``--hevval-model-version`` value, then ``$HEVVAL_MODEL_VERSION``, then
+    ``git describe --always --dirty`` in ``cwd``, then ``"unknown"`` (not a git checkout, git
+    missing, or git too slow).
+    """
+    for candidate in (cli_value, env.get(MODEL_VERSION_ENV)):
+        if candidate is not None and candidate.strip():
+            return candidate.strip()
+    try:
+        completed = subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            cwd=cwd,
+            capture_output=True,
+            text=True,
+            timeout=_GIT_TIMEOUT_S,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    described = completed.stdout.strip()
+    if completed.returncode != 0 or not described:
+        return "unknown"
+    return described
+
+
+def make_record(
+    spec_results: Sequence[Mapping[str, Any]],
+    *,
+    model_version: str,
+    tool_versions: Mapping[str, str] | None = None,
+    started_utc: datetime,
+) -> dict[str, Any]:
+    """Build a schema-2 history record from the run's spec results.
+
+    ``tool_versions`` is laid over :func:`default_tool_versions`, so the versions of
+    pytest-hevval, numpy and scipy are always present. Non-finite numbers become ``null``.
+    """
+    if not isinstance(model_version, str) or not model_version.strip():
+        raise HistoryError(
+            f"model_version must be a non-empty string (got {model_version!r})",
+            hint="pass --hevval-model-version or set HEVVAL_MODEL_VERSION",
+        )
+    versions = default_tool_versions()
+    versions.update({str(k): str(v) for k, v in (tool_versions or {}).items()})
+    specs = [_normalise_spec(spec, f"specs[{i}]", None) for i, spec in enumerate(spec_results)]
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "model_version": model_version.strip(),
+        "started_utc": format_utc(started_utc),
+        "tool_versions": versions,
+        "specs": specs,
+    }
+
+
+def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
+    """Return ``document`` as a validated schema-2 record, migrating older layouts.
+
+    Schema 1 differs from 2 in four places: ``version`` → ``model_version``; ``timestamp``
+    (POSIX seconds) → ``started_utc`` (ISO 8601 UTC); ``tools`` → ``tool_versions``;
+    ``results`` → ``specs``; and each signal's ``lambdas`` was a mapping by characteristic name
+    rather than a list in paper order.
+    """
+    if not isinstance(document, Mapping):
+        raise HistoryError(
+            f"a history record must be a JSON object (got {type(document).__name__})",
+            file=file,
+            hint=_HINT_CORRUPT,
+        )
+    version = document.get("schema_version")
+    if version == SCHEMA_VERSION:
+        return validate_record(document, file=file)
+    if version == 1:
+        return validate_record(_migrate_1_to_2(document, file), file=file)
+    if isinstance(version, int) and not isinstance(version, bool) and version > SCHEMA_VERSION:
+        raise HistoryError(
+            f"schema_version {version} is newer than this pytest-hevval understands "
+            f"(up to {SCHEMA_VERSION})",
+            file=file,
+            key="schema_version",
+            hint="upgrade pytest-hevval to read it",
+        )
+    raise HistoryError(
+        f"unknown schema_version (got {version!r}); expected 1 or {SCHEMA_VERSION}",
+        file=file,
+        key="schema_version",
+        hint=_HINT_CORRUPT,
+    )
+
+
+def _migrate_1_to_2(old: Mapping[str, Any], file: str | None) -> dict[str, Any]:
+    timestamp = old.get("timestamp")
+    if isinstance(timestamp, bool) or not isinstance(timestamp, (int, float)):
+        raise HistoryError(
+            f"schema 1 needs a numeric timestamp in POSIX seconds (got {timestamp!r})",
+            file=file,
+            key="timestamp",
+            hint=_HINT_CORRUPT,
+        )
+    try:
+        started = datetime.fromtimestamp(float(timestamp), tz=timezone.utc)
+    except (OverflowError, OSError, ValueError):
+        raise HistoryError(
+            f"timestamp out of range (got {timestamp!r})",
+            file=file,
+            key="timestamp",
+            hint=_HINT_CORRUPT,
+        ) from None
+    results = old.get("results")
+    if not isinstance(results, list):
+        raise HistoryError(
+            f"schema 1 needs a list under 'results' (got {type(results).__name__})",
+            file=file,
+            key="results",
+            hint=_HINT_CORRUPT,
+        )
+    specs = []
+    for spec in results:
+        if not isinstance(spec, Mapping):
+            specs.append(spec)  # validate_record reports it with its position
+            continue
+        new_spec = dict(spec)
+        signals = spec.get("signals")
+        if isinstance(signals, list):
+            new_spec["signals"] = [_migrate_signal_1(sig) for sig in signals]
+        specs.append(new_spec)
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "model_version": old.get("version"),
+        "started_utc": format_utc(started),
+        "tool_versions": old.get("tools", {}),
+        "specs": specs,
+    }
+
+
+def _migrate_signal_1(signal: Any) -> Any:
+    if not isinstance(signal, Mapping):
+        return signal
+    new = dict(signal)
+    lambdas = signal.get("lambdas")
+    if isinstance(lambdas, Mapping):
+        new["lambdas"] = [lambdas.get(name) for name in CHARACTERISTICS]
+    return new
+
+
+def validate_record(record: Mapping[str, Any], *, file: str | None = None) -> dict[str, Any]:
+    """Check a schema-2 record and return a normalised copy; errors name the file and key."""
+    if record.get("schema_version") != SCHEMA_VERSION:
+        raise HistoryError(
+            f"expected schema_version {SCHEMA_VERSION} (got {record.get('schema_version')!r})",
+            file=file,
+            key="schema_version",
+            hint="read records through migrate_record()",
+        )
+    model_version = record.get("model_version")
+    if not isinstance(model_version, str) or not model_version:
+        raise HistoryError(
+            f"expected a non-empty string (got {model_version!r})",
+            file=file,
+            key="model_version",
+            hint=_HINT_CORRUPT,
+        )
+    started = parse_utc(record.get("started_utc"), file=file)
+    tools = record.get("tool_versions", {})
+    if not isinstance(tools, Mapping) or not all(
+        isinstance(k, str) and isinstance(v, str) for k, v in tools.items()
+    ):
+        raise HistoryError(
+            "expected a mapping of tool name to version string",
+            file=file,
+            key="tool_versions",
+            hint=_HINT_CORRUPT,
+        )
+    specs = record.get("specs")
+    if not isinstance(specs, list):
+        raise HistoryError(
+            f"expected a list of spec results (got {type(specs).__name__})",
+            file=file,
+            key="specs",
+            hint=_HINT_CORRUPT,
+        )
+    return {
+        "schema_version": SCHEMA_VERSION,
+        "model_version": model_version,
+        "started_utc": format_utc(started),
+        "tool_versions": dict(tools),
+        "specs": [_normalise_spec(spec, f"specs[{i}]", file) for i, spec in enumerate(specs)],
+    }
+
+
+def _normalise_spec(spec: Any, where: str, file: str | None) -> dict[str, Any]:
+    if not isinstance(spec, Mapping):
+        raise HistoryError(
+            f"expected a spec result object (got {type(spec).__name__})",
+            file=file,
+            key=where,
+            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
+        )
+    name = spec.get("name", spec.get("spec"))
+    if not isinstance(name, str) or not name:
+        raise HistoryError(
+            f"a spec result needs a 'name' or 'spec' string (got {name!r})",
+            file=file,
+            key=f"{where}.name",
+            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
+        )
+    out: dict[str, Any] = {key: spec[key] for key in _SPEC_KEYS if key in spec}
+    out["name"] = name
+    out["phi"] = optional_float(spec.get("phi"), where=f"{where}.phi", file=file)
+    if "min_phi" in spec:
+        out["min_phi"] = optional_float(spec["min_phi"], where=f"{where}.min_phi", file=file)
+    signals = spec.get("signals", [])
+    if not isinstance(signals, list):
+        raise HistoryError(
+            f"expected a list (got {type(signals).__name__})",
+            file=file,
+            key=f"{where}.signals",
+            hint=_HINT_CORRUPT,
+        )
+    out["signals"] = [
+        _normalise_signal(sig, f"{where}.signals[{j}]", file) for j, sig in enumerate(signals)
+    ]
+    normalised: dict[str, Any] = json_safe(out, where=where)
+    return normalised
+
+
+def _normalise_signal(signal: Any, where: str, file: str | None) -> dict[str, Any]:
+    if not isinstance(signal, Mapping) or not isinstance(signal.get("path"), str):
+        raise HistoryError(
+            "expected a signal result object with a 'path' string",
+            file=file,
+            key=where,
+            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
+        )
+    out: dict[str, Any] = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
+    lambdas = signal.get("lambdas")
+    if not isinstance(lambdas, (list, tuple)) or len(lambdas) != len(CHARACTERISTICS):
+        raise HistoryError(
+            f"expected a list of {len(CHARACTERISTICS)} values λ1–λ7 (got {lambdas!r})",
+            file=file,
+            key=f"{where}.lambdas",
+            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
+        )
+    out["lambdas"] = [
+        optional_float(value, where=f"{where}.lambdas[{k}]", file=file)
+        for k, value in enumerate(lambdas)
+    ]
+    for key in ("lag_s", "peak_correlation", "mae", "rms", "delta_e", "error_std", "mean_error"):
+        if key in signal:
+            out[key] = optional_float(signal[key], where=f"{where}.{key}", file=file)
+    return out

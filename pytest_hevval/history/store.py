@@ -1,0 +1,220 @@
+"""An append-only folder of history records, safe for concurrent writers and parallel branches.
+
+Layout: one file per run, ``<UTC time>_<model-version slug>_<8 hex>.json``, for example
+``20240501T120000.123456Z_v1.4-3-gabc123_9f2c01ab.json``. Names sort by time, and the random
+suffix means two writers (or two branches merged later) never pick the same name, which
+sequential numbers cannot promise.
+
+Writes are atomic: the JSON goes to a hidden temporary file in the same folder, is fsync'ed,
+then hard-linked to its final name. ``os.link`` fails instead of replacing an existing file, so
+a record is never overwritten; readers never see a half-written ``*.json``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import tempfile
+import uuid
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from ._base import HistoryError
+from .records import migrate_record, parse_utc, validate_record
+
+__all__ = ["DEFAULT_HISTORY_DIR", "HistoryStore", "StoreProblem", "StoredRecord", "slugify"]
+
+DEFAULT_HISTORY_DIR = ".hevval/history"
+_SLUG_MAX = 40
+_NAME_ATTEMPTS = 20
+
+
+def slugify(version: str) -> str:
+    """A file-name-safe form of a model version (letters, digits, ``.``, ``-``, ``+``)."""
+    slug = re.sub(r"[^A-Za-z0-9.+-]+", "-", version).strip("-.")[:_SLUG_MAX].strip("-.")
+    return slug or "unknown"
+
+
+@dataclass(frozen=True)
+class StoreProblem:
+    """A file in the history folder that could not be read as a record."""
+
+    path: Path
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.message}"
+
+
+@dataclass(frozen=True)
+class StoredRecord:
+    """A validated schema-2 record with the file it came from."""
+
+    path: Path
+    record: dict[str, Any]
+    started_utc: datetime = field(compare=False)
+
+
+class HistoryStore:
+    """The history folder. Nothing here deletes or rewrites an existing record.
+
+    ``problems`` lists the files skipped by the latest scan (unreadable, partial, or not a
+    record), so that a bad file never hides the good ones and never raises.
+    """
+
+    def __init__(self, directory: Path | str) -> None:
+        self.directory = Path(directory)
+        self.problems: list[StoreProblem] = []
+
+    def __repr__(self) -> str:
+        return f"HistoryStore({str(self.directory)!r})"
+
+    # -- writing ---------------------------------------------------------------------------
+
+    def append(self, record: Mapping[str, Any]) -> Path:
+        """Validate ``record`` and write it as a new file; return the file's path."""
+        checked = validate_record(record)
+        started = parse_utc(checked["started_utc"])
+        payload = (json.dumps(checked, indent=1, allow_nan=False) + "\n").encode("utf-8")
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise HistoryError(
+                f"cannot create the history folder: {exc.strerror or exc}",
+                file=str(self.directory),
+                hint="choose a writable folder with --hevval-history-dir",
+            ) from None
+        stem = f"{started.strftime('%Y%m%dT%H%M%S.%fZ')}_{slugify(checked['model_version'])}"
+        temp = self._write_temp(payload)
+        try:
+            for _ in range(_NAME_ATTEMPTS):
+                final = self.directory / f"{stem}_{uuid.uuid4().hex[:8]}.json"
+                if self._publish(temp, final):
+                    _fsync_directory(self.directory)
+                    return final
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                temp.unlink()
+        raise HistoryError(  # pragma: no cover - 20 uuid4 collisions in a row
+            "could not find a free file name for the record",
+            file=str(self.directory),
+        )
+
+    def _write_temp(self, payload: bytes) -> Path:
+        try:
+            fd, name = tempfile.mkstemp(dir=self.directory, prefix=".tmp-", suffix=".part")
+        except OSError as exc:
+            raise HistoryError(
+                f"cannot write to the history folder: {exc.strerror or exc}",
+                file=str(self.directory),
+                hint="choose a writable folder with --hevval-history-dir",
+            ) from None
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(payload)
+                handle.flush()
+                os.fsync(handle.fileno())
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(name)
+            raise
+        return Path(name)
+
+    @staticmethod
+    def _publish(temp: Path, final: Path) -> bool:
+        """Give ``temp`` the name ``final`` unless that name exists; False when it does."""
+        try:
+            os.link(temp, final)
+            return True
+        except FileExistsError:
+            return False
+        except OSError:
+            pass  # a filesystem without hard links; reserve the name exclusively instead
+        try:
+            fd = os.open(final, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            return False
+        os.close(fd)
+        # The empty placeholder is ours alone; replacing it swaps in the full content at once.
+        os.replace(temp, final)
+        return True
+
+    # -- reading ---------------------------------------------------------------------------
+
+    def entries(self) -> list[StoredRecord]:
+        """Every readable record with its path, oldest first; fills :attr:`problems`."""
+        self.problems = []
+        if not self.directory.is_dir():
+            return []
+        found: list[StoredRecord] = []
+        for path in sorted(self.directory.glob("*.json")):
+            try:
+                text = path.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                self.problems.append(StoreProblem(path, f"unreadable: {exc}"))
+                continue
+            if not text.strip():
+                self.problems.append(StoreProblem(path, "empty file (a write may be in progress)"))
+                continue
+            try:
+                document = json.loads(text)
+            except json.JSONDecodeError as exc:
+                self.problems.append(
+                    StoreProblem(path, f"not valid JSON at line {exc.lineno}: {exc.msg}")
+                )
+                continue
+            try:
+                record = migrate_record(document, file=str(path))
+            except HistoryError as exc:
+                self.problems.append(StoreProblem(path, exc.problem))
+                continue
+            found.append(StoredRecord(path, record, parse_utc(record["started_utc"])))
+        found.sort(key=lambda entry: (entry.started_utc, entry.path.name))
+        return found
+
+    def records(self) -> list[dict[str, Any]]:
+        """Every readable record, oldest first; unreadable files go to :attr:`problems`."""
+        return [entry.record for entry in self.entries()]
+
+    def latest(self, before: datetime | None = None) -> dict[str, Any] | None:
+        """The newest record, or the newest one started strictly before ``before``."""
+        entries = self.entries()
+        if before is not None:
+            if before.tzinfo is None:
+                raise HistoryError(
+                    "latest(before=...) needs a timezone-aware datetime",
+                    hint="pass datetime.now(timezone.utc)",
+                )
+            entries = [entry for entry in entries if entry.started_utc < before]
+        return entries[-1].record if entries else None
+
+    def find(self, version: str) -> dict[str, Any] | None:
+        """The newest record of model version ``version``, or ``None``."""
+        matches = [entry for entry in self.entries() if entry.record["model_version"] == version]
+        return matches[-1].record if matches else None
+
+    def versions(self) -> list[str]:
+        """Distinct recorded model versions, oldest first."""
+        seen: dict[str, None] = {}
+        for entry in self.entries():
+            seen.setdefault(entry.record["model_version"], None)
+        return list(seen)
+
+
+def _fsync_directory(directory: Path) -> None:
+    # Makes the new name durable across a power cut on POSIX; Windows cannot open folders.
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)

@@ -1,0 +1,363 @@
+"""Trends over model versions: a table of Φ and λ per run, step detection, and a plot.
+
+:func:`detect_steps` is pure (a sequence in, steps out) so that it can be tested on synthetic
+series; :func:`plot_history` imports matplotlib only when called.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from fnmatch import fnmatchcase
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ._base import CHARACTERISTICS, HistoryError, spec_key
+
+__all__ = [
+    "HistoryRow",
+    "Step",
+    "detect_steps",
+    "history_table",
+    "plot_history",
+    "render_history_table",
+    "row_series",
+]
+
+# 1.4826 × MAD estimates σ of normal noise; the differences of white noise have σ·√2.
+_MAD_TO_SIGMA = 1.4826
+_PLOT_SUFFIXES = (".png", ".svg")
+
+
+@dataclass(frozen=True)
+class HistoryRow:
+    """One spec (``signal is None``) or one signal of one recorded run."""
+
+    started_utc: str
+    model_version: str
+    spec: str
+    spec_name: str
+    signal: str | None
+    phi: float | None
+    lambdas: tuple[float | None, ...]
+    lag_s: float | None
+    passed: bool | None
+
+    def value(self, field: str) -> float | None:
+        """``"phi"``, ``"lag_s"`` or a characteristic name."""
+        if field == "phi":
+            return self.phi
+        if field == "lag_s":
+            return self.lag_s
+        index = CHARACTERISTICS.index(field)
+        return self.lambdas[index] if index < len(self.lambdas) else None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "started_utc": self.started_utc,
+            "model_version": self.model_version,
+            "spec": self.spec,
+            "spec_name": self.spec_name,
+            "signal": self.signal,
+            "phi": self.phi,
+            "lambdas": dict(zip(CHARACTERISTICS, self.lambdas, strict=True))
+            if self.lambdas
+            else None,
+            "lag_s": self.lag_s,
+            "passed": self.passed,
+        }
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _matches_spec(spec: Mapping[str, Any], pattern: str | None) -> bool:
+    if pattern is None:
+        return True
+    key = spec_key(spec)
+    name = str(spec.get("name", ""))
+    return pattern in (key, name) or fnmatchcase(key, pattern) or fnmatchcase(name, pattern)
+
+
+def _matches_signal(signal: Mapping[str, Any], pattern: str) -> bool:
+    path = str(signal.get("path", ""))
+    return pattern in (path, signal.get("name")) or fnmatchcase(path, pattern)
+
+
+def history_table(
+    records: Iterable[Mapping[str, Any]], spec: str | None = None, signal: str | None = None
+) -> list[HistoryRow]:
+    """Rows of Φ (and, when ``signal`` is given, λ1–λ7 and lag) over the recorded runs.
+
+    ``spec`` and ``signal`` match exactly (spec path or name; signal path or name) or as a
+    shell glob (``"E_batt/*"``). Without ``signal`` there is one row per spec and run.
+    Rows are ordered by run time, then spec, then signal.
+    """
+    rows: list[HistoryRow] = []
+    for record in sorted(records, key=lambda r: str(r.get("started_utc", ""))):
+        version = str(record.get("model_version", "unknown"))
+        started = str(record.get("started_utc", ""))
+        for spec_result in record.get("specs", []):
+            if not isinstance(spec_result, Mapping) or not _matches_spec(spec_result, spec):
+                continue
+            passed = spec_result.get("passed")
+            spec_row = HistoryRow(
+                started_utc=started,
+                model_version=version,
+                spec=spec_key(spec_result),
+                spec_name=str(spec_result.get("name", spec_key(spec_result))),
+                signal=None,
+                phi=_number(spec_result.get("phi")),
+                lambdas=(),
+                lag_s=None,
+                passed=passed if isinstance(passed, bool) else None,
+            )
+            if signal is None:
+                rows.append(spec_row)
+                continue
+            for sig in spec_result.get("signals", []):
+                if not isinstance(sig, Mapping) or not _matches_signal(sig, signal):
+                    continue
+                lambdas = sig.get("lambdas")
+                passed = sig.get("passed")
+                rows.append(
+                    replace(
+                        spec_row,
+                        signal=str(sig["path"]),
+                        lambdas=tuple(_number(v) for v in lambdas)
+                        if isinstance(lambdas, list)
+                        else (),
+                        lag_s=_number(sig.get("lag_s")),
+                        passed=passed if isinstance(passed, bool) else None,
+                    )
+                )
+    return rows
+
+
+def row_series(rows: Sequence[HistoryRow]) -> dict[tuple[str, str | None], list[HistoryRow]]:
+    """Group rows into one time series per (spec, signal)."""
+    series: dict[tuple[str, str | None], list[HistoryRow]] = {}
+    for row in rows:
+        series.setdefault((row.spec, row.signal), []).append(row)
+    return series
+
+
+def _fmt(value: float | None, digits: int = 4) -> str:
+    return "—" if value is None else f"{value:.{digits}f}"
+
+
+def render_history_table(rows: Sequence[HistoryRow]) -> str:
+    """A plain-text table of the rows, aligned in columns."""
+    if not rows:
+        return "(no recorded runs match)"
+    with_signals = any(row.signal is not None for row in rows)
+    header = ["time (UTC)", "model version", "spec"]
+    if with_signals:
+        header += ["signal"]
+    header += ["Φ"]
+    if with_signals:
+        header += [f"λ{i}" for i in range(1, len(CHARACTERISTICS) + 1)] + ["lag s"]
+    header += ["passed"]
+    table = [header]
+    for row in rows:
+        cells = [row.started_utc[:19].replace("T", " "), row.model_version, row.spec]
+        if with_signals:
+            cells.append(row.signal or "")
+        cells.append(_fmt(row.phi))
+        if with_signals:
+            lambdas = row.lambdas or (None,) * len(CHARACTERISTICS)
+            cells += [_fmt(v) for v in lambdas] + [_fmt(row.lag_s, 2)]
+        cells.append({True: "yes", False: "NO", None: "—"}[row.passed])
+        table.append(cells)
+    widths = [max(len(line[i]) for line in table) for i in range(len(header))]
+    lines = [
+        "  ".join(cell.ljust(w) for cell, w in zip(line, widths, strict=True)).rstrip()
+        for line in table
+    ]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+# -- step detection -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Step:
+    """A lasting change of level in a series.
+
+    ``index`` is the first position at the new level; ``before``/``after`` are the medians of
+    the neighbouring segments; ``score`` is the size in units of the series' noise.
+    """
+
+    index: int
+    before: float
+    after: float
+    score: float
+    regression: bool
+
+    @property
+    def size(self) -> float:
+        return self.after - self.before
+
+
+def noise_sigma(values: npt.ArrayLike) -> float:
+    """Robust noise level: the MAD of first differences, scaled to σ of white noise.
+
+    Differences cancel the level, so a step adds a single outlier that the median ignores.
+    """
+    x = np.asarray(values, dtype=float)
+    if x.size < 2:
+        return 0.0
+    d = np.diff(x)
+    return float(_MAD_TO_SIGMA * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
+
+
+def detect_steps(
+    series: Sequence[float | None] | npt.ArrayLike,
+    *,
+    min_size: float,
+    threshold: float = 5.0,
+    min_segment: int = 2,
+    higher_is_better: bool = True,
+) -> list[Step]:
+    """Find lasting level changes in ``series`` by binary segmentation.
+
+    Each segment is split where the two sides' means differ most in units of their standard
+    error (a two-sample statistic with the noise σ from :func:`noise_sigma`); a split is kept
+    when that statistic reaches ``threshold`` *and* the medians of the two sides differ by at
+    least ``min_size``; both halves are then searched again. Non-finite and ``None`` values
+    are skipped; indices refer to the original series.
+
+    Parameters
+    ----------
+    min_size:
+        Smallest change worth reporting, in the series' unit (e.g. 0.01 for Φ).
+    threshold:
+        Required size of the change relative to the noise; 5 keeps flat noisy series of a few
+        hundred points free of false steps.
+    min_segment:
+        Fewest points on each side of a step, so that a single outlier is not a step.
+    higher_is_better:
+        Whether a drop (True, for Φ and λ) or a rise (False, for errors) is a regression.
+    """
+    if not math.isfinite(min_size) or min_size < 0:
+        raise HistoryError(f"min_size must be a finite number ≥ 0 (got {min_size!r})")
+    if min_segment < 1:
+        raise HistoryError(f"min_segment must be ≥ 1 (got {min_segment!r})")
+    raw = np.array(
+        [np.nan if v is None else v for v in np.asarray(series, dtype=object).ravel()],
+        dtype=float,
+    )
+    positions = np.flatnonzero(np.isfinite(raw))
+    x = raw[positions]
+    if x.size < 2 * min_segment:
+        return []
+    scale = max(1.0, float(np.max(np.abs(x))))
+    # A perfectly repeatable series has zero noise; a floor keeps the statistic finite.
+    sigma = max(noise_sigma(x), 1e-12 * scale)
+    splits: list[int] = []
+    pending = [(0, int(x.size))]
+    while pending:
+        start, stop = pending.pop()
+        split = _best_split(x[start:stop], sigma, min_segment, threshold, min_size)
+        if split is not None:
+            splits.append(start + split)
+            pending += [(start, start + split), (start + split, stop)]
+    splits.sort()
+    bounds = [0, *splits, int(x.size)]
+    steps = []
+    for k in range(1, len(bounds) - 1):
+        before = float(np.median(x[bounds[k - 1] : bounds[k]]))
+        after = float(np.median(x[bounds[k] : bounds[k + 1]]))
+        n_left = bounds[k] - bounds[k - 1]
+        n_right = bounds[k + 1] - bounds[k]
+        score = abs(after - before) / (sigma * math.sqrt(1 / n_left + 1 / n_right))
+        worse = after < before if higher_is_better else after > before
+        steps.append(Step(int(positions[bounds[k]]), before, after, score, worse))
+    return steps
+
+
+def _best_split(
+    x: npt.NDArray[np.float64], sigma: float, min_segment: int, threshold: float, min_size: float
+) -> int | None:
+    n = int(x.size)
+    if n < 2 * min_segment:
+        return None
+    cumulative = np.concatenate([[0.0], np.cumsum(x)])
+    k = np.arange(min_segment, n - min_segment + 1)
+    left = cumulative[k] / k
+    right = (cumulative[n] - cumulative[k]) / (n - k)
+    stat = np.abs(left - right) / (sigma * np.sqrt(1.0 / k + 1.0 / (n - k)))
+    best = int(k[int(np.argmax(stat))])
+    if float(np.max(stat)) < threshold:
+        return None
+    if abs(float(np.median(x[:best])) - float(np.median(x[best:]))) < max(min_size, 0.0):
+        return None
+    return best
+
+
+# -- plot -----------------------------------------------------------------------------------
+
+
+def plot_history(rows: Sequence[HistoryRow], path: Path | str) -> Path:
+    """Plot Φ (and λ1–λ7 of signal rows) over runs into a PNG or SVG file.
+
+    Uses matplotlib's object API with the Agg canvas, imported here, so no global pyplot
+    state is touched and no figure outlives the call.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in _PLOT_SUFFIXES:
+        raise HistoryError(
+            f"cannot plot to {path.suffix or 'a file without suffix'!r}",
+            file=str(path),
+            hint="name the file *.png or *.svg",
+        )
+    if not rows:
+        raise HistoryError("nothing to plot: no recorded runs match", file=str(path))
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        from ..errors import MissingExtraError
+
+        raise MissingExtraError.for_extra("--plot", "plot", "matplotlib") from None
+
+    runs = sorted({(row.started_utc, row.model_version) for row in rows})
+    x_of = {run: i for i, run in enumerate(runs)}
+    with_signals = any(row.signal is not None for row in rows)
+    figure = Figure(figsize=(10, 7 if with_signals else 4), layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(2 if with_signals else 1, 1, sharex=True, squeeze=False)[:, 0]
+    # Signal rows repeat their spec's Φ; plot each spec's Φ once per run.
+    phi: dict[str, dict[int, float]] = {}
+    for row in rows:
+        phi.setdefault(row.spec, {})[x_of[(row.started_utc, row.model_version)]] = (
+            np.nan if row.phi is None else row.phi
+        )
+    for spec, points in phi.items():
+        xs = sorted(points)
+        axes[0].plot(xs, [points[x] for x in xs], "o-", label=spec)
+    if with_signals:
+        for (_spec, signal), series in row_series(rows).items():
+            xs = [x_of[(r.started_utc, r.model_version)] for r in series]
+            for i, name in enumerate(CHARACTERISTICS):
+                ys = [r.value(name) for r in series]
+                axes[1].plot(
+                    xs, [np.nan if y is None else y for y in ys], ".-", label=f"{signal} λ{i + 1}"
+                )
+        axes[1].set_ylabel("λ")
+        axes[1].legend(fontsize="x-small", ncol=2, loc="best")
+    axes[0].set_ylabel("Φ")
+    axes[0].legend(fontsize="small", loc="best")
+    axes[-1].set_xticks(range(len(runs)))
+    axes[-1].set_xticklabels([version for _, version in runs], rotation=45, ha="right")
+    axes[-1].set_xlabel("model version (oldest first)")
+    figure.savefig(path)
+    return path

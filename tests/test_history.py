@@ -1,0 +1,885 @@
+"""Tests of run history: records, the store, comparison rules, the ratchet, trends and CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import uuid
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pytest_hevval import history as h
+from pytest_hevval.result import SpecResult
+
+T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
+LAMBDAS = [0.99, 0.95, 0.93, 0.92, 0.97, 0.91, 0.94]
+
+
+def signal(path: str = "E_batt/P_batt", **overrides: Any) -> dict[str, Any]:
+    base: dict[str, Any] = {
+        "path": path,
+        "name": path.rsplit("/", 1)[-1],
+        "set": 1,
+        "level": 2,
+        "alpha": 1.0,
+        "unit": "kW",
+        "lambdas": list(LAMBDAS),
+        "lag_s": -0.2,
+        "peak_correlation": 0.99,
+        "mae": 1.2,
+        "rms": 2.0,
+        "delta_e": 0.8,
+        "error_std": 1.9,
+        "mean_error": 0.1,
+        "thresholds": {"mae": 0.9},
+        "failures": [],
+        "passed": True,
+    }
+    base.update(overrides)
+    return base
+
+
+def spec(
+    name: str = "trip A01",
+    *,
+    phi: float | None = 0.9412,
+    signals: list[dict[str, Any]] | None = None,
+    path: str | None = "specs/trip_a01.hevval.yaml",
+) -> dict[str, Any]:
+    result: dict[str, Any] = {
+        "schema_version": 1,
+        "name": name,
+        "spec_hash": "sha256:abc",
+        "phi": phi,
+        "min_phi": 0.9,
+        "passed": True,
+        "data": {"reference": {"path": "ref.csv", "sha256": "r"}},
+        "signals": signals if signals is not None else [signal()],
+    }
+    if path is not None:
+        result["spec"] = path
+    return result
+
+
+def record(
+    version: str, when: datetime, specs: list[dict[str, Any]] | None = None
+) -> dict[str, Any]:
+    return h.make_record(specs or [spec()], model_version=version, started_utc=when)
+
+
+# -- records --------------------------------------------------------------------------------
+
+
+def test_make_record_carries_versions_hashes_and_values() -> None:
+    rec = h.make_record(
+        [spec()], model_version=" v1.2 ", tool_versions={"fmpy": "0.3"}, started_utc=T0
+    )
+    assert rec["schema_version"] == h.SCHEMA_VERSION == 2
+    assert rec["model_version"] == "v1.2"
+    assert rec["started_utc"] == "2024-05-01T12:00:00.000000Z"
+    assert {"pytest-hevval", "numpy", "scipy", "python", "fmpy"} <= set(rec["tool_versions"])
+    stored = rec["specs"][0]
+    assert stored["spec_hash"] == "sha256:abc"
+    assert stored["data"]["reference"]["sha256"] == "r"
+    assert stored["phi"] == pytest.approx(0.9412)
+    sig = stored["signals"][0]
+    assert sig["lambdas"] == LAMBDAS
+    assert (sig["lag_s"], sig["mae"], sig["passed"]) == (-0.2, 1.2, True)
+    json.dumps(rec, allow_nan=False)
+
+
+def test_make_record_accepts_engine_results_and_drops_figures() -> None:
+    plain = SpecResult.from_dict(spec()).to_dict()
+    engine = json.loads(json.dumps(plain))
+    engine["signals"][0]["figures"] = {"png": "x" * 1000}
+    rec = h.make_record([engine], model_version="v", started_utc=T0)
+    stored = rec["specs"][0]
+    assert stored["weights"] == engine["weights"]
+    assert "figures" not in stored["signals"][0]
+    assert stored["signals"][0]["children"] == []
+    assert SpecResult.from_dict(stored).to_dict() == plain
+
+
+def test_make_record_converts_nan_and_numpy_scalars() -> None:
+    lambdas: list[Any] = [np.float64(0.5), float("nan"), *LAMBDAS[2:]]
+    rec = h.make_record(
+        [spec(phi=np.float64(0.8), signals=[signal(lambdas=lambdas, mae=np.float32(2.0))])],
+        model_version="v",
+        started_utc=T0 + timedelta(hours=2),
+    )
+    sig = rec["specs"][0]["signals"][0]
+    assert sig["lambdas"][:2] == [0.5, None]
+    assert sig["mae"] == 2.0
+    assert rec["specs"][0]["phi"] == 0.8
+    assert type(rec["specs"][0]["phi"]) is float
+
+
+def test_make_record_converts_other_timezones_to_utc() -> None:
+    plus_two = timezone(timedelta(hours=2))
+    rec = record("v", datetime(2024, 5, 1, 14, 0, tzinfo=plus_two))
+    assert rec["started_utc"] == "2024-05-01T12:00:00.000000Z"
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"started_utc": datetime(2024, 5, 1)}, "timezone-aware"),
+        ({"model_version": ""}, "model_version"),
+    ],
+)
+def test_make_record_rejects_bad_arguments(kwargs: dict[str, Any], message: str) -> None:
+    arguments: dict[str, Any] = {"model_version": "v", "started_utc": T0, **kwargs}
+    with pytest.raises(h.HistoryError, match=message):
+        h.make_record([spec()], **arguments)
+
+
+def test_make_record_names_the_bad_key() -> None:
+    with pytest.raises(h.HistoryError) as info:
+        h.make_record(
+            [spec(signals=[signal(lambdas=[1.0, 2.0])])], model_version="v", started_utc=T0
+        )
+    assert info.value.key == "specs[0].signals[0].lambdas"
+    assert isinstance(info.value, ValueError)
+
+
+def v1_record() -> dict[str, Any]:
+    sig = signal()
+    sig["lambdas"] = dict(zip(_names(), LAMBDAS, strict=True))
+    return {
+        "schema_version": 1,
+        "version": "v0.9",
+        "timestamp": (T0 - timedelta(days=1)).timestamp(),
+        "tools": {"pytest-hevval": "0.0.9"},
+        "results": [spec(signals=[sig])],
+    }
+
+
+def _names() -> tuple[str, ...]:
+    from pytest_hevval.core.characteristics import CHARACTERISTICS
+
+    return CHARACTERISTICS
+
+
+def test_migrate_schema_1_to_2() -> None:
+    migrated = h.migrate_record(v1_record())
+    assert migrated["schema_version"] == 2
+    assert migrated["model_version"] == "v0.9"
+    assert migrated["started_utc"] == "2024-04-30T12:00:00.000000Z"
+    assert migrated["tool_versions"] == {"pytest-hevval": "0.0.9"}
+    assert migrated["specs"][0]["signals"][0]["lambdas"] == LAMBDAS
+
+
+def test_migrate_schema_2_is_identity_after_validation() -> None:
+    rec = record("v1", T0)
+    assert h.migrate_record(json.loads(json.dumps(rec))) == rec
+
+
+@pytest.mark.parametrize(
+    ("document", "message"),
+    [
+        ({"schema_version": 99}, "newer than this pytest-hevval"),
+        ({"schema_version": "two"}, "unknown schema_version"),
+        ({"schema_version": 1, "version": "v", "timestamp": "yesterday"}, "timestamp"),
+        ({"schema_version": 1, "version": "v", "timestamp": 0, "results": {}}, "results"),
+        ({"schema_version": 2, "model_version": "v", "started_utc": "noon", "specs": []}, "ISO"),
+        ([1, 2], "JSON object"),
+    ],
+)
+def test_migrate_rejects_bad_documents(document: Any, message: str) -> None:
+    with pytest.raises(h.HistoryError, match=message) as info:
+        h.migrate_record(document, file="x.json")
+    assert "x.json" in str(info.value)
+
+
+def test_resolve_model_version_precedence(tmp_path: Path) -> None:
+    env = {"HEVVAL_MODEL_VERSION": "from-env"}
+    assert h.resolve_model_version("cli", env, tmp_path) == "cli"
+    assert h.resolve_model_version("  ", env, tmp_path) == "from-env"
+    assert h.resolve_model_version(None, env, tmp_path) == "from-env"
+
+
+def _git(cwd: Path, *args: str) -> None:
+    subprocess.run(
+        ["git", "-c", "user.name=t", "-c", "user.email=t@example.com", *args],
+        cwd=cwd,
+        check=True,
+        capture_output=True,
+    )
+
+
+def test_resolve_model_version_from_git(tmp_path: Path) -> None:
+    _git(tmp_path, "init", "-q")
+    (tmp_path / "model.txt").write_text("a")
+    _git(tmp_path, "add", "model.txt")
+    _git(tmp_path, "commit", "-q", "-m", "m")
+    clean = h.resolve_model_version(None, {}, tmp_path)
+    assert re.fullmatch(r"[0-9a-f]{7,40}", clean)
+    (tmp_path / "model.txt").write_text("b")
+    assert h.resolve_model_version(None, {}, tmp_path) == f"{clean}-dirty"
+
+
+def test_resolve_model_version_outside_git_or_without_git(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path.parent))
+    assert h.resolve_model_version(None, {}, tmp_path) == "unknown"
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    assert h.resolve_model_version(None, {}, tmp_path) == "unknown"
+
+
+# -- store ----------------------------------------------------------------------------------
+
+NAME = re.compile(r"^\d{8}T\d{6}\.\d{6}Z_[A-Za-z0-9.+-]+_[0-9a-f]{8}\.json$")
+
+
+def test_store_round_trip_and_file_names(tmp_path: Path) -> None:
+    store = h.HistoryStore(tmp_path / "hist")
+    first = store.append(record("v1.0 beta/2", T0))
+    second = store.append(record("v1.1", T0 + timedelta(days=1)))
+    assert NAME.match(first.name)
+    assert NAME.match(second.name)
+    assert "_v1.0-beta-2_" in first.name
+    records = store.records()
+    assert [r["model_version"] for r in records] == ["v1.0 beta/2", "v1.1"]
+    assert records[1] == record("v1.1", T0 + timedelta(days=1))
+    assert store.problems == []
+    assert not list((tmp_path / "hist").glob(".tmp-*"))
+
+
+def test_store_is_append_only(tmp_path: Path) -> None:
+    store = h.HistoryStore(tmp_path)
+    rec = record("v1", T0)
+    paths = [store.append(rec), store.append(rec)]
+    assert paths[0] != paths[1]
+    assert len(store.records()) == 2
+
+
+def test_store_never_overwrites_an_existing_name(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    store = h.HistoryStore(tmp_path)
+    taken = uuid.UUID(int=0xAAAAAAAA << 96)
+    fresh = uuid.UUID(int=0xBBBBBBBB << 96)
+    existing = tmp_path / f"20240501T120000.000000Z_v1_{taken.hex[:8]}.json"
+    existing.write_text("precious")
+    ids = iter([taken, fresh])
+    monkeypatch.setattr(uuid, "uuid4", lambda: next(ids))
+    path = store.append(record("v1", T0))
+    assert path.name.endswith(f"_{fresh.hex[:8]}.json")
+    assert existing.read_text() == "precious"
+
+
+def test_store_without_hard_links(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_link(src: object, dst: object) -> None:
+        raise PermissionError("hard links not supported")
+
+    monkeypatch.setattr(os, "link", no_link)
+    store = h.HistoryStore(tmp_path)
+    store.append(record("v1", T0))
+    store.append(record("v1", T0))
+    assert len(store.records()) == 2
+    assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_store_skips_bad_files_and_reports_them(tmp_path: Path) -> None:
+    store = h.HistoryStore(tmp_path)
+    store.append(record("v1", T0))
+    (tmp_path / "partial.json").write_text('{"schema_version": 2, "model_')
+    (tmp_path / "empty.json").write_text("")
+    (tmp_path / "other.json").write_text('{"hello": 1}')
+    (tmp_path / "binary.json").write_bytes(b"\xff\xfe\x00")
+    (tmp_path / "v1.json").write_text(json.dumps(v1_record()))
+    (tmp_path / ".tmp-abc.part").write_text("{")
+    records = store.records()
+    assert [r["model_version"] for r in records] == ["v0.9", "v1"]
+    problems = {p.path.name: p.message for p in store.problems}
+    assert set(problems) == {"partial.json", "empty.json", "other.json", "binary.json"}
+    assert "not valid JSON" in problems["partial.json"]
+    assert "schema_version" in problems["other.json"]
+
+
+def test_store_latest_and_find(tmp_path: Path) -> None:
+    store = h.HistoryStore(tmp_path)
+    assert store.latest() is None
+    for i, version in enumerate(["a", "b", "a", "c"]):
+        store.append(record(version, T0 + timedelta(days=i)))
+    latest = store.latest()
+    assert latest is not None
+    assert latest["model_version"] == "c"
+    earlier = store.latest(before=T0 + timedelta(days=2))
+    assert earlier is not None
+    assert earlier["model_version"] == "b"
+    found = store.find("a")
+    assert found is not None
+    assert found["started_utc"].startswith("2024-05-03")
+    assert store.find("zzz") is None
+    assert store.versions() == ["a", "b", "c"]
+    with pytest.raises(h.HistoryError, match="timezone-aware"):
+        store.latest(before=datetime(2024, 1, 1))
+
+
+def test_store_missing_folder_reads_as_empty(tmp_path: Path) -> None:
+    assert h.HistoryStore(tmp_path / "nope").records() == []
+
+
+def test_store_unwritable_location_is_a_history_error(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(h.HistoryError, match="history folder"):
+        h.HistoryStore(blocker / "hist").append(record("v", T0))
+
+
+WRITER = """
+import sys
+from datetime import datetime, timezone
+from pytest_hevval.history import HistoryStore, make_record
+store = HistoryStore(sys.argv[1])
+when = datetime(2024, 5, 1, tzinfo=timezone.utc)
+spec = {"name": "s", "phi": 0.5, "signals": [
+    {"path": "a/b", "lambdas": [0.5] * 7, "writer": sys.argv[2]}]}
+for i in range(20):
+    spec["signals"][0]["n_samples"] = i
+    spec["signals"][0]["name"] = sys.argv[2]
+    store.append(make_record([spec], model_version="same", started_utc=when))
+"""
+
+
+def test_two_concurrent_writers_lose_nothing(tmp_path: Path) -> None:
+    procs = [
+        subprocess.Popen([sys.executable, "-c", WRITER, str(tmp_path), name])
+        for name in ("w1", "w2")
+    ]
+    assert [p.wait(timeout=120) for p in procs] == [0, 0]
+    store = h.HistoryStore(tmp_path)
+    records = store.records()
+    assert store.problems == []
+    written = sorted(
+        (r["specs"][0]["signals"][0]["name"], r["specs"][0]["signals"][0]["n_samples"])
+        for r in records
+    )
+    assert written == sorted((w, i) for w in ("w1", "w2") for i in range(20))
+
+
+# -- compare grammar ------------------------------------------------------------------------
+
+
+def test_parse_compare_fail_examples() -> None:
+    rules = h.parse_compare_fail("phi:0.01, lambda:0.02,MAE:1%,lambda4:0.5e-1, lag:0.3")
+    assert [(r.field, r.amount, r.relative) for r in rules] == [
+        ("phi", 0.01, False),
+        ("lambda", 0.02, False),
+        ("mae", 1.0, True),
+        ("rms", 0.05, False),
+        ("lag", 0.3, False),
+    ]
+    assert rules[2].allowed(0.8) == pytest.approx(0.008)
+    assert rules[0].allowed(0.8) == 0.01
+
+
+@pytest.mark.parametrize(
+    ("expr", "fragments"),
+    [
+        ("mea:0.1", ["unknown field 'mea'", "did you mean 'mae'", "valid fields: phi"]),
+        ("phi:abc", ["'abc'", "e.g. phi:0.01"]),
+        ("phi:-1", ["'-1'", "non-negative"]),
+        ("phi", ["no ':amount'"]),
+        ("", ["empty rule"]),
+        ("phi:0.1,", ["empty rule"]),
+        ("phi:1%%", ["'1%%'"]),
+    ],
+)
+def test_parse_compare_fail_errors(expr: str, fragments: list[str]) -> None:
+    with pytest.raises(h.HistoryError) as info:
+        h.parse_compare_fail(expr)
+    message = str(info.value)
+    assert message.startswith("--hevval-compare-fail: ")
+    for fragment in fragments:
+        assert fragment in message
+
+
+def changed(values: dict[int, float]) -> list[float]:
+    lambdas = list(LAMBDAS)
+    for index, value in values.items():
+        lambdas[index] = value
+    return lambdas
+
+
+def test_compare_deltas_and_membership() -> None:
+    before = record(
+        "v1",
+        T0,
+        [spec(), spec("B", path="b.hevval.yaml", phi=0.5)],
+    )
+    after_signals = [
+        signal(lambdas=changed({2: 0.90}), mae=1.5, lag_s=-0.5),
+        signal("new/sig"),
+    ]
+    current = [spec(phi=0.93, signals=after_signals), spec("C", path="c.hevval.yaml")]
+    comparison = h.compare(current, before)
+    assert comparison.before_label == "v1"
+    assert comparison.added_specs == ("c.hevval.yaml",)
+    assert comparison.removed_specs == ("b.hevval.yaml",)
+    (one,) = comparison.specs
+    assert one.phi.delta == pytest.approx(0.93 - 0.9412)
+    assert one.added_signals == ("new/sig",)
+    (sig,) = one.signals
+    assert sig.field("mae").delta == pytest.approx(0.90 - 0.93)  # λ3 comes first
+    assert sig.errors[1].field == "mae"
+    assert sig.errors[1].delta == pytest.approx(0.3)
+    assert sig.field("lag_s").delta == pytest.approx(-0.3)
+    json.dumps(comparison.to_dict(), allow_nan=False)
+
+
+def test_regressions_absolute_relative_and_lag() -> None:
+    before = record("v1", T0)
+    current = [spec(phi=0.93, signals=[signal(lambdas=changed({2: 0.90, 0: 0.985}), lag_s=-0.6)])]
+    comparison = h.compare(current, before)
+
+    def hits(expr: str) -> set[tuple[str | None, str]]:
+        return {(r.signal, r.field) for r in h.regressions(comparison, h.parse_compare_fail(expr))}
+
+    assert hits("phi:0.02") == set()
+    assert hits("phi:0.01") == {(None, "phi")}
+    assert hits("lambda:0.02") == {("E_batt/P_batt", "mae")}
+    assert hits("lambda:0.001") == {("E_batt/P_batt", "mae"), ("E_batt/P_batt", "lag_correlation")}
+    assert hits("lambda1:1%") == set()  # 0.005 < 1 % of 0.99
+    assert hits("lambda1:0.1%") == {("E_batt/P_batt", "lag_correlation")}
+    assert hits("lag:0.5") == set()
+    assert hits("lag:0.3") == {("E_batt/P_batt", "lag")}
+    (reg,) = h.regressions(comparison, h.parse_compare_fail("mae:0.02"))
+    assert (reg.spec, reg.before, reg.after, reg.allowed) == (
+        "specs/trip_a01.hevval.yaml",
+        0.93,
+        0.90,
+        0.02,
+    )
+    assert "λ3 mae dropped 0.93 → 0.9" in str(reg)
+    (lag,) = h.regressions(comparison, h.parse_compare_fail("lag:0.1"))
+    assert str(lag).startswith(
+        "specs/trip_a01.hevval.yaml::E_batt/P_batt: |lag| grew 0.2 s → 0.6 s"
+    )
+    assert "mae:0.02" in str(reg)
+
+
+def test_regressions_equal_runs_and_improvements_pass() -> None:
+    before = record("v1", T0)
+    better = [spec(phi=0.99, signals=[signal(lambdas=[1.0] * 7, lag_s=0.0)])]
+    rules = h.parse_compare_fail("phi:0,lambda:0,lag:0")
+    assert h.regressions(h.compare(before, before), rules) == []
+    assert h.regressions(h.compare(better, before), rules) == []
+
+
+def test_regressions_value_becoming_undefined() -> None:
+    before = record("v1", T0)
+    current = [spec(phi=None, signals=[signal(lambdas=changed({4: float("nan")}))])]
+    found = h.regressions(h.compare(current, before), h.parse_compare_fail("phi:1,anomaly:1"))
+    assert {(r.field, r.after) for r in found} == {("phi", None), ("anomaly", None)}
+    assert "undefined" in str(found[0])
+
+
+def test_missing_baseline_decisions(tmp_path: Path) -> None:
+    ci = h.missing_baseline(ci=True, create_baseline=False, directory=tmp_path)
+    assert ci.fails
+    assert str(tmp_path) in ci.message
+    assert "--hevval-create-baseline" in ci.message
+    assert "commit the history folder" in ci.message
+    local = h.missing_baseline(ci=False, create_baseline=False, directory=tmp_path)
+    assert local.action == "note"
+    assert not local.fails
+    created = h.missing_baseline(ci=True, create_baseline=True, directory=tmp_path, wanted="v9")
+    assert created.action == "record"
+    assert "'v9'" in created.message
+
+
+@pytest.mark.parametrize(
+    ("env", "expected"),
+    [
+        ({}, False),
+        ({"CI": "true"}, True),
+        ({"CI": "false"}, False),
+        ({"CI": "0", "GITHUB_ACTIONS": "true"}, True),
+        ({"GITLAB_CI": ""}, False),
+    ],
+)
+def test_is_ci(env: dict[str, str], expected: bool) -> None:
+    assert h.is_ci(env) is expected
+
+
+# -- ratchet --------------------------------------------------------------------------------
+
+
+def test_ratchet_tightens_and_never_loosens() -> None:
+    result = spec(signals=[signal(lambdas=changed({2: 0.95, 3: 0.85}), thresholds={})])
+    current = {"E_batt/P_batt": {"mae": 0.9, "rms": 0.9}}
+    proposed = h.ratchet_thresholds(result, current, 0.01)
+    assert proposed == {"E_batt/P_batt": {"mae": 0.94, "rms": 0.9}}
+    assert h.ratchet_thresholds(result, current, 0.5) == current
+
+
+def test_ratchet_uses_the_stricter_of_given_and_as_run_thresholds() -> None:
+    result = spec(signals=[signal(lambdas=changed({2: 0.80}), thresholds={"mae": 0.85})])
+    assert h.ratchet_thresholds(result, {"E_batt/P_batt": {"mae": 0.5}}, 0.0) == {
+        "E_batt/P_batt": {"mae": 0.85}
+    }
+
+
+def test_ratchet_keeps_undefined_and_ungated() -> None:
+    result = spec(signals=[signal(lambdas=changed({2: float("nan")}))])
+    assert h.ratchet_thresholds(result, {}, 0.01) == {"E_batt/P_batt": {"mae": 0.9}}
+    ungated = spec(signals=[signal(thresholds={})])
+    assert h.ratchet_thresholds(ungated, {}, 0.01) == {}
+
+
+def test_ratchet_rounds_down_so_the_run_still_passes() -> None:
+    result = spec(signals=[signal(lambdas=changed({2: 0.93339}), thresholds={"mae": 0.1})])
+    value = h.ratchet_thresholds(result, {}, 0.0)["E_batt/P_batt"]["mae"]
+    assert value == 0.9333
+
+
+@given(
+    achieved=st.lists(st.floats(0, 1) | st.none(), min_size=7, max_size=7),
+    current=st.floats(0, 1),
+    margin=st.floats(0, 0.99),
+)
+def test_ratchet_property_monotone_and_idempotent(
+    achieved: list[float | None], current: float, margin: float
+) -> None:
+    result = spec(signals=[signal(lambdas=achieved, thresholds={})])
+    start = {"E_batt/P_batt": dict.fromkeys(("mae", "emergent"), current)}
+    once = h.ratchet_thresholds(result, start, margin)
+    for name, value in once["E_batt/P_batt"].items():
+        assert value >= current
+        index = list(_names()).index(name)
+        if achieved[index] is not None and value > current:
+            assert value <= achieved[index]  # type: ignore[operator]
+    assert h.ratchet_thresholds(result, once, margin) == once
+
+
+def test_sidecar_path_names() -> None:
+    assert h.sidecar_path("specs/trip.hevval.yaml") == Path("specs/trip.hevval.thresholds.yaml")
+    assert h.sidecar_path(Path("a/x.yml")) == Path("a/x.thresholds.yaml")
+
+
+def test_ratchet_spec_writes_reviewable_sidecar_and_is_idempotent(tmp_path: Path) -> None:
+    spec_path = tmp_path / "trip.hevval.yaml"
+    spec_path.write_text("name: trip\n")
+    result = spec(signals=[signal(lambdas=changed({2: 0.95}))])
+    kwargs: dict[str, Any] = {"margin": 0.01, "model_version": "v7", "created_utc": T0}
+    outcome = h.ratchet_spec(spec_path, result, {"E_batt/P_batt": {"mae": 0.9}}, **kwargs)
+    assert outcome.written
+    assert outcome.tightened == (("E_batt/P_batt", "mae", 0.9, 0.94),)
+    text = outcome.path.read_text()
+    assert "model version v7" in text
+    assert "margin 0.01" in text
+    assert "2024-05-01" in text
+    assert h.load_sidecar(spec_path) == {"E_batt/P_batt": {"mae": 0.94}}
+    later = dict(kwargs, created_utc=T0 + timedelta(days=1), model_version="v8")
+    again = h.ratchet_spec(spec_path, result, {"E_batt/P_batt": {"mae": 0.9}}, **later)
+    assert not again.written
+    assert again.tightened == ()
+    assert outcome.path.read_text() == text
+    assert "unchanged" in again.summary()
+    assert "0.9000 → 0.9400" in outcome.summary()
+
+
+def test_ratchet_spec_without_gain_writes_nothing(tmp_path: Path) -> None:
+    spec_path = tmp_path / "trip.hevval.yaml"
+    result = spec(signals=[signal(lambdas=changed({2: 0.905}))])
+    outcome = h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
+    assert not outcome.written
+    assert not outcome.path.exists()
+
+
+def test_ratchet_spec_keeps_entries_of_absent_signals(tmp_path: Path) -> None:
+    spec_path = tmp_path / "trip.hevval.yaml"
+    h.write_sidecar(
+        spec_path, {"old/sig": {"rms": 0.8}}, model_version="v0", created_utc=T0, margin=0.01
+    )
+    result = spec(signals=[signal(lambdas=changed({2: 0.99}))])
+    h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
+    assert h.load_sidecar(spec_path) == {"old/sig": {"rms": 0.8}, "E_batt/P_batt": {"mae": 0.98}}
+
+
+def test_merge_thresholds_sidecar_only_tightens() -> None:
+    merged = h.merge_thresholds(
+        {"a": {"mae": 0.9, "rms": 0.8}}, {"a": {"mae": 0.7, "rms": 0.85}, "b": {"anomaly": 0.5}}
+    )
+    assert merged == {"a": {"mae": 0.9, "rms": 0.85}, "b": {"anomaly": 0.5}}
+
+
+@pytest.mark.parametrize(
+    ("text", "fragments"),
+    [
+        ("a:\n  mea: 0.9\n", ["a.mea", "did you mean 'mae'"]),
+        ("a:\n  mae: 1.5\n", ["a.mae", "[0, 1]"]),
+        ("a:\n  mae: yes\n", ["a.mae"]),
+        ("a: [1, 2]\n", ["a: expected"]),
+        ("- 1\n", ["expected a mapping"]),
+        ("a:\n  mae: [\n", ["not valid YAML", ".thresholds.yaml:"]),
+    ],
+)
+def test_load_sidecar_errors(tmp_path: Path, text: str, fragments: list[str]) -> None:
+    spec_path = tmp_path / "t.hevval.yaml"
+    h.sidecar_path(spec_path).write_text(text)
+    with pytest.raises(h.HistoryError) as info:
+        h.load_sidecar(spec_path)
+    message = str(info.value)
+    assert "t.hevval.thresholds.yaml" in message
+    assert "--hevval-ratchet" in message
+    for fragment in fragments:
+        assert fragment in message
+
+
+def test_load_sidecar_missing_or_empty(tmp_path: Path) -> None:
+    spec_path = tmp_path / "t.hevval.yaml"
+    assert h.load_sidecar(spec_path) == {}
+    h.sidecar_path(spec_path).write_text("# only a header\n")
+    assert h.load_sidecar(spec_path) == {}
+
+
+@pytest.mark.parametrize("text", ["abc", "-0.1", "1", "nan"])
+def test_parse_margin_errors(text: str) -> None:
+    with pytest.raises(h.HistoryError, match="--hevval-ratchet"):
+        h.parse_margin(text)
+
+
+# -- trends ---------------------------------------------------------------------------------
+
+
+def three_runs() -> list[dict[str, Any]]:
+    return [
+        record("v1", T0, [spec(phi=0.95, signals=[signal(), signal("x/y")])]),
+        record("v2", T0 + timedelta(days=1), [spec(phi=0.96)]),
+        record(
+            "v3",
+            T0 + timedelta(days=2),
+            [spec(phi=0.90, signals=[signal(lambdas=changed({2: 0.5}))]), spec("B", path="b")],
+        ),
+    ]
+
+
+def test_history_table_filters() -> None:
+    runs = three_runs()
+    rows = h.history_table(reversed(runs))
+    assert [(r.model_version, r.spec) for r in rows] == [
+        ("v1", "specs/trip_a01.hevval.yaml"),
+        ("v2", "specs/trip_a01.hevval.yaml"),
+        ("v3", "specs/trip_a01.hevval.yaml"),
+        ("v3", "b"),
+    ]
+    assert [r.phi for r in h.history_table(runs, spec="trip A01")] == [0.95, 0.96, 0.90]
+    sig_rows = h.history_table(runs, spec="specs/*", signal="E_batt/*")
+    assert [r.value("mae") for r in sig_rows] == [0.93, 0.93, 0.5]
+    assert h.history_table(runs, signal="y") == h.history_table(runs, signal="x/y")
+    text = h.render_history_table(sig_rows)
+    assert "v3" in text
+    assert "0.5000" in text
+    assert "λ7" in text
+    assert h.render_history_table([]) == "(no recorded runs match)"
+
+
+def test_detect_steps_finds_a_known_drop() -> None:
+    rng = np.random.default_rng(1)
+    series = np.r_[np.full(20, 0.95), np.full(20, 0.90)] + rng.normal(0, 0.004, 40)
+    (step,) = h.detect_steps(series, min_size=0.01)
+    assert step.index == 20
+    assert step.regression
+    assert step.size == pytest.approx(-0.05, abs=0.01)
+
+
+def test_detect_steps_finds_two_steps_and_the_direction() -> None:
+    series = [0.9] * 6 + [0.8] * 6 + [0.95] * 6
+    steps = h.detect_steps(series, min_size=0.01)
+    assert [(s.index, s.regression) for s in steps] == [(6, True), (12, False)]
+    errors = h.detect_steps([1.0] * 5 + [2.0] * 5, min_size=0.1, higher_is_better=False)
+    assert [s.regression for s in errors] == [True]
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_detect_steps_no_false_step_on_flat_noise(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    series = 0.9 + rng.normal(0, 0.01, 300)
+    assert h.detect_steps(series, min_size=0.005) == []
+
+
+def test_detect_steps_respects_min_size_and_skips_missing() -> None:
+    assert h.detect_steps([0.9] * 5 + [0.895] * 5, min_size=0.01) == []
+    assert len(h.detect_steps([0.9] * 5 + [0.895] * 5, min_size=0.001)) == 1
+    (step,) = h.detect_steps([0.9, None, 0.9, 0.9, math.nan, 0.7, 0.7, 0.7], min_size=0.1)
+    assert step.index == 5
+    assert h.detect_steps([0.9], min_size=0.0) == []
+    with pytest.raises(h.HistoryError, match="min_size"):
+        h.detect_steps([1.0, 2.0], min_size=-1.0)
+
+
+@pytest.mark.parametrize("suffix", [".png", ".svg"])
+def test_plot_history(tmp_path: Path, suffix: str) -> None:
+    runs = three_runs()
+    out = h.plot_history(h.history_table(runs, signal="E_batt/P_batt"), tmp_path / f"h{suffix}")
+    head = out.read_bytes()[:200]
+    if suffix == ".png":
+        assert head.startswith(b"\x89PNG")
+    else:
+        assert b"<svg" in head or b"<?xml" in head
+
+
+def test_plot_history_rejects_unknown_format(tmp_path: Path) -> None:
+    with pytest.raises(h.HistoryError, match=r"\*\.png or \*\.svg"):
+        h.plot_history(h.history_table(three_runs()), tmp_path / "h.jpg")
+
+
+# -- CLI ------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def history_dir(tmp_path: Path) -> Path:
+    store = h.HistoryStore(tmp_path / "hist")
+    for rec in three_runs():
+        store.append(rec)
+    return tmp_path / "hist"
+
+
+def test_history_main_table_steps_json_and_plot(
+    history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out_json = tmp_path / "rows.json"
+    plot = tmp_path / "p.png"
+    argv = ["--dir", str(history_dir), "--signal", "E_batt/P_batt", "--json", str(out_json)]
+    assert h.history_main([*argv, "--plot", str(plot)]) == 0
+    out = capsys.readouterr().out
+    assert "v1" in out
+    assert "v3" in out
+    assert "λ3" in out
+    assert json.loads(out_json.read_text())["rows"][2]["lambdas"]["mae"] == 0.5
+    assert plot.stat().st_size > 0
+
+
+def test_history_main_reports_drops(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    store = h.HistoryStore(tmp_path)
+    for i, phi in enumerate([0.95, 0.95, 0.95, 0.90, 0.90, 0.90]):
+        store.append(record(f"v{i}", T0 + timedelta(days=i), [spec(phi=phi)]))
+    assert h.history_main(["--dir", str(tmp_path)]) == 0
+    assert "drop: specs/trip_a01.hevval.yaml Φ 0.9500 → 0.9000 from model version v3" in (
+        capsys.readouterr().out
+    )
+
+
+def test_history_main_empty_and_bad_args(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert h.history_main(["--dir", str(tmp_path)]) == 1
+    assert "no readable records" in capsys.readouterr().err
+    assert h.history_main(["--bogus"]) == 2
+    assert "unrecognized arguments" in capsys.readouterr().err
+
+
+def test_compare_main_formats(
+    history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    run = tmp_path / "run.json"
+    run.write_text(json.dumps({"specs": [spec(phi=0.97)]}))
+    base = ["history:v1", str(run), "--dir", str(history_dir)]
+    assert h.compare_main(base) == 0
+    table = capsys.readouterr().out
+    assert "v1 → run.json" in table
+    assert "λ3 mae" in table
+    assert "MAE [kW]" in table
+    assert "0.9500" in table
+    assert "0.9700" in table
+    assert "+0.0200" in table
+    assert table.index("λ1") < table.rindex("Φ")
+
+    assert h.compare_main([*base, "--format", "md"]) == 0
+    md = capsys.readouterr().out
+    assert "| λ3 mae | 0.9300 | 0.9300 | 0 |" in md
+    assert "### Φ" in md
+
+    out = tmp_path / "cmp.json"
+    assert h.compare_main([*base, "--format", "json", "--output", str(out)]) == 0
+    document = json.loads(out.read_text())
+    assert document["comparison"]["specs"][0]["phi"]["delta"] == pytest.approx(0.02)
+
+
+def test_compare_main_fail_rules_and_latest(
+    history_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["history:v1", "history:latest", "--dir", str(history_dir)]
+    assert h.compare_main([*argv, "--fail", "phi:0.1"]) == 0
+    assert "no regressions" in capsys.readouterr().out
+    assert h.compare_main([*argv, "--fail", "phi:0.01,mae:0.1"]) == 1
+    out = capsys.readouterr().out
+    assert "2 regression(s)" in out
+    assert "mae dropped 0.93 → 0.5" in out
+
+
+def test_compare_main_previous(
+    history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert h.compare_main(["history:previous", "history:latest", "--dir", str(history_dir)]) == 0
+    assert "compare v2 → v3" in capsys.readouterr().out
+    single = tmp_path / "single"
+    h.HistoryStore(single).append(record("v1", T0))
+    assert h.compare_main(["history:previous", "history:latest", "--dir", str(single)]) == 2
+    assert "only one readable record" in capsys.readouterr().err
+
+
+def test_compare_main_reads_record_files(
+    history_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    files = sorted(history_dir.glob("*.json"))
+    assert h.compare_main([str(files[0]), str(files[1]), "--format", "json"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert (document["comparison"]["before"], document["comparison"]["after"]) == ("v1", "v2")
+
+
+@pytest.mark.parametrize(
+    ("argv", "fragments"),
+    [
+        (["history:v9", "history:latest"], ["no record of model version 'v9'", "v1, v2, v3"]),
+        (["missing.json", "history:latest"], ["missing.json: no such file"]),
+        (["history:latest", "history:latest", "--fail", "phy:1"], ["did you mean 'phi'"]),
+        (["history:latest", "history:latest", "--format", "xml"], ["invalid choice"]),
+    ],
+)
+def test_compare_main_errors(
+    history_dir: Path, argv: list[str], fragments: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert h.compare_main([*argv, "--dir", str(history_dir)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hevval compare: error: ")
+    for fragment in fragments:
+        assert fragment in err
+
+
+def test_compare_main_rejects_foreign_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text("[1")
+    other = tmp_path / "other.json"
+    other.write_text('{"x": 1}')
+    assert h.compare_main([str(bad), str(other)]) == 2
+    assert "bad.json: not valid JSON" in capsys.readouterr().err
+    assert h.compare_main([str(other), str(other)]) == 2
+    assert "neither a history record nor a run result" in capsys.readouterr().err
+
+
+def test_package_import_stays_light() -> None:
+    code = (
+        "import sys, pytest_hevval.history; "
+        "print('matplotlib' in sys.modules, 'pytest' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=os.environ
+    ).stdout
+    assert out.split() == ["False", "False"]

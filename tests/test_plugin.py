@@ -1,0 +1,304 @@
+"""The pytest plugin end to end, as a user runs it: with and without xdist."""
+
+from __future__ import annotations
+
+import json
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest_plugins = ["pytester"]
+
+TREE_SPEC = """\
+name: pack
+reference: {path: data/ref.csv, time: t}
+model: {path: data/sim.csv, time: time}
+alignment: {max_lag_s: 2}
+thresholds: {mae: 0.97, rms: 0.95}
+min_phi: 0.5
+sets:
+  - signal: E
+    ref: integrate(V * I) / 3600
+    sim: integrate(P) / 3600
+    unit: Wh
+    children:
+      - signal: P
+        ref: V * I
+        unit: W
+        children:
+          - {signal: V, unit: V, alpha: 0.5}
+          - {signal: I, unit: A, alpha: 0.5}
+  - {signal: speed, unit: km/h}
+"""
+
+
+def write_data(root: Path, *, fault: str | None = None, seed: int = 0) -> None:
+    """Reference and model output for a pack: E = ∫ V·I, P = V·I, with an optional fault."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 120.0, 0.1)
+    voltage = 350 + 10 * np.sin(t / 13)
+    current = 60 + 50 * np.sin(t / 5)
+    speed = 40 + 30 * np.sin(t / 20)
+    sim_voltage = voltage + rng.normal(0, 0.05, t.size)
+    sim_current = current + rng.normal(0, 0.05, t.size)
+    if fault == "leaf":
+        sim_current = sim_current * 1.25 + 8.0
+    power = sim_voltage * sim_current
+    if fault == "middle":
+        power = power + 6000 * np.exp(-(((t - 60) / 15) ** 2))
+    (root / "data").mkdir(exist_ok=True)
+    pd.DataFrame({"t": t, "V": voltage, "I": current, "speed": speed}).to_csv(
+        root / "data" / "ref.csv", index=False
+    )
+    pd.DataFrame(
+        {"time": t, "V": sim_voltage, "I": sim_current, "P": power, "speed": speed + 0.1}
+    ).to_csv(root / "data" / "sim.csv", index=False)
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester) -> pytest.Pytester:
+    pytester.makefile(".hevval.yaml", pack=TREE_SPEC)
+    return pytester
+
+
+def _no_plugin_traceback(output: str) -> None:
+    assert "Traceback" not in output
+    assert "pytest_hevval/" not in output.replace("pytest_hevval/__", "")
+
+
+def test_inert_without_flag(project: pytest.Pytester) -> None:
+    write_data(project.path)
+    result = project.runpytest()
+    result.assert_outcomes()
+    assert result.ret == pytest.ExitCode.NO_TESTS_COLLECTED
+
+
+def test_passing_spec(project: pytest.Pytester) -> None:
+    write_data(project.path)
+    result = project.runpytest("--hevval", "-v")
+    result.assert_outcomes(passed=6)
+    result.stdout.fnmatch_lines(
+        [
+            "*pack.hevval.yaml::E PASSED*",
+            "*pack.hevval.yaml::E/P/V PASSED*",
+            "*pack.hevval.yaml::Phi PASSED*",
+            "*hevval validation summary*",
+            "pack: Φ = 0.9* (min 0.5) PASS*",
+        ]
+    )
+
+
+def test_ini_switch_and_custom_glob(pytester: pytest.Pytester) -> None:
+    pytester.makefile(".yaml", custom=TREE_SPEC)
+    pytester.makeini("[pytest]\nhevval = true\nhevval_files = custom.yaml\n")
+    write_data(pytester.path)
+    result = pytester.runpytest()
+    result.assert_outcomes(passed=6)
+
+
+def test_error_at_leaf_is_localised(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="leaf")
+    result = project.runpytest("--hevval")
+    result.assert_outcomes(passed=3, failed=3)
+    output = result.stdout.str()
+    _no_plugin_traceback(output)
+    result.stdout.fnmatch_lines(
+        [
+            "*_ hevval pack: E _*",
+            "E missed its thresholds (pack.hevval.yaml:8)",
+            "  set 1, level 1, position 1, α = 1",
+            "  λ3 MAE = 0.* < 0.97 (MAE * Wh over a * Wh range)",
+            "  where the error appears:",
+            "    E/P/I (level 3, line 18): mae 0.*",
+            "  next: hevval diagnose pack.hevval.yaml --signal E/P/I *",
+        ]
+    )
+    result.stdout.fnmatch_lines(
+        [
+            "*_ hevval pack: E/P/I _*",
+            "E/P/I missed its thresholds (pack.hevval.yaml:18)",
+            "  set 1, level 3, position 2, α = 0.5",
+            "  λ3 MAE = * < 0.97 (MAE * A over a * A range)",
+            "  lag *s, peak correlation *",
+            "  where the error appears: here, at level 3 (a leaf)",
+        ]
+    )
+    result.stdout.fnmatch_lines(["*✗ I ?E/P/I? mae*← error appears here*"])
+
+
+def test_error_at_middle_node_is_localised(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="middle")
+    result = project.runpytest("--hevval")
+    result.assert_outcomes(passed=4, failed=2)
+    result.stdout.fnmatch_lines(
+        [
+            "E missed its thresholds*",
+            "*where the error appears:",
+            "    E/P (level 2, line 13)*",
+        ]
+    )
+    result.stdout.fnmatch_lines(
+        [
+            "E/P missed its thresholds (pack.hevval.yaml:13)",
+            "*where the error appears: here, at level 2: the signals below it pass, so the error "
+            "emerges where they combine",
+        ]
+    )
+
+
+def test_phi_item_reports_against_min_phi(pytester: pytest.Pytester) -> None:
+    pytester.makefile(".hevval.yaml", pack=TREE_SPEC.replace("min_phi: 0.5", "min_phi: 0.999"))
+    write_data(pytester.path, fault="leaf")
+    result = pytester.runpytest("--hevval", "-k", "Phi")
+    result.assert_outcomes(failed=1, deselected=5)
+    result.stdout.fnmatch_lines(
+        [
+            "Φ = 0.* < min_phi 0.999 (pack.hevval.yaml:6)",
+            "  signals that pull Φ down most (share of 1 − Φ):",
+            "    E/P/I: * % (weakest *",
+        ]
+    )
+
+
+def test_keyword_selection(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="leaf")
+    # Keywords match any part of the node id, so pick names unique to the items.
+    result = project.runpytest("--hevval", "-k", "speed or Phi")
+    result.assert_outcomes(passed=2, deselected=4)
+
+
+def test_last_failed_and_exitfirst(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="leaf")
+    project.runpytest("--hevval").assert_outcomes(passed=3, failed=3)
+    rerun = project.runpytest("--hevval", "--lf", "-v")
+    rerun.assert_outcomes(failed=3)
+    assert "PASSED" not in rerun.stdout.str()
+    first = project.runpytest("--hevval", "-x", "-p", "no:cacheprovider")
+    first.assert_outcomes(failed=1)
+
+
+def test_junit_properties(project: pytest.Pytester) -> None:
+    write_data(project.path)
+    project.runpytest("--hevval", "--junitxml=out.xml").assert_outcomes(passed=6)
+    tree = ET.parse(project.path / "out.xml")
+    case = next(c for c in tree.iter("testcase") if c.get("name") == "E/P/I")
+    properties = {p.get("name"): p.get("value") for p in case.iter("property")}
+    assert set(properties) == {
+        "phi",
+        "lambda1_lag_correlation",
+        "lambda2_derivative_match",
+        "lambda3_mae",
+        "lambda4_rms",
+        "lambda5_anomaly",
+        "lambda6_error_std",
+        "lambda7_emergent",
+        "lag_s",
+    }
+    assert 0.9 < float(properties["phi"]) <= 1.0
+    assert float(properties["lambda7_emergent"]) == 1.0  # a leaf
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            TREE_SPEC.replace("min_phi: 0.5", "min_phy: 0.5"),
+            "pack.hevval.yaml:6: min_phy: unknown key; did you mean 'min_phi'?",
+        ),
+        (
+            TREE_SPEC.replace("{mae: 0.97, rms: 0.95}", "{mae: 1.97, rms: 0.95}"),
+            "pack.hevval.yaml:5: thresholds.mae: must lie between 0 and 1 (got 1.97)",
+        ),
+    ],
+)
+def test_bad_spec_is_a_collection_error(
+    pytester: pytest.Pytester, text: str, expected: str
+) -> None:
+    pytester.makefile(".hevval.yaml", pack=text)
+    write_data(pytester.path)
+    result = pytester.runpytest("--hevval")
+    result.assert_outcomes(errors=1)
+    output = result.stdout.str()
+    assert "ERROR collecting pack.hevval.yaml" in output
+    assert expected in output
+    _no_plugin_traceback(output)
+
+
+def test_missing_column_is_an_error_naming_file_and_column(project: pytest.Pytester) -> None:
+    write_data(project.path)
+    frame = pd.read_csv(project.path / "data" / "sim.csv").rename(columns={"P": "Power"})
+    frame.to_csv(project.path / "data" / "sim.csv", index=False)
+    result = project.runpytest("--hevval")
+    result.assert_outcomes(errors=6)
+    output = result.stdout.str()
+    assert "sim.csv: column 'P': no such column in this file" in output
+    _no_plugin_traceback(output)
+
+
+def test_missing_file_is_an_error(project: pytest.Pytester) -> None:
+    write_data(project.path)
+    (project.path / "data" / "ref.csv").unlink()
+    result = project.runpytest("--hevval")
+    result.assert_outcomes(errors=6)
+    assert "ref.csv" in result.stdout.str()
+    _no_plugin_traceback(result.stdout.str())
+
+
+@pytest.mark.parametrize("fault", [None, "leaf", "middle"])
+def test_same_outcomes_under_xdist(project: pytest.Pytester, fault: str | None) -> None:
+    write_data(project.path, fault=fault)
+    serial = project.runpytest("--hevval", "--junitxml=serial.xml")
+    parallel = project.runpytest("--hevval", "-p", "xdist", "-n", "2", "--junitxml=par.xml")
+    assert serial.parseoutcomes() == parallel.parseoutcomes()
+
+    def cases(name: str) -> dict[str, dict[str, str | None]]:
+        tree = ET.parse(project.path / name)
+        return {
+            c.get("name", ""): {p.get("name", ""): p.get("value") for p in c.iter("property")}
+            for c in tree.iter("testcase")
+        }
+
+    assert cases("serial.xml") == cases("par.xml")
+    parallel.stdout.fnmatch_lines(["*hevval validation summary*", "pack: Φ = *"])
+
+
+def test_cli_run_json(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="leaf")
+    result = project.run(
+        sys.executable, "-m", "pytest_hevval", "run", "pack.hevval.yaml", "--json", "out.json"
+    )
+    assert result.ret == 1
+    payload = json.loads((project.path / "out.json").read_text())
+    assert {"phi", "min_phi", "passed", "signals"} <= set(payload)
+    assert payload["passed"] is False
+    by_path = {s["path"]: s for s in payload["signals"]}
+    leaf = by_path["E/P/I"]
+    assert {
+        "path",
+        "set",
+        "level",
+        "alpha",
+        "lambdas",
+        "lag_s",
+        "peak_correlation",
+        "mae",
+        "rms",
+        "passed",
+        "failures",
+        "origin",
+    } <= set(leaf)
+    assert len(leaf["lambdas"]) == 7
+    assert leaf["origin"] is True
+    assert by_path["E"]["origin"] is False
+    assert by_path["E"]["origins"] == ["E/P/I"]
+
+
+def test_cli_run_bad_spec_exit_code(pytester: pytest.Pytester) -> None:
+    pytester.makefile(".hevval.yaml", bad="sets: 3\n")
+    result = pytester.run(sys.executable, "-m", "pytest_hevval", "run", "bad.hevval.yaml")
+    assert result.ret == 2
+    assert "bad.hevval.yaml:1: reference: is required" in result.stderr.str()
