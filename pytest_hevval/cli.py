@@ -89,6 +89,8 @@ def _run(args: argparse.Namespace) -> int:
         )
     if args.json:
         _write_json(args.json, payload)
+    if not args.no_history:
+        _record_history(args, [r.to_dict() for r in results])
     if args.report:
         from .report import write_reports
         from .report.render import parse_formats
@@ -102,6 +104,17 @@ def _run(args: argparse.Namespace) -> int:
         for path in written:
             print(f"report: {path}")
     return EXIT_OK if passed else EXIT_FAILED
+
+
+def _record_history(args: argparse.Namespace, dicts: list[dict[str, Any]]) -> None:
+    from datetime import datetime, timezone
+
+    from .history import HistoryStore, make_record, resolve_model_version
+
+    version = resolve_model_version(args.model_version, os.environ, Path.cwd())
+    record = make_record(dicts, model_version=version, started_utc=datetime.now(timezone.utc))
+    path = HistoryStore(Path(args.history_dir)).append(record)
+    print(f"history: recorded {version} in {path}")
 
 
 class _NoProgress:
@@ -135,6 +148,9 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--report", default="", help="write reports: html,json,md")
     run.add_argument("--report-dir", default=".hevval/report", help="folder for reports")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--no-history", action="store_true", help="do not record this run")
+    run.add_argument("--history-dir", default=".hevval/history", help="folder of run records")
+    run.add_argument("--model-version", help="model version recorded in the history")
     return parser
 
 

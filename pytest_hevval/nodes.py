@@ -45,8 +45,7 @@ class SpecFile(pytest.File):
         state = self.config.stash[session_key]
         self.spec = load_spec(self.path)
         spec = self.spec
-        state.cache.declare(spec.reference, spec.reference_columns())
-        state.cache.declare(spec.model, spec.model_columns())
+        state.register(spec)
         for _, path, node in spec.walk():
             yield SignalItem.from_parent(self, name="/".join(path), spec=spec, line=node.line)
         yield PhiItem.from_parent(self, name="Phi", spec=spec, line=spec.min_phi_line)
@@ -116,6 +115,7 @@ class SignalItem(_SpecItem):
         if signal.failures:
             diagnosis = self.state.diagnosis_line(self.evaluation, signal)
             raise ThresholdMissed(signal_failure_report(result, signal, diagnosis_line=diagnosis))
+        _raise_regressions(self.state.regressions_for(result, signal.path), self.name)
 
 
 class PhiItem(_SpecItem):
@@ -126,3 +126,14 @@ class PhiItem(_SpecItem):
         self._record(None)
         if not result.phi_passed:
             raise ThresholdMissed(phi_report(result))
+        _raise_regressions(self.state.regressions_for(result, None), "Φ")
+
+
+def _raise_regressions(found: list[str], what: str) -> None:
+    if found:
+        raise ThresholdMissed(
+            f"{what} got worse than the baseline by more than --hevval-compare-fail allows:\n"
+            + "\n".join(f"  {line}" for line in found)
+            + "\n  next: fix the model, or, if the change is intended, record a new baseline "
+            "(run without --hevval-compare-fail and keep the history)"
+        )

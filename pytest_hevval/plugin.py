@@ -54,6 +54,12 @@ def pytest_runtest_makereport(
     return report
 
 
+def pytest_sessionstart(session: pytest.Session) -> None:
+    state = session.config.stash[session_key]
+    if state.enabled:
+        state.start()
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     state = session.config.stash[session_key]
     if state.enabled and state.is_controller:

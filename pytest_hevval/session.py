@@ -1,13 +1,15 @@
 """Per-process state of one pytest session: options, the data cache, evaluations, results.
 
-The hooks in :mod:`pytest_hevval.plugin` delegate here. Workers evaluate; only the controller
-(the process without ``workerinput``) writes history and reports.
+The hooks in :mod:`pytest_hevval.plugin` delegate here. Every process evaluates the specs of
+the items it runs; only the controller (the process without ``workerinput``) writes history
+and reports, once, from the results the workers' reports carry back.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -28,12 +30,21 @@ class HevvalSession:
     config: pytest.Config
     cache: DataCache = field(default_factory=DataCache)
     evaluations: dict[str, Evaluation | HevvalError] = field(default_factory=dict)
+    #: Specs collected by this process, by path relative to the rootdir.
+    specs: dict[str, Spec] = field(default_factory=dict)
     #: Spec results seen by this process (the controller receives them from worker reports).
     results: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: Spec results already attached to a report by this process.
     shipped: set[str] = field(default_factory=set)
-    failed_items: int = 0
+    #: Lines for the terminal summary (history, comparison, ratchet).
+    notes: list[str] = field(default_factory=list)
+    compare_rules: list[Any] = field(default_factory=list)
+    ratchet_margin: float | None = None
+    baseline: dict[str, Any] | None = None
+    model_version: str = "unknown"
+    started: datetime = field(default_factory=lambda: datetime.now(timezone.utc))
 
+    # -- options ----------------------------------------------------------------------------
     @property
     def enabled(self) -> bool:
         return bool(get_option(self.config, ""))
@@ -65,6 +76,70 @@ class HevvalSession:
         if count < 1:
             raise pytest.UsageError(f"--hevval-workers must be ≥ 1 (got {count})")
         return count
+
+    def history_dir(self) -> Path:
+        return self.rootdir / str(self.option("history-dir"))
+
+    def wants_comparison(self) -> bool:
+        return bool(self.option("compare") or self.option("compare-fail"))
+
+    def validate_options(self) -> None:
+        """Fail fast, before collection, on option values that cannot work."""
+        from .history import HistoryError, parse_compare_fail, parse_margin
+
+        self.workers()
+        try:
+            expression = self.option("compare-fail")
+            if expression:
+                self.compare_rules = parse_compare_fail(str(expression))
+            margin = self.option("ratchet")
+            if margin:
+                self.ratchet_margin = parse_margin(str(margin))
+        except HistoryError as exc:
+            raise pytest.UsageError(str(exc)) from None
+        if self.option("report"):
+            from .report import parse_formats
+
+            try:
+                parse_formats(str(self.option("report")))
+            except HevvalError as exc:
+                raise pytest.UsageError(str(exc)) from None
+
+    # -- session start: the baseline --------------------------------------------------------
+    def start(self) -> None:
+        """Pick the baseline before this run records anything (every process reads it)."""
+        from .history import (
+            HistoryStore,
+            is_ci,
+            missing_baseline,
+            resolve_model_version,
+        )
+
+        self.model_version = resolve_model_version(
+            self.option("model-version"), os.environ, self.rootdir
+        )
+        if not self.wants_comparison():
+            return
+        wanted = str(self.option("compare") or "latest")
+        store = HistoryStore(self.history_dir())
+        self.baseline = store.latest() if wanted == "latest" else store.find(wanted)
+        if self.baseline is not None or not self.is_controller:
+            return
+        decision = missing_baseline(
+            ci=is_ci(os.environ),
+            create_baseline=bool(self.option("create-baseline")),
+            directory=self.history_dir(),
+            wanted=wanted,
+        )
+        if decision.fails:
+            raise pytest.UsageError(f"hevval: {decision.message}")
+        self.notes.append(decision.message)
+
+    # -- evaluation -------------------------------------------------------------------------
+    def register(self, spec: Spec) -> None:
+        self.specs[self.relative(str(spec.path))] = spec
+        self.cache.declare(spec.reference, spec.reference_columns())
+        self.cache.declare(spec.model, spec.model_columns())
 
     def evaluate(self, spec: Spec) -> Evaluation:
         """Evaluate a spec once per process; later items of the same spec reuse it."""
@@ -99,8 +174,26 @@ class HevvalSession:
 
     def diagnosis_line(self, evaluation: Evaluation | None, signal: SignalResult) -> str | None:
         """One line naming the top significant finding for a failing signal, if enabled."""
-        return None
+        if evaluation is None or self.option("diagnose") == "off":
+            return None
+        from .diagnose import headline
 
+        return headline(evaluation, signal.origins[0] if signal.origins else signal.path)
+
+    def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
+        """Rules of --hevval-compare-fail this signal (or Φ, for None) breaks vs the baseline."""
+        if self.baseline is None or not self.compare_rules:
+            return []
+        from .history import compare, regressions
+
+        comparison = compare([result.to_dict()], self.baseline)
+        return [
+            str(found)
+            for found in regressions(comparison, self.compare_rules)
+            if found.signal == signal and (signal is not None or found.field == "phi")
+        ]
+
+    # -- results crossing from workers ------------------------------------------------------
     def ship(self, result: SpecResult) -> dict[str, Any] | None:
         """The spec's result dict the first time this process reports on the spec."""
         if result.spec in self.shipped:
@@ -116,29 +209,118 @@ class HevvalSession:
         if payload is not None:
             self.receive(payload)
 
-    def validate_options(self) -> None:
-        """Fail fast, before collection, on option values that cannot work."""
-        self.workers()
-
-    def finish(self, session: pytest.Session) -> None:
-        """Controller only: write history and reports once for the whole run."""
-
-    def summarise(self, terminalreporter: Any) -> None:
-        results = self.spec_results()
-        if not results:
-            return
-        terminalreporter.write_sep("=", "hevval validation summary")
-        for line in tree_summary(results, details=bool(self.option("details"))):
-            terminalreporter.write_line(line)
-
     def spec_results(self) -> list[SpecResult]:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
 
     def relative(self, path: str) -> str:
+        if "://" in path:
+            return path
         try:
             return os.path.relpath(path, self.rootdir)
         except ValueError:
             return path
+
+    # -- session end: controller only -------------------------------------------------------
+    def finish(self, session: pytest.Session) -> None:
+        """Write reports, the comparison, the ratchet and the history record, once."""
+        dicts = [self.results[k] for k in sorted(self.results)]
+        if not dicts:
+            return
+        failed = False
+        failed |= self._write_reports(dicts)
+        self._compare(dicts)
+        failed |= self._ratchet(dicts)
+        failed |= self._record(dicts)
+        if failed and session.exitstatus == pytest.ExitCode.OK:
+            session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+    def _write_reports(self, dicts: list[dict[str, Any]]) -> bool:
+        formats = str(self.option("report") or "")
+        if formats:
+            from .report import parse_formats, write_reports
+
+            try:
+                written = write_reports(
+                    dicts,
+                    parse_formats(formats),
+                    self.rootdir / str(self.option("report-dir")),
+                    title="hevval validation report",
+                )
+            except HevvalError as exc:
+                self.notes.append(f"report: error: {exc}")
+                return True
+            self.notes.extend(f"report: {self.relative(str(p))}" for p in written)
+        if os.environ.get("GITHUB_ACTIONS") == "true":
+            from .report import github_annotations
+
+            for line in github_annotations(dicts, self.rootdir):
+                print(line)
+        return False
+
+    def _compare(self, dicts: list[dict[str, Any]]) -> None:
+        if self.baseline is None or not self.option("compare"):
+            return
+        from .history import compare, comparison_table, regressions
+
+        comparison = compare(dicts, self.baseline, after_label=self.model_version)
+        found = regressions(comparison, self.compare_rules) if self.compare_rules else None
+        self.notes.append(comparison_table(comparison, found))
+
+    def _ratchet(self, dicts: list[dict[str, Any]]) -> bool:
+        if self.ratchet_margin is None:
+            return False
+        from .history import ratchet_spec
+
+        failed = False
+        for result in dicts:
+            spec = self.specs.get(result["spec"])
+            if spec is None:
+                continue
+            written = {
+                "/".join(path): {**spec.thresholds, **node.thresholds}
+                for _, path, node in spec.walk()
+            }
+            try:
+                outcome = ratchet_spec(
+                    spec.path,
+                    result,
+                    written,
+                    margin=self.ratchet_margin,
+                    model_version=self.model_version,
+                    created_utc=self.started,
+                )
+            except HevvalError as exc:
+                self.notes.append(f"ratchet: error: {exc}")
+                failed = True
+                continue
+            self.notes.append(outcome.summary())
+        return failed
+
+    def _record(self, dicts: list[dict[str, Any]]) -> bool:
+        if self.option("no-history"):
+            return False
+        from .history import HistoryStore, make_record
+
+        try:
+            path = HistoryStore(self.history_dir()).append(
+                make_record(dicts, model_version=self.model_version, started_utc=self.started)
+            )
+        except (HevvalError, OSError) as exc:
+            self.notes.append(f"history: error: the run was not recorded: {exc}")
+            return True
+        self.notes.append(f"history: recorded {self.model_version} in {self.relative(str(path))}")
+        return False
+
+    def summarise(self, terminalreporter: Any) -> None:
+        results = self.spec_results()
+        if not results and not self.notes:
+            return
+        terminalreporter.write_sep("=", "hevval validation summary")
+        for line in tree_summary(results, details=bool(self.option("details"))):
+            terminalreporter.write_line(line)
+        for note in self.notes:
+            for line in note.splitlines():
+                terminalreporter.write_line(line)
 
 
 session_key = pytest.StashKey[HevvalSession]()

@@ -6,6 +6,7 @@ Every problem becomes a :class:`~pytest_hevval.errors.SpecError` of the form
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from collections.abc import Callable, Mapping
@@ -203,7 +204,12 @@ def load_spec(path: str | Path) -> Spec:
             file=str(spec_path),
             hint="save it as UTF-8",
         ) from None
-    return parse_spec_text(text, spec_path, hashlib.sha256(raw).hexdigest())
+    spec = parse_spec_text(text, spec_path, hashlib.sha256(raw).hexdigest())
+    from ..history.ratchet import load_sidecar
+
+    # Thresholds tightened by --hevval-ratchet live beside the spec; only stricter ones apply.
+    sidecar = load_sidecar(spec_path)
+    return dataclasses.replace(spec, ratchet=sidecar) if sidecar else spec
 
 
 def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec:

@@ -1,0 +1,149 @@
+"""History through the plugin: records per run, gates against the past, the ratchet."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tests.test_plugin import TREE_SPEC, write_data
+
+pytest_plugins = ["pytester"]
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> pytest.Pytester:
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.delenv("GITHUB_ACTIONS", raising=False)
+    monkeypatch.delenv("HEVVAL_MODEL_VERSION", raising=False)
+    pytester.makefile(".hevval.yaml", pack=TREE_SPEC)
+    write_data(pytester.path)
+    return pytester
+
+
+def records(root: Path) -> list[dict]:
+    folder = root / ".hevval" / "history"
+    return [json.loads(p.read_text()) for p in sorted(folder.glob("*.json"))]
+
+
+def test_every_run_is_recorded(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=v1").assert_outcomes(passed=6)
+    project.runpytest("--hevval", "--hevval-model-version=v2").assert_outcomes(passed=6)
+    found = records(project.path)
+    assert [r["model_version"] for r in found] == ["v1", "v2"]
+    spec = found[0]["specs"][0]
+    assert spec["spec"] == "pack.hevval.yaml"
+    assert len(spec["spec_hash"]) == 64
+    assert len(spec["data"]["reference"]["sha256"]) == 64
+    signal = next(s for s in spec["signals"] if s["path"] == "E/P/I")
+    assert len(signal["lambdas"]) == 7
+    assert {"numpy", "scipy", "pytest-hevval"} <= set(found[0]["tool_versions"])
+
+
+def test_no_history_flag(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-no-history").assert_outcomes(passed=6)
+    assert not (project.path / ".hevval" / "history").exists()
+
+
+def test_model_version_from_environment(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HEVVAL_MODEL_VERSION", "from-env")
+    project.runpytest("--hevval").assert_outcomes(passed=6)
+    assert records(project.path)[0]["model_version"] == "from-env"
+
+
+def test_gate_fails_on_regression_that_still_passes_thresholds(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    # A small extra error in the current: still far above the 0.97 MAE threshold.
+    import pandas as pd
+
+    frame = pd.read_csv(project.path / "data" / "sim.csv")
+    frame["I"] = frame["I"] + 0.8
+    frame["P"] = frame["V"] * frame["I"]
+    frame.to_csv(project.path / "data" / "sim.csv", index=False)
+    plain = project.runpytest("--hevval", "--hevval-no-history")
+    plain.assert_outcomes(passed=6)
+    gated = project.runpytest(
+        "--hevval", "--hevval-model-version=worse", "--hevval-compare-fail=lambda:0.002"
+    )
+    gated.assert_outcomes(passed=3, failed=3)
+    gated.stdout.fnmatch_lines(
+        [
+            "E/P/I got worse than the baseline by more than --hevval-compare-fail allows:",
+            "  pack.hevval.yaml::E/P/I: λ3 mae dropped 0.99* → 0.99* (allowed drop 0.002, *",
+        ]
+    )
+
+
+def test_compare_shows_deltas(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=a").assert_outcomes(passed=6)
+    result = project.runpytest("--hevval", "--hevval-model-version=b", "--hevval-compare")
+    result.assert_outcomes(passed=6)
+    result.stdout.fnmatch_lines(["compare a → b", "pack.hevval.yaml (pack)", "*λ3 mae*", "*Φ*"])
+
+
+def test_missing_baseline_fails_in_ci(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("CI", "true")
+    result = project.runpytest("--hevval", "--hevval-compare-fail=phi:0.01")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["*no baseline record in *history; comparison needs one.*"])
+    created = project.runpytest(
+        "--hevval", "--hevval-compare-fail=phi:0.01", "--hevval-create-baseline"
+    )
+    created.assert_outcomes(passed=6)
+    assert len(records(project.path)) == 1
+
+
+def test_missing_baseline_is_a_note_locally(project: pytest.Pytester) -> None:
+    result = project.runpytest("--hevval", "--hevval-compare")
+    result.assert_outcomes(passed=6)
+    result.stdout.fnmatch_lines(["*no baseline record in *; nothing to compare against yet*"])
+
+
+def test_bad_compare_fail_expression_is_a_usage_error(project: pytest.Pytester) -> None:
+    result = project.runpytest("--hevval", "--hevval-compare-fail=lamda:0.1")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "lamda" in result.stderr.str()
+
+
+def test_ratchet_tightens_and_never_loosens(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-ratchet=0.01").assert_outcomes(passed=6)
+    sidecar = project.path / "pack.hevval.thresholds.yaml"
+    first = yaml.safe_load(sidecar.read_text())
+    assert first["E/P/I"]["mae"] > 0.97  # tighter than the spec's 0.97
+    text = sidecar.read_text()
+    # A worse model: the ratchet keeps the old values, and the tightened gate now fails.
+    write_data(project.path, fault="leaf")
+    worse = project.runpytest("--hevval", "--hevval-ratchet=0.01")
+    worse.assert_outcomes(passed=3, failed=3)
+    assert sidecar.read_text() == text
+    # The sidecar is what failed the items: the message shows the ratcheted threshold.
+    worse.stdout.fnmatch_lines([f"*λ3 MAE = * < {first['E/P/I']['mae']:g} *"])
+
+
+def test_xdist_controller_writes_one_record(project: pytest.Pytester) -> None:
+    result = project.runpytest("--hevval", "-p", "xdist", "-n", "2")
+    result.assert_outcomes(passed=6)
+    assert len(records(project.path)) == 1
+
+
+def test_two_processes_at_once_lose_nothing(project: pytest.Pytester) -> None:
+    command = [sys.executable, "-m", "pytest", "--hevval", "-q", "-p", "no:cacheprovider"]
+    runs = [
+        subprocess.Popen(
+            [*command, f"--hevval-model-version=p{i}"],
+            cwd=project.path,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        for i in range(2)
+    ]
+    assert [run.wait(timeout=120) for run in runs] == [0, 0]
+    assert sorted(r["model_version"] for r in records(project.path)) == ["p0", "p1"]
