@@ -1,0 +1,62 @@
+"""The example project, run as a user runs it: real measurements, the paper's bus tree."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLE = Path(__file__).resolve().parent.parent / "example_project"
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+    out = tmp_path_factory.mktemp("example") / "run.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest_hevval", "run", "specs", "--json", str(out),
+         "--no-history", "--quiet"],
+        cwd=EXAMPLE,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )  # fmt: skip
+    assert run.returncode in (0, 1), run.stderr
+    return {spec["name"]: spec for spec in json.loads(out.read_text())["specs"]}
+
+
+def test_every_case_is_scored(results: dict[str, dict]) -> None:
+    assert len(results) >= 10
+    for spec in results.values():
+        assert 0.0 <= spec["phi"] <= 1.0
+        assert all(len(s["lambdas"]) == 7 for s in spec["signals"])
+
+
+def test_i3_fit_trip_passes_and_others_are_validated(results: dict[str, dict]) -> None:
+    fit = next(s for name, s in results.items() if "A01" in name)
+    assert fit["passed"] is True
+    assert fit["phi"] > 0.93
+    held_out = [s for name, s in results.items() if "i3" in name and "A01" not in name]
+    assert held_out, "the i3 model must be validated on trips not used for fitting"
+
+
+def test_bus_error_is_localised_at_engine_torque(results: dict[str, dict]) -> None:
+    bus = next(s for name, s in results.items() if "bus" in name)
+    origins = {s["path"] for s in bus["signals"] if s["origin"]}
+    assert "FCcum/FCinst/Teng" in origins
+    assert [s["path"] for s in bus["signals"]][:4] == [
+        "FCcum",
+        "FCcum/FCinst",
+        "FCcum/FCinst/Neng",
+        "FCcum/FCinst/Teng",
+    ]
+
+
+def test_camry_cold_start_costs_more_than_hot(results: dict[str, dict]) -> None:
+    cold = results["Camry FTP cold-start UDDS"]
+    hot = results["Camry FTP hot-start UDDS"]
+    cold_cum = cold["signals"][0]
+    hot_cum = hot["signals"][0]
+    assert cold_cum["mae"] > hot_cum["mae"]
