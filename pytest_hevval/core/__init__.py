@@ -7,6 +7,14 @@ from .characteristics import (
     normalised_error,
     signal_characteristics,
 )
+from .diagnosis import (
+    Candidate,
+    CandidateFinding,
+    Diagnosis,
+    Whiteness,
+    diagnose_residual,
+    ljung_box,
+)
 from .lag import LagSearch, correlation_curve, search_lag
 from .tree import (
     ScoredNode,
@@ -21,15 +29,21 @@ from .tree import (
 __all__ = [
     "CHARACTERISTICS",
     "CHARACTERISTIC_LABELS",
+    "Candidate",
+    "CandidateFinding",
+    "Diagnosis",
     "LagSearch",
     "ScoredNode",
     "SignalCharacteristics",
     "TreeNode",
+    "Whiteness",
     "correlation_curve",
+    "diagnose_residual",
     "emergent",
     "error_origins",
     "global_metric",
     "iter_nodes",
+    "ljung_box",
     "normalised_error",
     "score_tree",
     "search_lag",

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
-from .lag import _EXACT_LIMIT, LagSearch, _search, dot_overlap
+from .lag import _EXACT_LIMIT, LagSearch, _dot, _search, dot_overlap
 
 __all__ = [
     "CHARACTERISTICS",
@@ -56,8 +56,10 @@ CHARACTERISTIC_LABELS: dict[str, str] = {
 
 CorrelationKind = Literal["xcorr", "pearson"]
 
-# 2**15 float64 samples per side keep a chunk and its temporaries inside L2 cache.
-_CHUNK = 1 << 15
+# Samples per chunk (a multiple of 16 and of lag._BLAS_PIECE). A chunk costs about 45 numpy
+# calls of roughly a microsecond each; 2**16 samples amortise them, and still measured faster
+# than 2**15 although the chunk then spills from L2 into L3 (benchmarks/README.md).
+_CHUNK = 1 << 16
 # Below this many samples a single vectorised pass is faster than chunking.
 _SMALL = 1 << 17
 # Magnitudes beyond these would overflow or underflow sums of squares; rescale by a power of 2.
@@ -194,7 +196,6 @@ class _Scratch:
 
     def __init__(self, size: int, convert: bool) -> None:
         self.error = np.empty(size, dtype=np.float64)
-        self.ones = np.ones(size, dtype=np.float64)
         self.up = np.empty(size, dtype=np.bool_)
         self.down = np.empty(size, dtype=np.bool_)
         self.key = np.empty(size, dtype=np.int8)
@@ -230,7 +231,24 @@ def _derivative_key(
     return np.subtract(up.view(np.int8), down.view(np.int8), out=out)
 
 
-_QUARTER = np.full(4, 0.25, dtype=np.float64)
+# Pyramid levels made by the main pass: [(ref, sim) block means by 4, (ref, sim) by 16].
+_Levels = list[tuple[FloatArray, FloatArray]]
+
+_add = np.add.reduce
+_min = np.minimum.reduce
+_max = np.maximum.reduce
+
+
+def _quarter_means(x: FloatArray, out: FloatArray, scratch: FloatArray) -> FloatArray:
+    """Means of consecutive blocks of 4 (len(x) is a multiple of 4) written into ``out``.
+
+    Two strided pairwise additions cost about half a matrix-vector product with weights 1/4,
+    and ×0.25 is exact, so 4·Σ out is the chunk's sum in a fixed summation order.
+    """
+    pairs = scratch[: x.shape[0] // 2]
+    np.add(x[0::2], x[1::2], out=pairs)
+    np.add(pairs[0::2], pairs[1::2], out=out)
+    return np.multiply(out, 0.25, out=out)
 
 
 def _chunk_sums(
@@ -240,7 +258,7 @@ def _chunk_sums(
     stop: int,
     scale: float,
     scratch: _Scratch,
-    quarter: tuple[FloatArray, FloatArray] | None,
+    levels: _Levels | None,
 ) -> _Sums:
     """Sums over samples [start, stop) of the whole record.
 
@@ -251,11 +269,12 @@ def _chunk_sums(
     m = stop - start
     r = _as_float64(ref[start:stop], scale, scratch.ref)
     s = _as_float64(sim[start:stop], scale, scratch.sim)
-    ones = scratch.ones[:m]
     out = _Sums(n=m)
     e = np.subtract(r, s, out=scratch.error[:m])
-    out.sq_error = float(np.dot(e, e))
-    error_sum = float(np.dot(e, ones))
+    out.sq_error = _dot(e, e)
+    # ufunc reductions called directly: the ndarray.sum/min/max wrappers add about a
+    # microsecond each, which is a tenth of the work on a chunk.
+    error_sum = float(_add(e))
     out.error_mean = error_sum / m
     if out.error_mean * error_sum <= 0.5 * out.sq_error:
         # Σe² − (Σe)²/m loses at most one bit to cancellation when the spread is at least
@@ -263,26 +282,32 @@ def _chunk_sums(
         out.error_m2 = out.sq_error - out.error_mean * error_sum
     else:
         centred = e - out.error_mean
-        out.error_m2 = float(np.dot(centred, centred))
-    out.abs_error = float(np.dot(np.abs(e, out=e), ones))
-    out.ref_sq = float(np.dot(r, r))
-    out.sim_sq = float(np.dot(s, s))
-    out.cross = float(np.dot(r, s))
-    out.ref_min = float(r.min())
-    out.ref_max = float(r.max())
-    if quarter is not None:
-        # The block means by 4 of the lag pyramid come from the chunk while it is in cache;
-        # their sum (×4, exact) is the chunk's sum. Chunks start on multiples of 4.
+        out.error_m2 = _dot(centred, centred)
+    out.abs_error = float(_add(np.abs(e, out=e)))
+    out.ref_sq = _dot(r, r)
+    out.sim_sq = _dot(s, s)
+    out.cross = _dot(r, s)
+    out.ref_min = float(_min(r))
+    out.ref_max = float(_max(r))
+    if levels is not None:
+        # The block means by 4 and 16 of the lag pyramid come from the chunk while it is in
+        # cache; the sum of the first (×4, exact) is the chunk's sum. Chunks start on multiples
+        # of 16.
+        (r4, s4), (r16, s16) = levels
         q0 = start // 4
         q1 = q0 + m // 4
         whole = (m // 4) * 4
-        rq = np.matmul(r[:whole].reshape(-1, 4), _QUARTER, out=quarter[0][q0:q1])
-        sq = np.matmul(s[:whole].reshape(-1, 4), _QUARTER, out=quarter[1][q0:q1])
-        out.ref_sum = 4.0 * float(np.dot(rq, ones[: q1 - q0])) + float(r[whole:].sum())
-        out.sim_sum = 4.0 * float(np.dot(sq, ones[: q1 - q0])) + float(s[whole:].sum())
+        rq = _quarter_means(r[:whole], r4[q0:q1], scratch.error)
+        sq = _quarter_means(s[:whole], s4[q0:q1], scratch.error)
+        out.ref_sum = 4.0 * float(_add(rq)) + float(_add(r[whole:]))
+        out.sim_sum = 4.0 * float(_add(sq)) + float(_add(s[whole:]))
+        h0 = start // 16
+        h1 = h0 + (q1 - q0) // 4
+        _quarter_means(rq[: (h1 - h0) * 4], r16[h0:h1], scratch.error)
+        _quarter_means(sq[: (h1 - h0) * 4], s16[h0:h1], scratch.error)
     else:
-        out.ref_sum = float(np.dot(r, ones))
-        out.sim_sum = float(np.dot(s, ones))
+        out.ref_sum = float(_add(r))
+        out.sim_sum = float(_add(s))
     # Central differences: the first and last sample of the record have derivative 0.
     i0 = max(start, 1)
     i1 = min(stop, n_total - 1)
@@ -302,13 +327,13 @@ def _all_sums(
     sim: AnyFloatArray,
     scale: float,
     workers: int,
-    quarter: tuple[FloatArray, FloatArray] | None = None,
+    levels: _Levels | None = None,
 ) -> _Sums:
     n = ref.shape[0]
     convert = scale != 1.0 or ref.dtype != np.float64 or sim.dtype != np.float64
     if n <= _SMALL:
         with np.errstate(all="ignore"):
-            return _chunk_sums(ref, sim, 0, n, scale, _Scratch(n, convert), quarter)
+            return _chunk_sums(ref, sim, 0, n, scale, _Scratch(n, convert), levels)
     bounds = [*range(0, n, _CHUNK), n]
     spans = list(itertools.pairwise(bounds))
 
@@ -320,7 +345,7 @@ def _all_sums(
         # state is per thread, hence set inside each worker.
         with np.errstate(all="ignore"):
             for start, stop in part:
-                acc.merge(_chunk_sums(ref, sim, start, stop, scale, scratch, quarter))
+                acc.merge(_chunk_sums(ref, sim, start, stop, scale, scratch, levels))
         return acc
 
     if workers <= 1:
@@ -369,10 +394,8 @@ def _check_inputs(
     return ref, sim
 
 
-def _quarter_buffers(
-    n: int, dt: float, max_lag_s: float | None
-) -> tuple[FloatArray, FloatArray] | None:
-    """Storage for the block means by 4 when the lag search will build a pyramid."""
+def _level_buffers(n: int, dt: float, max_lag_s: float | None) -> _Levels | None:
+    """Storage for the block means by 4 and 16 when the lag search will build a pyramid."""
     if n <= _EXACT_LIMIT:
         return None
     if max_lag_s is not None:
@@ -381,7 +404,9 @@ def _quarter_buffers(
             return None
         if max_lag_s < 0 or round(max_lag_s / dt) < 1:
             return None
-    return np.empty(n // 4, dtype=np.float64), np.empty(n // 4, dtype=np.float64)
+    quarter = (np.empty(n // 4, dtype=np.float64), np.empty(n // 4, dtype=np.float64))
+    sixteenth = (np.empty(n // 16, dtype=np.float64), np.empty(n // 16, dtype=np.float64))
+    return [quarter, sixteenth]
 
 
 def _sim_extremes_needed(sums: _Sums) -> bool:
@@ -474,12 +499,16 @@ def signal_characteristics(
 
         workers = min(2, os.cpu_count() or 1)
 
-    quarter = _quarter_buffers(n, dt, max_lag_s)
-    sums = _all_sums(ref, sim, 1.0, workers, quarter)
-    if _sim_extremes_needed(sums):
+    levels = _level_buffers(n, dt, max_lag_s)
+    sums = _all_sums(ref, sim, 1.0, workers, levels)
+    sim_extremes = _sim_extremes_needed(sums)
+    if sim_extremes:
         sums.sim_min = float(np.min(sim))
         sums.sim_max = float(np.max(sim))
-    finite = all(math.isfinite(v) for v in (sums.ref_min, sums.ref_max, sums.sim_min, sums.sim_max))
+    # Skipped simulated extremes stay ±inf; _sim_extremes_needed then proved Σ s² finite.
+    finite = math.isfinite(sums.ref_min) and math.isfinite(sums.ref_max)
+    if sim_extremes:
+        finite = finite and math.isfinite(sums.sim_min) and math.isfinite(sums.sim_max)
     if not finite:
         for name, arr in (("reference", ref), ("simulated", sim)):
             index = _first_non_finite(np.asarray(arr))
@@ -488,9 +517,9 @@ def signal_characteristics(
                     f"{name} signal contains NaN or inf (first at sample {index})",
                     hint="set a gap policy (nan: omit) or clean the data",
                 )
-    # Unset simulated extremes are ±inf here only when they cannot decide the rescale below.
+    # Skipped simulated extremes cannot decide the rescale below (see _sim_extremes_needed).
     peak = max(abs(sums.ref_min), abs(sums.ref_max))
-    if math.isfinite(sums.sim_min):
+    if sim_extremes:
         peak = max(peak, abs(sums.sim_min), abs(sums.sim_max))
     scale = 1.0
     if peak > _TOO_BIG or (0.0 < peak < _TOO_SMALL):
@@ -540,9 +569,9 @@ def signal_characteristics(
         sim_mean=s_mean,
         scale=scale,
         workers=workers,
-        quarter=quarter,
+        levels=levels or (),
     )
-    del quarter
+    del levels
     if centred_peak is None:
         peak_correlation = _correlation_at(ref, sim, search.lag, sums, correlation, scale)
     else:
@@ -663,7 +692,7 @@ def _correlation_from_centred(
     cross = centred + mu_s * r_sum + mu_r * s_sum - m * mu_r * mu_s
     if kind == "pearson":
         cov = cross - r_sum * s_sum / m
-        var_r = sums.ref_sq - float(np.dot(r_edge, r_edge)) - r_sum**2 / m
-        var_s = sums.sim_sq - float(np.dot(s_edge, s_edge)) - s_sum**2 / m
+        var_r = sums.ref_sq - _dot(r_edge, r_edge) - r_sum**2 / m
+        var_s = sums.sim_sq - _dot(s_edge, s_edge) - s_sum**2 / m
         return _coefficient(cov, var_r, var_s)
     return _coefficient(cross, sums.ref_sq, sums.sim_sq)

@@ -27,6 +27,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 from scipy import fft as sfft
+from scipy import linalg as sla
 from scipy import signal as sps
 from scipy import stats
 
@@ -65,6 +66,7 @@ _COLLINEAR = 1e-6
 # Relative singular-value cut-off when orthonormalising design matrices.
 _RCOND = 1e-10
 _DEFAULT_MAX_LAG_S = 10.0
+_KINDS: tuple[str, ...] = ("declared", "channel", "derivative", "lag", "gain", "offset")
 _N_PEAKS = 3
 
 
@@ -203,6 +205,21 @@ def _json_safe(value: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
+# Thread-parallel BLAS gains nothing on these memory-bound, thin products and, on a machine
+# whose cores are already busy, its spinning threads slow them down by an order of magnitude;
+# numpy's own einsum loops are single-threaded.
+
+
+def _dot(a: FloatArray, b: FloatArray) -> float:
+    return float(np.einsum("t,t->", a, b))
+
+
+def _project_out(rows: FloatArray, q: FloatArray) -> FloatArray:
+    """Each row minus its projection on the orthonormal columns of q."""
+    coef = np.einsum("jt,tk->jk", rows, q)
+    return np.asarray(rows - np.einsum("jk,tk->jt", coef, q), dtype=np.float64)
+
+
 def _block_means(x: FloatArray, factor: int) -> FloatArray:
     if factor == 1:
         return x
@@ -220,21 +237,27 @@ def _lag_matrix(u: FloatArray, order: int) -> FloatArray:
 def _ar_order(u: FloatArray) -> int:
     """AR order by BIC (Schwarz 1978), all orders fitted on the same sample.
 
-    One QR of the lag matrix gives every order's residual sum of squares: the first p columns
-    of Q span the AR(p) regressors.
+    One factorisation of the lag matrix gives every order's residual sum of squares, because
+    the AR(p) regressors are the first p lag columns.
     """
     n = u.shape[0]
     top = min(_MAX_AR_ORDER, max(0, n // 10 - 1))
     if top == 0:
         return 0
     y = u[top:]
-    q, _ = np.linalg.qr(_lag_matrix(u, top))
-    proj = (q.T @ y) ** 2
-    total = float(y @ y)
+    lagged = _lag_matrix(u, top)
+    total = _dot(y, y)
     if total <= 0.0:
         return 0
-    ssr = total - np.concatenate(([0.0], np.cumsum(proj)))
-    ssr = np.maximum(ssr, total * 1e-15)
+    # Cholesky of the lag Gram matrix is the R of a QR of the lag matrix: the forward solve
+    # gives the projections of y on the nested AR(1) … AR(top) regressor spaces.
+    gram = np.einsum("ti,tj->ij", lagged, lagged)
+    try:
+        chol = np.linalg.cholesky(gram + np.eye(top) * 1e-12 * np.trace(gram))
+    except np.linalg.LinAlgError:
+        return 0
+    proj = sla.solve_triangular(chol, np.einsum("ti,t->i", lagged, y), lower=True) ** 2
+    ssr = np.maximum(total - np.concatenate(([0.0], np.cumsum(proj))), total * 1e-15)
     m = y.shape[0]
     bic = m * np.log(ssr / m) + np.arange(top + 1) * math.log(m)
     return int(np.argmin(bic))
@@ -244,18 +267,24 @@ def _ar_fit(u: FloatArray, order: int) -> FloatArray:
     """Least-squares AR(order) coefficients φ of u (no intercept: u has mean zero).
 
     The persistence Σφ is biased low by about (1 + 3Σφ)/n (Kendall 1954, for AR(1)); that bias
-    makes tests anti-conservative near a unit root, so it is added back to φ₁, keeping Σφ ≤ 1.
+    makes tests anti-conservative near a unit root, so it is added back to φ₁, keeping
+    Σφ ≤ 1 − 1/n.
     """
     if order == 0 or u.shape[0] <= 2 * order + 2:
         return np.zeros(0)
     y = u[order:]
-    if float(y @ y) == 0.0:
+    if _dot(y, y) == 0.0:
         return np.zeros(0)
-    fitted, *_ = np.linalg.lstsq(_lag_matrix(u, order), y, rcond=None)
+    lagged = _lag_matrix(u, order)
+    gram = np.einsum("ti,tj->ij", lagged, lagged)
+    fitted, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", lagged, y), rcond=_RCOND)
     phi = np.array(fitted, dtype=np.float64)
     persistence = float(np.sum(phi))
     if persistence > 0.0:
-        corrected = min(persistence + (1.0 + 3.0 * persistence) / y.shape[0], 1.0)
+        # Σφ = 1 would null the constant column of the whitened design; 1 − 1/n keeps the
+        # offset identified, with the huge variance a unit root implies.
+        m = y.shape[0]
+        corrected = min(persistence + (1.0 + 3.0 * persistence) / m, 1.0 - 1.0 / m)
         phi[0] += corrected - persistence
     return phi
 
@@ -354,7 +383,12 @@ def _long_run_sums(scores: FloatArray) -> FloatArray:
         [_andrews_bandwidth(scores[:, [j]]) for j in range(scores.shape[1])], dtype=np.float64
     )
     max_lag = int(min(n - 1, math.ceil(float(np.max(bandwidths, initial=1.0)))))
-    acov = _autocovariances(scores, max_lag)
+    if max_lag <= 32:
+        acov = np.stack(
+            [np.einsum("ij,ij->j", scores[lag:], scores[: n - lag]) for lag in range(max_lag + 1)]
+        )
+    else:
+        acov = _autocovariances(scores, max_lag)
     lags = np.arange(max_lag + 1, dtype=np.float64)[:, None]
     weights = np.clip(1.0 - lags / np.maximum(bandwidths, 1.0)[None, :], 0.0, None)
     weights[0] = 0.5
@@ -378,23 +412,23 @@ def _hac_fit(y: FloatArray, x: FloatArray, order: int) -> _Fit:
     g_t = x*_t e*_t.
     """
     beta0, *_ = np.linalg.lstsq(x, y, rcond=None)
-    phi = _ar_fit(y - x @ beta0, order)
+    phi = _ar_fit(y - np.einsum("tk,k->t", x, beta0), order)
     ys = _whiten(y, phi)
     xs = _whiten(x, phi)
     beta, *_ = np.linalg.lstsq(xs, ys, rcond=_RCOND)
-    e = ys - xs @ beta
+    e = ys - np.einsum("tk,k->t", xs, beta)
     g = xs * e[:, None]
     n, k = xs.shape
     bandwidth = _andrews_bandwidth(g)
     max_lag = int(min(n - 1, math.ceil(bandwidth)))
     weights = _bartlett_weights(bandwidth, max_lag)
-    s = g.T @ g
+    s = np.einsum("ti,tj->ij", g, g)
     for lag in range(1, max_lag + 1):
         if weights[lag] <= 0.0:
             break
-        gamma = g[lag:].T @ g[:-lag]
+        gamma = np.einsum("ti,tj->ij", g[lag:], g[:-lag])
         s += weights[lag] * (gamma + gamma.T)
-    bread = np.linalg.pinv(xs.T @ xs, rcond=_RCOND)
+    bread = np.linalg.pinv(np.einsum("ti,tj->ij", xs, xs), rcond=_RCOND)
     cov = bread @ s @ bread * (n / max(n - k, 1))
     return _Fit(
         beta=np.asarray(beta, dtype=np.float64),
@@ -414,47 +448,81 @@ class _Screen:
     df: npt.NDArray[np.int64]
 
 
-def _screen(y: FloatArray, base: FloatArray, z: FloatArray, phi: FloatArray) -> _Screen:
-    """Test every column of z, one at a time, added to the base design, in one vectorised pass.
+def _residualise(v: FloatArray, x: FloatArray) -> FloatArray:
+    """v minus its least-squares projection on the few columns of x (normal equations).
 
-    By Frisch-Waugh-Lovell the coefficient of z_j in the whitened joint model is
-    β_j = z̃_jᵀỹ / z̃_jᵀz̃_j, with ỹ, z̃_j the whitened series with the whitened base projected
-    out, and its HAC variance is LRV(z̃_j e_j) / (z̃_jᵀz̃_j)².
+    The design here is a constant and at most a handful of standardised candidates, so the
+    k × k system is well conditioned and far cheaper than a factorisation of the n × k matrix.
     """
-    ys = _whiten(y, phi)
-    q = _orthonormal(_whiten(base, phi))
-    zs = _whiten(z, phi)
-    y_t = ys - q @ (q.T @ ys)
-    z_t = zs - q @ (q.T @ zs)
-    zz = np.einsum("ij,ij->j", z_t, z_t)
+    gram = np.einsum("ti,tj->ij", x, x)
+    coef, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", x, v), rcond=_RCOND)
+    return np.asarray(v - np.einsum("ti,i->t", x, coef), dtype=np.float64)
+
+
+def _screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> _Screen:
+    """Test every row of z_rows (one candidate each), one at a time, added to the base design.
+
+    For candidate j: the OLS residual of y on [base, z_j] gives the AR(order) filter φ_j
+    (Cochrane-Orcutt), y, base and z_j are whitened with it and, by Frisch-Waugh-Lovell, the
+    coefficient is β_j = z̃ᵀỹ / z̃ᵀz̃ with ỹ, z̃ the whitened series with the whitened base
+    projected out; its HAC variance is LRV(z̃ e) / (z̃ᵀz̃)².
+    """
+    m, n = z_rows.shape
+    k = base.shape[1] + 1
+    q0 = _orthonormal(base)
+    y_perp = _project_out(y[None, :], q0)[0]
+    z_perp = _project_out(z_rows, q0)
+    zz0 = np.einsum("ji,ji->j", z_perp, z_perp)
     with np.errstate(invalid="ignore", divide="ignore"):
-        beta = (z_t.T @ y_t) / zz
-        beta = np.where(zz > 0, beta, 0.0)
-        e = y_t[:, None] - z_t * beta[None, :]
-        lrv = _long_run_sums(z_t * e)
-        n = ys.shape[0]
-        k = q.shape[1] + 1
-        se = np.sqrt(lrv * (n / max(n - k, 1))) / zz
+        b0 = np.where(zz0 > 0, np.einsum("jt,t->j", z_perp, y_perp) / zz0, 0.0)
+    beta = np.zeros(m)
+    se = np.full(m, np.inf)
+    df = np.ones(m, dtype=np.int64)
+    rho = _lag1(z_rows.T)
+    for j in range(m):
+        if zz0[j] <= 0.0:
+            continue
+        phi = _ar_fit(y_perp - b0[j] * z_perp[j], order)
+        ys = _whiten(y, phi)
+        zs = _whiten(z_rows[j], phi)
+        y_t = _residualise(ys, _whiten(base, phi))
+        z_t = _residualise(zs, _whiten(base, phi))
+        zz = _dot(z_t, z_t)
+        if zz <= 0.0:
+            continue
+        beta[j] = _dot(z_t, y_t) / zz
+        e = y_t - beta[j] * z_t
+        nw = ys.shape[0]
+        lrv = float(_long_run_sums((z_t * e)[:, None])[0])
+        se[j] = math.sqrt(lrv * nw / max(nw - k, 1)) / zz
+        df[j] = int(_effective_df(n, k, phi, rho[j : j + 1])[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
         t = np.abs(beta) / se
-    df = _effective_df(y.shape[0], k, phi, _lag1(z))
     p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
-    p = np.where(zz > 0, p, 1.0)
+    p = np.where(np.isfinite(se), p, 1.0)
     return _Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
 
 
 def _effective_samples(u: FloatArray, order: int) -> float:
-    """n γ₀ (1 − Σφ)² / σ²: samples of white noise giving the same variance of the mean."""
+    """Samples of white noise that would estimate the mean of u as precisely.
+
+    The AR(p) long-run variance gives n γ₀ (1 − Σφ)² / σ²; for a nearly deterministic u (a
+    drift, a slow wave) both (1 − Σφ) and σ² vanish and the ratio means nothing, so the
+    AR(1) value n (1 − ρ₁)/(1 + ρ₁) (Bartlett 1935) bounds it from above.
+    """
     n = u.shape[0]
     centred = u - float(np.mean(u))
-    gamma0 = float(centred @ centred) / n
-    phi = _ar_fit(centred, order)
-    if gamma0 <= 0.0 or phi.shape[0] == 0:
+    gamma0 = _dot(centred, centred)
+    if gamma0 <= 0.0:
         return float(n)
-    residual = _whiten(centred, phi)
-    sigma2 = float(residual @ residual) / residual.shape[0]
-    if sigma2 <= 0.0:
-        return 1.0
-    eff = n * gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2
+    rho1 = min(max(_dot(centred[1:], centred[:-1]) / gamma0, -0.999999), 0.999999)
+    eff = n * (1.0 - rho1) / (1.0 + rho1)
+    phi = _ar_fit(centred, order)
+    if phi.shape[0]:
+        residual = _whiten(centred, phi)
+        sigma2 = _dot(residual, residual) / residual.shape[0]
+        if sigma2 > 0.0:
+            eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
     return float(min(max(eff, 1.0), n))
 
 
@@ -534,6 +602,8 @@ class _Series:
     grid: FloatArray
     mean: float
     std: float
+    # Multiplies a coefficient fitted on the rescaled data to give it in the caller's units.
+    unit: float
 
 
 def _format_pct(fraction: float) -> str:
@@ -550,7 +620,7 @@ def _full_rate_r2(r: FloatArray, columns: Sequence[FloatArray]) -> float:
     if not columns:
         return 0.0
     rc = r - float(np.mean(r))
-    total = float(rc @ rc)
+    total = _dot(rc, rc)
     if total <= 0.0:
         return 0.0
     centred = [c - float(np.mean(c)) for c in columns]
@@ -558,14 +628,14 @@ def _full_rate_r2(r: FloatArray, columns: Sequence[FloatArray]) -> float:
     gram = np.empty((k, k))
     cross = np.empty(k)
     for i in range(k):
-        cross[i] = float(centred[i] @ rc)
+        cross[i] = _dot(centred[i], rc)
         for j in range(i, k):
-            gram[i, j] = gram[j, i] = float(centred[i] @ centred[j])
+            gram[i, j] = gram[j, i] = _dot(centred[i], centred[j])
     coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
     return float(min(max(float(coef @ cross) / total, 0.0), 1.0))
 
 
-def _exact_match(n: int, dt: float, alpha: float) -> Diagnosis:
+def _exact_match(n: int) -> Diagnosis:
     return Diagnosis(
         lag_s=0.0,
         gain=1.0,
@@ -604,8 +674,9 @@ def diagnose_residual(
     dt:
         Sample interval in seconds.
     candidates:
-        Explanatory series on the same grid. Automatic ``lag`` (d/dt simulated) and ``gain``
-        (simulated) candidates are added unless a candidate of that kind is given.
+        Explanatory series on the same grid. Automatic ``lag`` (the slope of the simulated
+        signal over the searched lag) and ``gain`` (the simulated signal) candidates are added
+        unless a candidate of that kind is given.
     max_lag_s:
         Half-width of the lag search window; default min(10 s, a quarter of the record).
     alpha:
@@ -626,22 +697,38 @@ def diagnose_residual(
         Non-finite values, length mismatch, fewer than 10 samples, non-positive ``dt``, or a
         candidate that is not a finite series of the same length.
     SpecError
-        Invalid ``alpha``, ``max_selected``, ``max_samples`` or duplicate candidate names.
+        Invalid ``alpha``, ``max_selected``, ``max_samples``, an unknown candidate kind or a
+        duplicate candidate name.
 
     Notes
     -----
-    Headline fit (on the lag-aligned pair): reference ≈ gain · simulated + offset. The gain
-    error is *significant* when its interval excludes 1 and |gain − 1| > 0.5 %; the offset
-    when its interval excludes 0 and |offset| > 0.5 % of the reference range.
+    *Timing.* The lag m (samples) maximises the mean-removed cross-correlation within
+    ±``max_lag_s``. The ``lag`` candidate is the secant slope
+    x(t) = [sim(t + d) − sim(t)] / d with d = −m·dt (the derivative when m = 0): a delay d gives
+    r = d·x exactly, so its coefficient is the delay in seconds. ``timing_significant`` needs
+    m ≠ 0, the ``lag`` candidate selected (below), a coefficient of the sign of −m and at least
+    half a sample.
 
-    Forward selection over standardised candidates z_j: at step k every remaining candidate is
-    tested in the joint model r = c + Σ_selected β z + β_j z_j; those with p_j ≤ α / (m − k)
-    (Holm 1979) and an increase of R² ≥ 0.5 % are eligible, and the one with the largest
-    increase of R² enters. Tests use AR(p) pre-whitening with p by BIC (Schwarz 1978) and φ
-    estimated on the residual of the model without z_j (Cochrane & Orcutt 1949), then a
-    Newey & West (1987) HAC variance with the Andrews (1991) bandwidth: the pre-whitened HAC
-    estimator of Andrews & Monahan (1992). Student-t reference distribution with n − k degrees
-    of freedom.
+    *Gain and offset.* On the lag-aligned pair, reference ≈ gain · simulated + offset, fitted by
+    the same pre-whitened HAC regression. Each is *significant* when its p-value is below α/2
+    (Bonferroni over the two), its (1 − α) interval excludes 1 (gain) or 0 (offset), and the
+    effect is material: |gain − 1| > 0.5 %, |offset| > 0.5 % of the reference range.
+
+    *Forward selection.* Candidates z_j are standardised on the regression grid; constant and
+    collinear ones (R² > 1 − 10⁻⁶ on those before them) are dropped with a note. At step k
+    (k = 0, 1, …) each remaining candidate with an increase of R² of at least 0.5 % is tested
+    in the model r = c + Σ_selected β z + β_j z_j; those with p_j ≤ α / (m − k) (Holm 1979)
+    are eligible and the one with the largest increase of R² enters.
+
+    *Tests.* Feasible GLS (Cochrane & Orcutt 1949): the OLS residual u of the model under test
+    gives AR(p) coefficients φ (p by BIC, Schwarz 1978, on the raw residual, p ≤ 10), with the
+    Kendall (1954) bias (1 + 3Σφ)/n added back to Σφ, capped at 1 − 1/n. The response and every
+    regressor are filtered, y*_t = y_t − Σ_i φ_i y_{t−i}, and OLS on the filtered data gets the
+    Newey & West (1987) variance (X*ᵀX*)⁻¹ S (X*ᵀX*)⁻¹, S = Σ_l w_l Γ_l with Bartlett weights
+    w_l = 1 − |l|/S_T and the Andrews (1991) AR(1) plug-in bandwidth S_T: the pre-whitened HAC
+    estimator of Andrews & Monahan (1992). Student-t with the effective degrees of freedom
+    ν = n (1 − φ̄ρ)/(1 + φ̄ρ) − k, φ̄ = Σφ and ρ the lag-one autocorrelation of the regressor
+    (Bretherton et al. 1999), which keeps slowly varying regressors in persistent noise honest.
     """
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating, np.integer)):
         raise DegenerateSignalError(f"dt must be a number of seconds, got {dt!r}")
@@ -666,6 +753,11 @@ def diagnose_residual(
         raise DegenerateSignalError(f"at least 10 samples are needed, got {n}")
     names: set[str] = set()
     for cand in candidates:
+        if cand.kind not in _KINDS:
+            raise SpecError(
+                f"candidate {cand.name!r} has kind {cand.kind!r}; "
+                f"expected one of {', '.join(_KINDS)}"
+            )
         if cand.name in names:
             raise SpecError(f"candidate name {cand.name!r} is used twice")
         names.add(cand.name)
@@ -679,20 +771,36 @@ def diagnose_residual(
                 key=name,
             )
 
-    r = ref - sim
-    if not np.any(r):
-        return _exact_match(n, dt, alpha)
-
+    if not np.any(ref - sim):
+        return _exact_match(n)
+    # Exact power-of-two rescaling keeps sums of squares of 1e200-sized or 1e-200-sized signals
+    # inside float64; fractions, p-values, gain and delay do not depend on it.
+    s_sig = _pow2_scale(max(float(np.max(np.abs(ref))), float(np.max(np.abs(sim)))))
+    ref = ref * s_sig
+    sim = sim * s_sig
+    units: dict[str, float] = {}
+    scaled_user: list[tuple[str, str, FloatArray]] = []
+    for name, kind, values in user:
+        c = _pow2_scale(np.max(np.abs(values), initial=0.0))
+        units[name] = c / s_sig
+        scaled_user.append((name, kind, values * c))
+    user = scaled_user
     notes: list[str] = []
-    factor = max(1, math.ceil(n / max_samples))
-    dt_grid = dt * factor
-    lags_grid = LJUNG_BOX_LAGS
+    sim_varies = _varies(sim)
 
     # --- timing -------------------------------------------------------------------------------
     window_s = _DEFAULT_MAX_LAG_S if max_lag_s is None else float(max_lag_s)
-    max_lag = int(min(max(window_s, 0.0) / dt, (n - 1) if max_lag_s is not None else n // 4))
-    lag = search_lag(ref, sim, max_lag).lag
+    # At least 10 samples must remain where both records overlap at the searched lag.
+    max_lag = int(min(max(window_s, 0.0) / dt, (n - 10) if max_lag_s is not None else n // 4))
+    # A constant signal correlates equally with every shift: there is no lag to find.
+    lag = search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0
     lag_s = lag * dt
+    # The candidates are analysed where sim(t − lag) exists, so that the lag candidate is exact
+    # on every sample it is fitted to.
+    window = slice(max(0, lag), n + min(0, lag))
+    r = (ref - sim)[window]
+    n_w = r.shape[0]
+    factor = max(1, math.ceil(n_w / max_samples))
 
     # --- gain and offset on the lag-aligned pair ----------------------------------------------
     if lag >= 0:
@@ -705,7 +813,6 @@ def diagnose_residual(
     ref_range = float(np.ptp(ref)) or float(np.max(np.abs(ref))) or 1.0
     r_g = _block_means(r, factor)
     order = _ar_order(r_g - float(np.mean(r_g)))
-    sim_varies = float(np.ptp(sim_g)) > 1e-12 * max(float(np.max(np.abs(sim_g))), 1e-300)
     design = (
         np.column_stack([np.ones_like(sim_g), sim_g])
         if sim_varies
@@ -716,16 +823,22 @@ def diagnose_residual(
     offset = float(head.beta[0])
     offset_interval = _interval(offset, float(head_se[0]), int(head.df[0]), alpha)
     offset_p = _p_value(offset, float(head_se[0]), int(head.df[0]))
+    # Gain and offset are two tests of one question ("is the simulated signal itself off?"):
+    # Bonferroni over the pair keeps the chance of a false headline at most alpha.
+    headline_level = alpha / 2.0
     offset_significant = (
-        offset_p < alpha
+        offset_p <= headline_level
         and not (offset_interval[0] <= 0.0 <= offset_interval[1])
         and abs(offset) > OFFSET_MATERIALITY * ref_range
     )
     if sim_varies:
         gain = float(head.beta[1])
-        gain_interval = _interval(gain, float(head_se[1]), int(head.df[1]), alpha)
+        gain_se = float(head_se[1])
+        gain_interval = _interval(gain, gain_se, int(head.df[1]), alpha)
         gain_significant = (
-            not (gain_interval[0] <= 1.0 <= gain_interval[1]) and abs(gain - 1.0) > GAIN_MATERIALITY
+            _p_value(gain - 1.0, gain_se, int(head.df[1])) <= headline_level
+            and not (gain_interval[0] <= 1.0 <= gain_interval[1])
+            and abs(gain - 1.0) > GAIN_MATERIALITY
         )
     else:
         gain, gain_interval, gain_significant = 1.0, (1.0, 1.0), False
@@ -737,75 +850,97 @@ def diagnose_residual(
     auto: list[tuple[str, str, FloatArray]] = []
     # A user channel may already be called "lag" or "gain"; the automatic one then steps aside.
     if "lag" not in kinds:
-        auto.append((_free_name("lag", names), "lag", np.gradient(sim, dt)))
+        auto.append((_free_name("lag", names), "lag", _delay_slope(sim, lag, dt)[window]))
     if "gain" not in kinds:
-        auto.append((_free_name("gain", names), "gain", sim))
-    for label, kind, values in [*auto, *user]:
+        auto.append((_free_name("gain", names), "gain", sim[window]))
+    for label, kind, values in [*auto, *((a, b, v[window]) for a, b, v in user)]:
         grid = _block_means(values, factor)
-        series.append(_Series(label, kind, values, grid, float(np.mean(grid)), float(np.std(grid))))
+        unit = units.get(label, 1.0)
+        series.append(
+            _Series(label, kind, values, grid, float(np.mean(grid)), float(np.std(grid)), unit)
+        )
 
-    kept: list[_Series] = []
-    basis = np.ones((r_g.shape[0], 1)) / math.sqrt(r_g.shape[0])
+    ng = r_g.shape[0]
+    usable: list[_Series] = []
     for s in series:
         scale = max(float(np.max(np.abs(s.grid))), 1e-300)
         if s.std <= 1e-12 * scale:
             notes.append(f"candidate {s.name!r} is constant and was dropped")
+        else:
+            usable.append(s)
+    # Sequential Cholesky of the Gram matrix of [1, z₁, z₂, …]: the pivot of z_j is the part
+    # of its variance left after projecting out the constant and every candidate kept before
+    # it, so one pass finds all collinear ones; a dropped candidate adds no pivot.
+    standardised = np.empty((len(usable) + 1, ng))
+    standardised[0] = 1.0 / math.sqrt(ng)
+    for i, s in enumerate(usable):
+        standardised[i + 1] = (s.grid - s.mean) / s.std
+    gram = np.einsum("it,jt->ij", standardised, standardised)
+    factor_rows = np.zeros_like(gram)
+    factor_rows[0, 0] = math.sqrt(gram[0, 0])
+    kept: list[_Series] = []
+    kept_rows: list[int] = [0]
+    for i, s in enumerate(usable, start=1):
+        cols = np.asarray(kept_rows)
+        below = sla.solve_triangular(
+            factor_rows[np.ix_(cols, cols)], gram[cols, i], lower=True, check_finite=False
+        )
+        pivot = gram[i, i] - float(np.sum(below**2))
+        if pivot / gram[i, i] >= _COLLINEAR:
+            factor_rows[i, cols] = below
+            factor_rows[i, i] = math.sqrt(pivot)
+            kept.append(s)
+            kept_rows.append(i)
             continue
-        z = (s.grid - s.mean) / s.std
-        left = z - basis @ (basis.T @ z)
-        share = float(left @ left) / float(z @ z)
-        if share < _COLLINEAR:
-            others = [k.name for k in kept]
+        corr = np.abs(gram[kept_rows[1:], i]) / ng
+        best = int(np.argmax(corr)) if kept else -1
+        if best >= 0 and corr[best] ** 2 >= 1.0 - _COLLINEAR:
+            notes.append(f"candidate {s.name!r} duplicates {kept[best].name!r} and was dropped")
+        else:
             notes.append(
-                f"candidate {s.name!r} is a linear combination of "
-                f"{', '.join(repr(o) for o in others) or 'the constant'} and was dropped"
+                f"candidate {s.name!r} is (nearly) a linear combination of the candidates "
+                "before it and was dropped"
             )
-            continue
-        kept.append(s)
-        basis = np.column_stack([basis, left / math.sqrt(float(left @ left))])
+    kept_rows = kept_rows[1:]
 
     m = len(kept)
-    ng = r_g.shape[0]
-    z_all = np.column_stack([(s.grid - s.mean) / s.std for s in kept]) if m else np.zeros((ng, 0))
+    z_rows = np.ascontiguousarray(standardised[kept_rows]) if m else np.zeros((0, ng))
     rc_g = r_g - float(np.mean(r_g))
-    sst_g = float(rc_g @ rc_g)
+    sst_g = _dot(rc_g, rc_g)
 
-    # Alone: every candidate with an intercept, noise model from the intercept-only residual.
+    # Alone: every candidate with an intercept.
     ones = np.ones((ng, 1))
-    phi0 = _ar_fit(rc_g, order)
-    alone = _screen(r_g, ones, z_all, phi0) if m else None
+    alone = _screen(r_g, ones, z_rows, order) if m else None
 
     # --- forward selection --------------------------------------------------------------------
     selected: list[int] = []
     holm_levels: list[float] = []
-    cumulative: list[float] = []
     remaining_idx = list(range(m))
     base = ones
-    current_r2 = 0.0
     while remaining_idx and len(selected) < max_selected and sst_g > 0.0:
-        step = len(selected)
-        level = alpha / (m - step)
+        level = alpha / (m - len(selected))
         q = _orthonormal(base)
-        fitted = q @ (q.T @ r_g)
-        resid = r_g - fitted
-        z_rem = z_all[:, remaining_idx]
-        z_perp = z_rem - q @ (q.T @ z_rem)
-        zz = np.einsum("ij,ij->j", z_perp, z_perp)
-        share = zz / ng
+        resid = _project_out(r_g[None, :], q)[0]
+        z_rem = z_rows[remaining_idx]
+        z_perp = _project_out(z_rem, q)
+        zz = np.einsum("jt,jt->j", z_perp, z_perp)
         with np.errstate(invalid="ignore", divide="ignore"):
-            gain_r2 = np.where(share > _COLLINEAR, (z_perp.T @ resid) ** 2 / zz / sst_g, 0.0)
-        phi = _ar_fit(resid, order)
-        screen = _screen(r_g, base, z_rem, phi)
-        eligible = (screen.p <= level) & (gain_r2 >= MIN_EXPLAINED_INCREASE)
-        if not np.any(eligible):
+            gain_r2 = np.where(
+                zz / ng > _COLLINEAR, np.einsum("jt,t->j", z_perp, resid) ** 2 / zz / sst_g, 0.0
+            )
+        # Only candidates that would add a material share need the (costly) test.
+        material = np.flatnonzero(gain_r2 >= MIN_EXPLAINED_INCREASE)
+        if material.shape[0] == 0:
             break
-        pick = int(np.argmax(np.where(eligible, gain_r2, -np.inf)))
+        screen = _screen(r_g, base, z_rem[material], order)
+        passed = screen.p <= level
+        if not np.any(passed):
+            break
+        pick = int(material[int(np.argmax(np.where(passed, gain_r2[material], -np.inf)))])
         chosen = remaining_idx.pop(pick)
         selected.append(chosen)
         holm_levels.append(level)
-        current_r2 += float(gain_r2[pick])
-        cumulative.append(current_r2)
-        base = np.column_stack([base, z_all[:, chosen]])
+        base = np.column_stack([base, z_rows[chosen]])
 
     # --- final joint model --------------------------------------------------------------------
     findings: list[CandidateFinding] = []
@@ -837,8 +972,8 @@ def diagnose_residual(
                     kind=s.kind,
                     explained_fraction=_full_rate_r2(r, [s.full]),
                     joint_explained_fraction=joint_r2_full[pos],
-                    coefficient=coef,
-                    interval=_interval(coef, se_std / s.std, df, alpha),
+                    coefficient=coef * s.unit,
+                    interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
                     p_value=p,
                     significant=p <= holm_levels[pos],
                     selected=True,
@@ -857,8 +992,10 @@ def diagnose_residual(
                     kind=s.kind,
                     explained_fraction=_full_rate_r2(r, [s.full]),
                     joint_explained_fraction=None,
-                    coefficient=coef,
-                    interval=_interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha),
+                    coefficient=coef * s.unit,
+                    interval=_scaled(
+                        _interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha), s.unit
+                    ),
                     p_value=p,
                     significant=p <= alpha / m,
                     selected=False,
@@ -866,14 +1003,14 @@ def diagnose_residual(
                 )
             )
 
-    mean_sq = float(r @ r) / n
+    mean_sq = _dot(r, r) / n_w
     offset_finding = CandidateFinding(
         name=_free_name("offset", names),
         kind="offset",
         explained_fraction=min(1.0, float(np.mean(r)) ** 2 / mean_sq),
         joint_explained_fraction=None,
-        coefficient=offset,
-        interval=offset_interval,
+        coefficient=offset / s_sig,
+        interval=_scaled(offset_interval, 1.0 / s_sig),
         p_value=offset_p,
         significant=offset_significant,
         selected=offset_significant,
@@ -882,23 +1019,24 @@ def diagnose_residual(
     ordered = _rank([*findings, offset_finding])
 
     # --- timing significance ------------------------------------------------------------------
+    # Timing counts only when the delay survived the forward selection, with the sign of the
+    # searched lag and a size of at least half a sample: the lag search maximises the fit over
+    # many lags, so an unadjusted test of the lag it picked would see delays in pure noise.
     timing_significant = False
     lag_finding = next((f for f in ordered if f.kind == "lag"), None)
     if lag_finding is not None and lag != 0:
-        excludes_zero = not (lag_finding.interval[0] <= 0.0 <= lag_finding.interval[1])
-        agrees = (lag_finding.coefficient > 0) == (lag < 0)
         timing_significant = (
-            excludes_zero
-            and lag_finding.p_value < alpha
-            and agrees
+            lag_finding.selected
+            and lag_finding.significant
+            and (lag_finding.coefficient > 0) == (lag < 0)
             and abs(lag_finding.coefficient) >= dt / 2.0
         )
 
-    remaining = ljung_box(remaining_grid, lags_grid, alpha=alpha)
+    remaining = ljung_box(remaining_grid, LJUNG_BOX_LAGS, alpha=alpha)
     frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
     effective = _effective_samples(r_g, order)
     if factor > 1:
-        notes.append(f"regressions use block means of {factor} samples ({dt_grid:g} s)")
+        notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
 
     summary = _summary(
         ordered,
@@ -912,8 +1050,8 @@ def diagnose_residual(
         lag_s=lag_s,
         gain=gain,
         gain_interval=gain_interval,
-        offset=offset,
-        offset_interval=offset_interval,
+        offset=offset / s_sig,
+        offset_interval=_scaled(offset_interval, 1.0 / s_sig),
         timing_significant=timing_significant,
         gain_significant=gain_significant,
         offset_significant=offset_significant,
@@ -943,6 +1081,37 @@ def _rank(findings: Sequence[CandidateFinding]) -> list[CandidateFinding]:
             )
             chosen.insert(at, f)
     return [replace(f, rank=i + 1) for i, f in enumerate([*chosen, *rest])]
+
+
+def _delay_slope(sim: FloatArray, lag: int, dt: float) -> FloatArray:
+    """The series whose coefficient is the delay d of the simulation, in seconds.
+
+    If sim(t) = ref(t − d) then r(t) = sim(t + d) − sim(t) = d · [sim(t + d) − sim(t)] / d, so
+    the secant slope over the lag found by the search (d = −lag·dt) explains a pure delay
+    exactly with coefficient d; without a lag it is the derivative, the first-order term of
+    the same expansion. Samples whose shifted partner falls outside the record repeat the edge
+    value; the diagnosis only fits the samples where it exists.
+    """
+    if lag == 0:
+        return np.asarray(np.gradient(sim, dt), dtype=np.float64)
+    n = sim.shape[0]
+    ahead = sim[np.clip(np.arange(n) - lag, 0, n - 1)]
+    return np.asarray((ahead - sim) / (-lag * dt), dtype=np.float64)
+
+
+def _scaled(interval: tuple[float, float], unit: float) -> tuple[float, float]:
+    return (interval[0] * unit, interval[1] * unit)
+
+
+def _pow2_scale(magnitude: float) -> float:
+    """The power of two that brings ``magnitude`` into [0.5, 1); 1 for zero."""
+    if magnitude <= 0.0 or not math.isfinite(magnitude):
+        return 1.0
+    return math.ldexp(1.0, -math.frexp(magnitude)[1])
+
+
+def _varies(x: FloatArray) -> bool:
+    return float(np.ptp(x)) > 1e-12 * max(float(np.max(np.abs(x))), 1e-300)
 
 
 def _free_name(name: str, taken: set[str]) -> str:

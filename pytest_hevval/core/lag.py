@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
@@ -42,7 +43,9 @@ _FACTOR = 4
 # of the block-mean correlation lies within ±(factor − 1) of the true peak scaled down; two
 # more on each side absorb plateaus and rounding.
 _REFINE = _FACTOR + 2
-_CHUNK = 1 << 15
+# Samples per chunk of the streamed loops (a multiple of _BLAS_PIECE): large enough to amortise
+# numpy's per-call overhead, which measured heavier than spilling from L2 into L3.
+_CHUNK = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -55,10 +58,148 @@ class LagSearch:
     levels: int = 1
 
 
+# OpenBLAS runs ddot on its own worker threads above 10 000 elements and dgemv above 9 216.
+# Those threads spin while waiting; next to this module's two threads on a two-core machine
+# they made a 32 768-element dot about 30 times slower than on one thread. Every BLAS call here
+# therefore stays at or below this many elements, batching the pieces into one matmul call.
+_BLAS_PIECE = 8192
+
+
+def _dot(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]) -> float:
+    """Σ a·b for float64 vectors of any length, with single-threaded BLAS calls."""
+    n = a.shape[0]
+    if n <= _BLAS_PIECE:
+        return float(np.dot(a, b))
+    pieces, rest = divmod(n, _BLAS_PIECE)
+    whole = n - rest
+    head = np.matmul(
+        a[:whole].reshape(pieces, 1, _BLAS_PIECE), b[:whole].reshape(pieces, _BLAS_PIECE, 1)
+    )
+    # A Python sum of a few floats costs less than numpy's reduction machinery.
+    total: float = sum(head.ravel().tolist())
+    if rest:
+        total += float(np.dot(a[whole:], b[whole:]))
+    return total
+
+
+# Samples per row in _lagged_dots_by_rows; it handles up to _ROW + 1 lags at once.
+_ROW = 16
+
+
+def _lagged_dots_by_rows(
+    rw: npt.NDArray[np.float64], sc: npt.NDArray[np.float64], count: int, pieces: int
+) -> list[float]:
+    """:func:`_lagged_dots` for ``pieces`` whole BLAS pieces, as two small matrix products.
+
+    With both signals laid out in rows of _ROW samples, G[c, u] = Σ_t rw[t·_ROW + c]·sc[t·_ROW + u]
+    holds every product a lag below _ROW needs, and C(i) = Σ_u G[i + u, u] sums a diagonal. The
+    two products per piece (rows c < _ROW, and the count − 1 rows beyond) cost about as much
+    as 1.5 dot products while replacing ``count`` of them.
+    """
+    rows = _BLAS_PIECE // _ROW
+    step = rw.strides[0]
+    strides = (step * _BLAS_PIECE, step * _ROW, step)
+    near = np.lib.stride_tricks.as_strided(
+        rw, shape=(pieces, rows, _ROW), strides=strides, writeable=False
+    )
+    far = np.lib.stride_tricks.as_strided(
+        rw[_ROW:], shape=(pieces, rows, count - 1), strides=strides, writeable=False
+    )
+    s_rows = sc.reshape(pieces, rows, _ROW)
+    g = np.concatenate(
+        (
+            np.add.reduce(np.matmul(near.transpose(0, 2, 1), s_rows), axis=0),
+            np.add.reduce(np.matmul(far.transpose(0, 2, 1), s_rows), axis=0),
+        )
+    )
+    diagonals = np.lib.stride_tricks.as_strided(
+        g, shape=(count, _ROW), strides=(g.strides[0], g.strides[0] + g.strides[1]), writeable=False
+    )
+    totals: list[float] = np.add.reduce(diagonals, axis=1).tolist()
+    return totals
+
+
+class _WindowKernel:
+    """One thread's buffers for :func:`_exact_window`, with the strided views over them.
+
+    The views are made once: numpy's as_strided costs several microseconds a call, as much
+    as the arithmetic on a chunk, and the buffers are refilled in place for every chunk.
+    """
+
+    def __init__(self, count: int) -> None:
+        self.count = count
+        self.s_buf = np.empty(_CHUNK, dtype=np.float64)
+        self.r_buf = np.empty(_CHUNK + count - 1, dtype=np.float64)
+        self.by_rows = count <= _ROW + 1
+        if not self.by_rows:
+            return
+        pieces = _CHUNK // _BLAS_PIECE
+        rows = _BLAS_PIECE // _ROW
+        step = self.r_buf.strides[0]
+        strides = (step * _BLAS_PIECE, step * _ROW, step)
+        as_strided = np.lib.stride_tricks.as_strided
+        self.near = as_strided(
+            self.r_buf, shape=(pieces, rows, _ROW), strides=strides, writeable=False
+        ).transpose(0, 2, 1)
+        self.far = as_strided(
+            self.r_buf[_ROW:], shape=(pieces, rows, count - 1), strides=strides, writeable=False
+        ).transpose(0, 2, 1)
+        self.s_rows = self.s_buf.reshape(pieces, rows, _ROW)
+        self.g_near = np.empty((pieces, _ROW, _ROW), dtype=np.float64)
+        self.g_far = np.empty((pieces, count - 1, _ROW), dtype=np.float64)
+        self.g = np.empty((_ROW + count - 1, _ROW), dtype=np.float64)
+        self.diagonals = as_strided(
+            self.g,
+            shape=(count, _ROW),
+            strides=(self.g.strides[0], self.g.strides[0] + self.g.strides[1]),
+            writeable=False,
+        )
+
+    def full_chunk(self) -> list[float]:
+        """:func:`_lagged_dots` of the whole buffers (a chunk of exactly _CHUNK samples)."""
+        if not self.by_rows:
+            return _lagged_dots(self.r_buf, self.s_buf, self.count)
+        np.matmul(self.near, self.s_rows, out=self.g_near)
+        np.matmul(self.far, self.s_rows, out=self.g_far)
+        np.add.reduce(self.g_near, axis=0, out=self.g[:_ROW])
+        np.add.reduce(self.g_far, axis=0, out=self.g[_ROW:])
+        totals: list[float] = np.add.reduce(self.diagonals, axis=1).tolist()
+        return totals
+
+
+def _lagged_dots(
+    rw: npt.NDArray[np.float64], sc: npt.NDArray[np.float64], count: int
+) -> list[float]:
+    """[Σ rw[i : i + w]·sc for i in range(count)] with w = len(sc), rw contiguous.
+
+    One batched matmul over a strided view computes every lag and every BLAS-sized piece,
+    where a loop of dot calls would pay numpy's call overhead count × pieces times.
+    """
+    width = sc.shape[0]
+    pieces, rest = divmod(width, _BLAS_PIECE)
+    whole = width - rest
+    totals = [0.0] * count
+    if pieces and count <= _ROW + 1:
+        totals = _lagged_dots_by_rows(rw, sc[:whole], count, pieces)
+    elif pieces:
+        step = rw.strides[0]
+        lagged = np.lib.stride_tricks.as_strided(
+            rw,
+            shape=(count, pieces, 1, _BLAS_PIECE),
+            strides=(step, step * _BLAS_PIECE, step * _BLAS_PIECE, step),
+            writeable=False,
+        )
+        products = np.matmul(lagged, sc[:whole].reshape(pieces, _BLAS_PIECE, 1))
+        totals = np.add.reduce(products.reshape(count, pieces), axis=1).tolist()
+    if rest:
+        tail = sc[whole:]
+        for i in range(count):
+            totals[i] += float(np.dot(rw[i + whole : i + width], tail))
+    return totals
+
+
 def dot_overlap(a: FloatArray, b: FloatArray, scale: float = 1.0) -> float:
     """Σ a·b accumulated in float64, in cache-sized chunks for float32 or rescaled input."""
-    if a.dtype == np.float64 and b.dtype == np.float64 and scale == 1.0:
-        return float(np.dot(a, b))
     total = 0.0
     for start in range(0, a.shape[0], _CHUNK):
         x = np.asarray(a[start : start + _CHUNK], dtype=np.float64)
@@ -66,7 +207,7 @@ def dot_overlap(a: FloatArray, b: FloatArray, scale: float = 1.0) -> float:
         if scale != 1.0:
             x = x * scale
             y = y * scale
-        total += float(np.dot(x, y))
+        total += _dot(x, y)
     return total
 
 
@@ -123,16 +264,17 @@ def _exact_window(
 
         def run(part: list[tuple[int, int]]) -> npt.NDArray[np.float64]:
             acc = [0.0] * (count + 1)
-            # One pair of buffers per thread: allocating per chunk costs more than the dots.
-            s_buf = np.empty(_CHUNK, dtype=np.float64)
-            r_buf = np.empty(_CHUNK + count - 1, dtype=np.float64)
+            kernel = _WindowKernel(count)
             for a, b in part:
                 width = b - a
-                sc = _centre_into(s[a:b], s_mean, scale, s_buf[:width])
-                rw = _centre_into(r[a + lo : b + hi], r_mean, scale, r_buf[: width + count - 1])
-                for i in range(count):
-                    acc[i] += float(np.dot(rw[i : i + width], sc))
-                acc[count] += float(np.dot(rw[:width], rw[:width]))
+                sc = _centre_into(s[a:b], s_mean, scale, kernel.s_buf[:width])
+                rw = _centre_into(
+                    r[a + lo : b + hi], r_mean, scale, kernel.r_buf[: width + count - 1]
+                )
+                values = kernel.full_chunk() if width == _CHUNK else _lagged_dots(rw, sc, count)
+                for i, value in enumerate(values):
+                    acc[i] += value
+                acc[count] += _dot(rw[:width], rw[:width])
             return np.array(acc, dtype=np.float64)
 
         if workers > 1 and len(spans) > 8:
@@ -150,12 +292,33 @@ def _block_means(x: FloatArray, factor: int) -> npt.NDArray[np.float64]:
     out = np.empty(blocks, dtype=np.float64)
     # A matrix-vector product with equal weights is the fastest block mean numpy offers: a
     # reduction along a short axis (reshape(...).mean(axis=1)) is about eight times slower.
+    # Each product is a batch of dgemv calls of at most _BLAS_PIECE elements (see there).
+    if factor > _BLAS_PIECE // 4:
+        # Long blocks reduce quickly along their own contiguous axis.
+        per = max(1, (_CHUNK * 4) // factor)
+        for first in range(0, blocks, per):
+            last = min(first + per, blocks)
+            chunk = np.asarray(x[first * factor : last * factor], dtype=np.float64)
+            np.mean(chunk.reshape(-1, factor), axis=1, out=out[first:last])
+        return out
     weights = np.full(factor, 1.0 / factor, dtype=np.float64)
-    per = max(1, (_CHUNK * 4) // factor)
+    rows = _BLAS_PIECE // factor
+    per = rows * max(1, (_CHUNK * 4) // _BLAS_PIECE)
     for first in range(0, blocks, per):
         last = min(first + per, blocks)
         chunk = np.asarray(x[first * factor : last * factor], dtype=np.float64)
-        np.matmul(chunk.reshape(-1, factor), weights, out=out[first:last])
+        batches = (last - first) // rows
+        split = first + batches * rows
+        if batches:
+            np.matmul(
+                chunk[: batches * rows * factor].reshape(batches, rows, factor),
+                weights,
+                out=out[first:split].reshape(batches, rows),
+            )
+        if split < last:
+            np.matmul(
+                chunk[batches * rows * factor :].reshape(-1, factor), weights, out=out[split:last]
+            )
     return out
 
 
@@ -164,7 +327,7 @@ def _centred_energy(x: FloatArray, mean: float, scale: float, lo: int, hi: int) 
     total = 0.0
     for start in range(max(lo, 0), hi, _CHUNK):
         part = _centred(x[start : min(start + _CHUNK, hi)], mean, scale)
-        total += float(np.dot(part, part))
+        total += _dot(part, part)
     return total
 
 
@@ -253,14 +416,15 @@ def _search(
     sim_mean: float | None,
     scale: float,
     workers: int,
-    quarter: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None = None,
+    levels: Sequence[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = (),
     ref_energy: float | None = None,
 ) -> tuple[LagSearch, float | None]:
     """:func:`search_lag`, plus the mean-removed C(lag) over the lag's whole overlap when the
     search computed it exactly.
 
-    ``quarter`` optionally holds the block means by 4 of both signals, already made by a pass
-    that read the data anyway, so the pyramid needs no extra read of the full records.
+    ``levels`` optionally holds the first pyramid levels (block means by 4, 16, …) of both
+    signals, already made by a pass that read the data anyway, so that building the pyramid
+    needs no extra read of the full records.
     ``ref_energy`` optionally gives Σ ((r − μ)·scale)² over the whole record, for the same
     reason; without it the final level reads the reference once more.
     """
@@ -278,9 +442,10 @@ def _search(
     # Pyramid of block means: levels[k] has factor _FACTOR**k.
     refs: list[FloatArray] = [reference]
     sims: list[FloatArray] = [simulated]
-    if quarter is not None and n // _FACTOR >= 16:
-        refs.append(quarter[0])
-        sims.append(quarter[1])
+    for r_level, s_level in levels:
+        if refs[-1].shape[0] > _COARSEST and refs[-1].shape[0] // _FACTOR >= 16:
+            refs.append(r_level)
+            sims.append(s_level)
     while refs[-1].shape[0] > _COARSEST and refs[-1].shape[0] // _FACTOR >= 16:
         refs.append(_block_means(refs[-1], _FACTOR))
         sims.append(_block_means(sims[-1], _FACTOR))
@@ -325,11 +490,8 @@ def _overlap_ends(
     total = 0.0
     for a, b in ((max(0, -lag), half), (n - half, min(n, n - lag))):
         if b > a:
-            total += float(
-                np.dot(
-                    _centred(r[a + lag : b + lag], r_mean, scale),
-                    _centred(s[a:b], s_mean, scale),
-                )
+            total += _dot(
+                _centred(r[a + lag : b + lag], r_mean, scale), _centred(s[a:b], s_mean, scale)
             )
     return total
 
@@ -362,7 +524,7 @@ def correlation_curve(
     r64 = np.asarray(r, dtype=np.float64)
     s64 = np.asarray(s, dtype=np.float64)
     full = sps.correlate(r64, s64, mode="full", method="fft")
-    norm = math.sqrt(float(np.dot(r64, r64)) * float(np.dot(s64, s64))) or 1.0
+    norm = math.sqrt(_dot(r64, r64) * _dot(s64, s64)) or 1.0
     zero = s64.shape[0] - 1
     window = full[zero - step_lags : zero + step_lags + 1] / norm
     lags = (np.arange(-step_lags, step_lags + 1) * factor).astype(np.int64)
