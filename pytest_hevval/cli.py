@@ -92,8 +92,7 @@ def _run(args: argparse.Namespace) -> int:
     if not args.no_history:
         _record_history(args, [r.to_dict() for r in results])
     if args.report:
-        from .report import write_reports
-        from .report.render import parse_formats
+        from .report import parse_formats, write_reports
 
         written = write_reports(
             [r.to_dict() for r in results],

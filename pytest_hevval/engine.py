@@ -397,6 +397,8 @@ def _evaluate(
                 dt=dt,
                 start_s=aligned.grid.start_s,
                 max_lag=chars.lag_search.max_lag if chars.lag_search else 0,
+                # About one point per pixel of the page's plots; the JSON stays half the size.
+                points=1000,
             )
         signals.append(
             SignalResult(

@@ -64,6 +64,7 @@ class _SpecItem(pytest.Item):
         self.line = line
         self.evaluation: Evaluation | None = None
         self.hevval_payload: dict[str, Any] | None = None
+        self.hevval_diagnosis: dict[str, Any] | None = None
 
     @property
     def state(self) -> HevvalSession:
@@ -112,9 +113,12 @@ class SignalItem(_SpecItem):
         result = self.result
         signal = result.signal(self.name)
         self._record(signal)
+        diagnosis = self.state.diagnosis_for(self.evaluation, signal)
+        if diagnosis is not None:
+            self.hevval_diagnosis = {"spec": result.spec, **diagnosis}
         if signal.failures:
-            diagnosis = self.state.diagnosis_line(self.evaluation, signal)
-            raise ThresholdMissed(signal_failure_report(result, signal, diagnosis_line=diagnosis))
+            line = diagnosis.get("summary") if diagnosis else None
+            raise ThresholdMissed(signal_failure_report(result, signal, diagnosis_line=line))
         _raise_regressions(self.state.regressions_for(result, signal.path), self.name)
 
 

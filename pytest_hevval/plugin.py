@@ -47,10 +47,14 @@ def pytest_runtest_makereport(
     item: pytest.Item, call: pytest.CallInfo[None]
 ) -> Generator[None, pytest.TestReport, pytest.TestReport]:
     report = yield
-    payload = getattr(item, "hevval_payload", None)
-    if payload is not None and call.when == "call":
+    if call.when == "call":
         # Plain JSON-safe data rides on the report, so it reaches the xdist controller.
-        report.hevval_spec = payload  # type: ignore[attr-defined]
+        payload = getattr(item, "hevval_payload", None)
+        if payload is not None:
+            report.hevval_spec = payload  # type: ignore[attr-defined]
+        diagnosis = getattr(item, "hevval_diagnosis", None)
+        if diagnosis is not None:
+            report.hevval_diagnosis = diagnosis  # type: ignore[attr-defined]
     return report
 
 

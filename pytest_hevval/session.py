@@ -38,6 +38,9 @@ class HevvalSession:
     shipped: set[str] = field(default_factory=set)
     #: Lines for the terminal summary (history, comparison, ratchet).
     notes: list[str] = field(default_factory=list)
+    annotations: list[str] = field(default_factory=list)
+    diagnoses: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
+    received_diagnoses: dict[tuple[str, str], dict[str, Any]] = field(default_factory=dict)
     compare_rules: list[Any] = field(default_factory=list)
     ratchet_margin: float | None = None
     baseline: dict[str, Any] | None = None
@@ -172,13 +175,27 @@ class HevvalSession:
             if isinstance(side, dict) and side.get("path") and "://" not in str(side["path"]):
                 side["path"] = self.relative(str(side["path"]))
 
-    def diagnosis_line(self, evaluation: Evaluation | None, signal: SignalResult) -> str | None:
-        """One line naming the top significant finding for a failing signal, if enabled."""
-        if evaluation is None or self.option("diagnose") == "off":
+    def diagnosis_for(
+        self, evaluation: Evaluation | None, signal: SignalResult
+    ) -> dict[str, Any] | None:
+        """The diagnosis of the signal where this signal's error appears, if enabled."""
+        mode = self.option("diagnose")
+        if evaluation is None or mode == "off" or (mode == "failed" and signal.passed):
             return None
-        from .diagnose import headline
+        from .diagnose import diagnose_signal
 
-        return headline(evaluation, signal.origins[0] if signal.origins else signal.path)
+        target = signal.origins[0] if signal.origins else signal.path
+        key = (str(evaluation.spec.path), target)
+        if key not in self.diagnoses:
+            try:
+                self.diagnoses[key] = diagnose_signal(evaluation, target)
+            except HevvalError as exc:
+                self.diagnoses[key] = {"signal": target, "summary": f"not diagnosed: {exc}"}
+        return self.diagnoses[key]
+
+    def receive_diagnosis(self, payload: dict[str, Any]) -> None:
+        """Controller: keep a worker's diagnosis to show it in the reports."""
+        self.received_diagnoses[(payload["spec"], payload["signal"])] = payload
 
     def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
         """Rules of --hevval-compare-fail this signal (or Φ, for None) breaks vs the baseline."""
@@ -208,6 +225,9 @@ class HevvalSession:
         payload = getattr(report, "hevval_spec", None)
         if payload is not None:
             self.receive(payload)
+        diagnosis = getattr(report, "hevval_diagnosis", None)
+        if diagnosis is not None:
+            self.receive_diagnosis(diagnosis)
 
     def spec_results(self) -> list[SpecResult]:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
@@ -234,6 +254,53 @@ class HevvalSession:
         if failed and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
+    def _decorate(self, dicts: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        """Report copies of the results with each signal's diagnosis and history trend."""
+        trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        phis: dict[str, list[dict[str, Any]]] = {}
+        if not self.option("no-history"):
+            from .history import HistoryStore
+
+            for record in HistoryStore(self.history_dir()).records():
+                version = str(record.get("model_version", "?"))
+                for spec in record.get("specs", []):
+                    phis.setdefault(spec.get("spec", ""), []).append(
+                        {"version": version, "phi": spec.get("phi")}
+                    )
+                    for signal in spec.get("signals", []):
+                        trends.setdefault((spec.get("spec", ""), signal["path"]), []).append(
+                            {
+                                "version": version,
+                                "phi": spec.get("phi"),
+                                "lambdas": signal.get("lambdas"),
+                            }
+                        )
+        decorated = []
+        for result in dicts:
+            copy = dict(result)
+            signals = []
+            for signal in result["signals"]:
+                item = dict(signal)
+                found = self.received_diagnoses.get((result["spec"], signal["path"]))
+                if found is None and signal.get("origins"):
+                    found = self.received_diagnoses.get((result["spec"], signal["origins"][0]))
+                if found is not None:
+                    item["diagnosis"] = found
+                history = trends.get((result["spec"], signal["path"]))
+                if history:
+                    item["history"] = [
+                        *history,
+                        {
+                            "version": self.model_version,
+                            "phi": result["phi"],
+                            "lambdas": signal["lambdas"],
+                        },
+                    ]
+                signals.append(item)
+            copy["signals"] = signals
+            decorated.append(copy)
+        return decorated
+
     def _write_reports(self, dicts: list[dict[str, Any]]) -> bool:
         formats = str(self.option("report") or "")
         if formats:
@@ -241,7 +308,7 @@ class HevvalSession:
 
             try:
                 written = write_reports(
-                    dicts,
+                    self._decorate(dicts),
                     parse_formats(formats),
                     self.rootdir / str(self.option("report-dir")),
                     title="hevval validation report",
@@ -253,8 +320,8 @@ class HevvalSession:
         if os.environ.get("GITHUB_ACTIONS") == "true":
             from .report import github_annotations
 
-            for line in github_annotations(dicts, self.rootdir):
-                print(line)
+            # Printed by the terminal summary: a workflow command must start its own line.
+            self.annotations.extend(github_annotations(dicts, self.rootdir))
         return False
 
     def _compare(self, dicts: list[dict[str, Any]]) -> None:
@@ -313,8 +380,10 @@ class HevvalSession:
 
     def summarise(self, terminalreporter: Any) -> None:
         results = self.spec_results()
-        if not results and not self.notes:
+        if not results and not self.notes and not self.annotations:
             return
+        for line in self.annotations:
+            terminalreporter.write_line(line)
         terminalreporter.write_sep("=", "hevval validation summary")
         for line in tree_summary(results, details=bool(self.option("details"))):
             terminalreporter.write_line(line)

@@ -302,3 +302,39 @@ def test_cli_run_bad_spec_exit_code(pytester: pytest.Pytester) -> None:
     result = pytester.run(sys.executable, "-m", "pytest_hevval", "run", "bad.hevval.yaml")
     assert result.ret == 2
     assert "bad.hevval.yaml:1: reference: is required" in result.stderr.str()
+
+
+def test_reports_are_written_once_with_diagnosis(project: pytest.Pytester) -> None:
+    write_data(project.path, fault="leaf")
+    result = project.runpytest(
+        "--hevval", "-p", "xdist", "-n", "2", "--hevval-report=html,json,md", "--hevval-no-history"
+    )
+    result.assert_outcomes(passed=3, failed=3)
+    folder = project.path / ".hevval" / "report"
+    assert sorted(p.name for p in folder.iterdir()) == ["report.html", "report.json", "report.md"]
+    document = json.loads((folder / "report.json").read_text())
+    specs = document["specs"] if isinstance(document, dict) else document
+    signal = next(s for s in specs[0]["signals"] if s["path"] == "E/P/I")
+    assert signal["figures"]["overlay"]
+    assert "summary" in signal["diagnosis"]
+    assert "E/P/I" in (folder / "report.md").read_text()
+    html = (folder / "report.html").read_text()
+    assert "https://" not in html
+    assert "<script src" not in html
+
+
+def test_bad_report_format_is_a_usage_error(project: pytest.Pytester) -> None:
+    result = project.runpytest("--hevval", "--hevval-report=pdf")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--hevval-report" in result.stderr.str()
+
+
+def test_github_annotations_point_at_the_spec_line(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    write_data(project.path, fault="leaf")
+    result = project.runpytest("--hevval", "--hevval-no-history")
+    result.stdout.fnmatch_lines(
+        ["::error file=pack.hevval.yaml,line=18,title=hevval::pack: E/P/I:*"]
+    )

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import importlib
+import io
 import os
 import re
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -26,6 +27,7 @@ import numpy.typing as npt
 
 from ..errors import DataError, MissingExtraError, did_you_mean
 from .record import Channel, Reader, Record, SourceOptions, missing_column
+from .remote import is_url, parquet_source, read_url
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -143,6 +145,8 @@ def read_record(path: str, columns: Iterable[str] | None, options: SourceOptions
     """
     path = os.fspath(path)
     fmt = detect_format(path, options)
+    if is_url(path):
+        return read_url(path, columns, options, fmt, _READERS[fmt])
     if not os.path.exists(path):
         raise DataError(
             "file not found",
@@ -434,6 +438,21 @@ def _sniff_encoding(head: bytes) -> str:
     return "utf-8"
 
 
+def _check_encoding(path: str, encoding: str) -> None:
+    """Reject an `encoding:` Python does not know, or one that does not decode bytes to text."""
+    try:
+        # Empty input would skip the codec lookup. The header is decoded with "replace", which
+        # some codecs (idna) refuse.
+        b"\x00\x00\x00\x00".decode(encoding, errors="replace")
+    except (LookupError, UnicodeError):
+        raise DataError(
+            f"{encoding!r} is not a text encoding Python can read files in",
+            file=path,
+            key="encoding",
+            hint="set `encoding:` to a text encoding such as utf-8, latin-1 or cp1252",
+        ) from None
+
+
 def _header_line(head: bytes, encoding: str) -> str:
     text = head.decode(encoding, errors="replace")
     for line in text.splitlines():
@@ -484,6 +503,8 @@ def _read_delimited(
     import pandas as pd
 
     head = _read_head(path)
+    if options.encoding is not None:
+        _check_encoding(path, options.encoding)
     encoding = options.encoding or _sniff_encoding(head)
     header = _header_line(head, encoding)
     if not header:
@@ -690,7 +711,8 @@ def _read_parquet(path: str, columns: Iterable[str] | None, options: SourceOptio
     pa = _import("pyarrow", "reading Parquet files", "parquet")
     pq = _import("pyarrow.parquet", "reading Parquet files", "parquet")
     try:
-        parquet_file = pq.ParquetFile(path)
+        source, filesystem = parquet_source(path)
+        parquet_file = pq.ParquetFile(source, filesystem=filesystem)
         schema = parquet_file.schema_arrow
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise _corrupt(path, "Parquet", exc) from None
@@ -771,12 +793,22 @@ def _field_unit(field: Any) -> str | None:
 # HDF5 and MATLAB v7.3 (which is HDF5)
 
 
-def _open_hdf5(path: str, kind: str) -> Any:
+@contextmanager
+def _open_hdf5(path: str, kind: str) -> Iterator[Any]:
     h5py = _import("h5py", f"reading {kind} files", "hdf5" if kind == "HDF5" else "mat")
     try:
-        return h5py.File(path, "r")
+        handle = h5py.File(path, "r")
     except (OSError, ValueError) as exc:
         raise _corrupt(path, kind, exc) from None
+    with handle:
+        try:
+            yield handle
+        except DataError:
+            raise
+        except (RuntimeError, OSError, KeyError, ValueError) as exc:
+            # A damaged object header or heap surfaces only when the group is walked, as
+            # RuntimeError ("Object visitation failed") or OSError from the HDF5 library.
+            raise _corrupt(path, kind, exc) from None
 
 
 def _read_hdf5(path: str, columns: Iterable[str] | None, options: SourceOptions) -> Record:
@@ -1092,10 +1124,19 @@ def _disarm_half_open_mdf(exc: BaseException) -> None:
     asammdf's ``__del__`` calls ``close()`` on such an object, which then fails on attributes
     the constructor never set; the error surfaces as an unraisable exception (a warning under
     pytest). The object is only reachable through the traceback.
+
+    asammdf's ``MDF.__init__`` also leaves the data file open when the version field of the
+    identification block is not ASCII; that stream too is only reachable through the traceback
+    and would be reported as an unclosed file when collected.
     """
     traceback = exc.__traceback__
     while traceback is not None:
-        obj: Any = traceback.tb_frame.f_locals.get("self")
+        frame = traceback.tb_frame
+        if str(frame.f_globals.get("__name__", "")).startswith("asammdf"):
+            for value in list(frame.f_locals.values()):
+                if isinstance(value, io.IOBase) and not value.closed:
+                    value.close()
+        obj: Any = frame.f_locals.get("self")
         half_open = obj is not None and not getattr(obj, "_closed", True)
         if half_open and type(obj).__module__.startswith("asammdf.blocks.mdf_v"):
             tempfile = getattr(obj, "_tempfile", None)

@@ -97,6 +97,8 @@ class HistoryStore:
                 if self._publish(temp, final):
                     _fsync_directory(self.directory)
                     return final
+        except OSError as exc:
+            raise _write_error(self.directory, exc) from None
         finally:
             with contextlib.suppress(FileNotFoundError):
                 temp.unlink()
@@ -119,9 +121,11 @@ class HistoryStore:
                 handle.write(payload)
                 handle.flush()
                 os.fsync(handle.fileno())
-        except BaseException:
+        except BaseException as exc:
             with contextlib.suppress(OSError):
                 os.unlink(name)
+            if isinstance(exc, OSError):
+                raise _write_error(self.directory, exc) from None
             raise
         return Path(name)
 
@@ -141,7 +145,13 @@ class HistoryStore:
             return False
         os.close(fd)
         # The empty placeholder is ours alone; replacing it swaps in the full content at once.
-        os.replace(temp, final)
+        try:
+            os.replace(temp, final)
+        except OSError:
+            # Left behind, the empty placeholder would be listed as a problem on every read.
+            with contextlib.suppress(OSError):
+                os.unlink(final)
+            raise
         return True
 
     # -- reading ---------------------------------------------------------------------------
@@ -204,6 +214,15 @@ class HistoryStore:
         for entry in self.entries():
             seen.setdefault(entry.record["model_version"], None)
         return list(seen)
+
+
+def _write_error(directory: Path, exc: OSError) -> HistoryError:
+    return HistoryError(
+        f"cannot write the history record: {exc.strerror or exc}",
+        file=str(directory),
+        hint="free disk space or choose another folder with --hevval-history-dir; "
+        "the records already there are unchanged",
+    )
 
 
 def _fsync_directory(directory: Path) -> None:

@@ -134,9 +134,14 @@ class _Context:
     def number(self, value: Any, line: int, key: str) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.error(line, key, "must be a number", got=value)
-        if not math.isfinite(value):
+        try:
+            number = float(value)
+        except OverflowError:
+            # An integer written with hundreds of digits is beyond float range.
+            number = math.inf
+        if not math.isfinite(number):
             raise self.error(line, key, "must be a finite number", got=value)
-        return float(value)
+        return number
 
     def positive(self, value: Any, line: int, key: str) -> float:
         number = self.number(value, line, key)
@@ -225,6 +230,12 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         raise SpecError(f"invalid YAML: {problem}", file=file, line=line) from None
     except yaml.YAMLError as exc:
         raise SpecError(f"invalid YAML: {exc}", file=file) from None
+    except RecursionError:
+        raise SpecError(
+            "invalid YAML: nested too deeply",
+            file=file,
+            hint="a spec needs a few levels of nesting; check for runaway brackets or indentation",
+        ) from None
     if document is None:
         raise SpecError(
             "the spec file is empty", file=file, line=1, hint="see docs/spec.md for the format"
@@ -318,7 +329,8 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
     path: str | None = None
     if kind in ("path", "fmu"):
         raw = context.text(mapping[kind], mapping.line_of(kind), _join(key, kind))
-        path = raw if "://" in raw else str((base / raw).resolve())
+        where = _join(key, kind)
+        path = raw if "://" in raw else _resolve(context, base, raw, mapping.line_of(kind), where)
     callable_ref = None
     if kind == "callable":
         callable_ref = context.text(mapping["callable"], mapping.line_of("callable"), key)
@@ -366,6 +378,16 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
     )
+
+
+def _resolve(context: _Context, base: Path, raw: str, line: int, key: str) -> str:
+    if "\x00" in raw:
+        raise context.error(line, key, "a file path cannot contain a NUL character", got=raw)
+    try:
+        return str((base / raw).resolve())
+    except (OSError, RuntimeError) as exc:
+        # Python before 3.13 raises RuntimeError for a symlink loop.
+        raise context.error(line, key, f"cannot resolve the path ({exc})", got=raw) from None
 
 
 def _plain_mapping(context: _Context) -> Callable[[Any, int, str], dict[str, Any]]:

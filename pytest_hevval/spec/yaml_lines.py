@@ -37,6 +37,21 @@ class LineList(list[Any]):
 
 
 class _LineLoader(yaml.SafeLoader):
+    def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
+        try:
+            return super().construct_object(node, deep=deep)
+        except (yaml.YAMLError, RecursionError):
+            raise
+        except (ValueError, TypeError, KeyError, AttributeError, OverflowError) as exc:
+            # PyYAML's safe constructors fail with plain Python errors on values such as
+            # `2001-13-01`, `!!int 0x`, `!!bool maybe` or an integer of 5000 digits; as a YAML
+            # error the value keeps its line.
+            tag = str(node.tag).rsplit(":", 1)[-1]
+            problem = f"cannot read this value as {tag}"
+            if isinstance(exc, (ValueError, OverflowError)) and str(exc):
+                problem += f" ({exc})"
+            raise yaml.constructor.ConstructorError(None, None, problem, node.start_mark) from None
+
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
         mapping = LineDict()
         mapping.line = node.start_mark.line + 1

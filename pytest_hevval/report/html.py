@@ -1,0 +1,164 @@
+"""The self-contained HTML report: one file, CSS inline, no scripts, no external URLs.
+
+The glyph plot is a base64 PNG (matplotlib); the per-signal plots are inline SVG written
+directly from the figure data (:mod:`pytest_hevval.report.svg`).
+
+jinja2 (autoescaping on) and matplotlib are imported on first use. Everything the page shows
+comes from the result dicts via :mod:`pytest_hevval.report.model`, the same view-model as the
+JSON and Markdown reports.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ..errors import MissingExtraError
+from . import model, plots, svg
+
+__all__ = ["render_html"]
+
+_TEMPLATE = "report.html.j2"
+
+
+def _fmt(value: object, digits: int = 4) -> str:
+    if not model.is_finite_number(value):
+        return "—"
+    number = float(value)
+    if number != 0 and (abs(number) >= 1e6 or abs(number) < 10 ** -(digits - 1)):
+        return f"{number:.{digits - 1}e}"
+    return f"{number:.{digits}f}"
+
+
+def _fmt_g(value: object, digits: int = 4) -> str:
+    if not model.is_finite_number(value):
+        return "—"
+    return f"{float(value):.{digits}g}"
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_-]+", "-", text).strip("-") or "x"
+
+
+def _percent(value: object) -> float:
+    """Position of a [0, 1] value on a bar, in percent."""
+    if not model.is_finite_number(value):
+        return 0.0
+    return max(0.0, min(100.0, 100.0 * float(value)))
+
+
+def _signal_view(
+    spec_index: int, signal: Mapping[str, Any], anchors: Mapping[str, str]
+) -> dict[str, Any]:
+    diagnosis = signal.get("diagnosis")
+    history = signal.get("history")
+    failed = signal.get("passed") is False
+    origins = [str(o) for o in model.items(signal.get("origins"))]
+    path = str(signal.get("path") or signal.get("name") or "")
+    return {
+        "signal": signal,
+        "path": path,
+        "anchor": anchors.get(path, f"spec{spec_index}-{_slug(path)}"),
+        "cells": model.cells(signal),
+        "failed": failed,
+        "is_origin": failed and bool(signal.get("origin")),
+        "origins": [(o, anchors.get(o)) for o in origins if o != path],
+        "margin": model.margin(signal),
+        "plot": svg.signal_svg(signal, f"{spec_index}-{anchors.get(path, path)}"),
+        "diagnosis": diagnosis if isinstance(diagnosis, Mapping) else None,
+        "history": svg.history_svg(history) if isinstance(history, Sequence) else None,
+    }
+
+
+def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
+    anchors: dict[str, str] = {}
+    for j, signal in enumerate(model.items(spec.get("signals"))):
+        path = str(signal.get("path") or signal.get("name") or "")
+        anchors.setdefault(path, f"spec{index}-{j}-{_slug(path)}")
+    views = {id(s): _signal_view(index, s, anchors) for s in model.ordered_signals(spec)}
+    tree = [(views[id(s)], depth) for s, depth in model.tree_rows(spec)]
+    signals = list(views.values())
+    phi = spec.get("phi")
+    min_phi = spec.get("min_phi")
+    return {
+        "spec": spec,
+        "index": index,
+        "anchor": f"spec{index}",
+        "passed": spec.get("passed") is not False,
+        "phi": phi,
+        "min_phi": min_phi,
+        "phi_bar": _percent(phi),
+        "min_bar": _percent(min_phi) if model.is_finite_number(min_phi) else None,
+        "phi_gap": (float(phi) - float(min_phi))
+        if model.is_finite_number(phi) and model.is_finite_number(min_phi)
+        else None,
+        "alignment": spec.get("alignment") if isinstance(spec.get("alignment"), Mapping) else {},
+        "glyph": plots.glyph_plot(spec),
+        "tree": tree,
+        "signals": signals,
+        "failing": [v for v in signals if v["failed"]],
+        "weights": spec.get("weights"),
+    }
+
+
+def _environment() -> Any:
+    try:
+        import jinja2
+    except ImportError as exc:
+        raise MissingExtraError.for_extra("the HTML report", "html", "jinja2") from exc
+    env = jinja2.Environment(
+        loader=jinja2.PackageLoader("pytest_hevval.report", "templates"),
+        # Results may come from older or hand-written JSON: a missing optional key renders
+        # as empty (and "—" through the number filters) instead of failing the whole report.
+        autoescape=True,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
+    env.filters["fmt"] = _fmt
+    env.filters["fmt_g"] = _fmt_g
+    return env
+
+
+def render_html(
+    spec_results: Sequence[Mapping[str, Any]], *, title: str, generated_utc: str
+) -> str:
+    """The HTML report of ``spec_results`` as one self-contained page.
+
+    Parameters
+    ----------
+    spec_results:
+        Per-spec result dicts (the JSON report's ``specs``).
+    title:
+        Page title and heading.
+    generated_utc:
+        Timestamp shown in the header; passed in so that rendering stays a pure function.
+    """
+    env = _environment()
+    specs = [_spec_view(i, spec) for i, spec in enumerate(spec_results)]
+    anchors = {
+        (view["index"], sv["path"]): sv["anchor"] for view in specs for sv in view["signals"]
+    }
+    worst = [
+        {
+            "row": row,
+            "anchor": anchors.get(
+                (row.spec_index, str(row.signal.get("path") or row.signal.get("name") or ""))
+            ),
+        }
+        for row in model.worst_rows(spec_results, limit=12)
+    ]
+    template = env.get_template(_TEMPLATE)
+    text: str = template.render(
+        title=title,
+        generated_utc=generated_utc,
+        summary=model.summary(spec_results),
+        specs=specs,
+        worst=worst,
+        characteristics=model.CHARACTERISTICS,
+        labels=model.LABELS,
+        short_labels=model.SHORT_LABELS,
+        colours=model.CHARACTERISTIC_COLOURS,
+        isfinite=model.is_finite_number,
+    )
+    return text

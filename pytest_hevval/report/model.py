@@ -1,0 +1,318 @@
+"""One view-model for every report format.
+
+HTML, JSON and Markdown all read the per-spec result dicts through these functions, so the order
+of signals, what counts as "worst", and the pass/fail colour of every λ agree across formats.
+Pure Python on plain dicts: no numpy, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal, TypeGuard, cast
+
+__all__ = [
+    "CHARACTERISTICS",
+    "CHARACTERISTIC_COLOURS",
+    "LABELS",
+    "SHORT_LABELS",
+    "Cell",
+    "GlyphPoint",
+    "WorstRow",
+    "cells",
+    "failing_signals",
+    "glyph_points",
+    "is_finite_number",
+    "items",
+    "margin",
+    "ordered_signals",
+    "signal_order",
+    "summary",
+    "tree_rows",
+    "worst_rows",
+]
+
+# Kept literally (not imported from core) so that rendering never imports numpy/scipy.
+CHARACTERISTICS: tuple[str, ...] = (
+    "lag_correlation",
+    "derivative_match",
+    "mae",
+    "rms",
+    "anomaly",
+    "error_std",
+    "emergent",
+)
+LABELS: dict[str, str] = {
+    "lag_correlation": "lag correlation",
+    "derivative_match": "derivative match",
+    "mae": "MAE",
+    "rms": "RMS",
+    "anomaly": "anomaly (RMS−MAE)",
+    "error_std": "error spread",
+    "emergent": "emergent",
+}
+SHORT_LABELS: dict[str, str] = {name: f"λ{i}" for i, name in enumerate(CHARACTERISTICS, 1)}
+#: Fill colour of each characteristic λ1…λ7 (Okabe–Ito, safe for colour-blind readers).
+CHARACTERISTIC_COLOURS: dict[str, str] = {
+    "lag_correlation": "#0072B2",
+    "derivative_match": "#E69F00",
+    "mae": "#009E73",
+    "rms": "#56B4E9",
+    "anomaly": "#CC79A7",
+    "error_std": "#D55E00",
+    "emergent": "#F0E442",
+}
+
+Status = Literal["pass", "fail", "ungated"]
+
+
+def is_finite_number(value: object) -> TypeGuard[float]:
+    """A real, finite number (numpy scalars included, booleans not)."""
+    if isinstance(value, float):
+        return math.isfinite(value)
+    return (
+        isinstance(value, numbers.Real)
+        and not isinstance(value, bool)
+        and math.isfinite(float(value))
+    )
+
+
+def items(value: object) -> list[Any]:
+    """``value`` as a list: ``None`` and scalars give ``[]``; numpy arrays work too."""
+    if value is None or isinstance(value, (str, bytes, Mapping)):
+        return []
+    try:
+        return list(cast("Iterable[Any]", value))
+    except TypeError:
+        return []
+
+
+def _lambdas(signal: Mapping[str, Any]) -> list[float | None]:
+    raw = items(signal.get("lambdas"))
+    out: list[float | None] = []
+    for i in range(len(CHARACTERISTICS)):
+        value = raw[i] if i < len(raw) else None
+        out.append(float(value) if is_finite_number(value) else None)
+    return out
+
+
+def _thresholds(signal: Mapping[str, Any]) -> dict[str, float]:
+    raw = signal.get("thresholds")
+    if not isinstance(raw, Mapping):
+        return {}
+    return {str(k): float(v) for k, v in raw.items() if is_finite_number(v)}
+
+
+def _failed_names(signal: Mapping[str, Any]) -> set[str]:
+    return {
+        str(f.get("characteristic"))
+        for f in items(signal.get("failures"))
+        if isinstance(f, Mapping)
+    }
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One λ of one signal, with its gate."""
+
+    characteristic: str
+    index: int
+    value: float | None
+    threshold: float | None
+    status: Status
+
+    @property
+    def label(self) -> str:
+        return SHORT_LABELS[self.characteristic]
+
+
+def cells(signal: Mapping[str, Any]) -> list[Cell]:
+    """λ1…λ7 of ``signal`` coloured against their thresholds.
+
+    A characteristic listed in ``failures`` is failing even if its value would pass (the engine
+    is the judge, e.g. for tolerances); otherwise a value below its threshold fails.
+    """
+    values = _lambdas(signal)
+    gates = _thresholds(signal)
+    failed = _failed_names(signal)
+    out: list[Cell] = []
+    for i, (name, value) in enumerate(zip(CHARACTERISTICS, values, strict=True), 1):
+        threshold = gates.get(name)
+        status: Status
+        if name in failed:
+            status = "fail"
+        elif threshold is None:
+            status = "ungated"
+        elif value is None or value < threshold:
+            status = "fail"
+        else:
+            status = "pass"
+        out.append(Cell(name, i, value, threshold, status))
+    return out
+
+
+def margin(signal: Mapping[str, Any]) -> float | None:
+    """Smallest λ − threshold over the gated characteristics (negative: failing)."""
+    gaps = [
+        c.value - c.threshold
+        for c in cells(signal)
+        if c.threshold is not None and c.value is not None
+    ]
+    return min(gaps) if gaps else None
+
+
+def _min_lambda(signal: Mapping[str, Any]) -> float:
+    values = [v for v in _lambdas(signal) if v is not None]
+    return min(values) if values else 1.0
+
+
+def signal_order(signal: Mapping[str, Any]) -> tuple[int, float, float, str]:
+    """Sort key: failing first, then the smallest margin, then the smallest λ."""
+    gap = margin(signal)
+    return (
+        0 if signal.get("passed") is False else 1,
+        gap if gap is not None else math.inf,
+        _min_lambda(signal),
+        str(signal.get("path", "")),
+    )
+
+
+def ordered_signals(spec: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    return sorted(items(spec.get("signals")), key=signal_order)
+
+
+def failing_signals(spec: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    return [s for s in ordered_signals(spec) if s.get("passed") is False]
+
+
+def _parent(path: str) -> str | None:
+    return path.rsplit("/", 1)[0] if "/" in path else None
+
+
+def tree_rows(spec: Mapping[str, Any]) -> list[tuple[Mapping[str, Any], int]]:
+    """Signals depth-first as (signal, depth), each set's root first, siblings by position.
+
+    A signal's parent is the signal whose path is its own minus the last segment; signals whose
+    parent is not in the spec start a new root.
+    """
+    signals: list[Mapping[str, Any]] = items(spec.get("signals"))
+    by_path = {str(s.get("path", "")): s for s in signals}
+    children: dict[str | None, list[Mapping[str, Any]]] = {}
+    for s in signals:
+        parent = _parent(str(s.get("path", "")))
+        if parent not in by_path:
+            parent = None
+        children.setdefault(parent, []).append(s)
+
+    def key(s: Mapping[str, Any]) -> tuple[float, float, float]:
+        def num(name: str) -> float:
+            value = s.get(name)
+            return float(value) if is_finite_number(value) else math.inf
+
+        return (num("set"), num("level"), num("position"))
+
+    rows: list[tuple[Mapping[str, Any], int]] = []
+    seen: set[int] = set()
+
+    def visit(s: Mapping[str, Any], depth: int) -> None:
+        if id(s) in seen:
+            return
+        seen.add(id(s))
+        rows.append((s, depth))
+        for child in sorted(children.get(str(s.get("path", "")), []), key=key):
+            visit(child, depth + 1)
+
+    for root in sorted(children.get(None, []), key=key):
+        visit(root, 0)
+    return rows
+
+
+@dataclass(frozen=True)
+class GlyphPoint:
+    """One glyph of the behavioural plot (paper Fig. 10)."""
+
+    signal: str
+    characteristic: str
+    index: int
+    value: float
+    weight: float
+    level: int
+    status: Status
+
+
+def _weights(spec: Mapping[str, Any]) -> list[float]:
+    raw = items(spec.get("weights"))
+    return [
+        float(raw[i]) if i < len(raw) and is_finite_number(raw[i]) else 1.0
+        for i in range(len(CHARACTERISTICS))
+    ]
+
+
+def glyph_points(spec: Mapping[str, Any]) -> list[GlyphPoint]:
+    """Every (signal, λ) pair at x = λ, y = α·β."""
+    beta = _weights(spec)
+    out: list[GlyphPoint] = []
+    for s in items(spec.get("signals")):
+        alpha = float(s["alpha"]) if is_finite_number(s.get("alpha")) else 1.0
+        level = int(s["level"]) if is_finite_number(s.get("level")) else 1
+        for c in cells(s):
+            if c.value is None:
+                continue
+            out.append(
+                GlyphPoint(
+                    signal=str(s.get("path") or s.get("name") or "?"),
+                    characteristic=c.characteristic,
+                    index=c.index,
+                    value=c.value,
+                    weight=alpha * beta[c.index - 1],
+                    level=max(1, level),
+                    status=c.status,
+                )
+            )
+    return out
+
+
+@dataclass(frozen=True)
+class WorstRow:
+    spec: str
+    spec_index: int
+    signal: Mapping[str, Any]
+    worst: Cell | None
+
+    @property
+    def margin(self) -> float | None:
+        return margin(self.signal)
+
+
+def _worst_cell(signal: Mapping[str, Any]) -> Cell | None:
+    all_cells = [c for c in cells(signal) if c.value is not None]
+    if not all_cells:
+        return None
+    gated = [c for c in all_cells if c.threshold is not None]
+    if gated:
+        return min(gated, key=lambda c: (c.value or 0.0) - (c.threshold or 0.0))
+    return min(all_cells, key=lambda c: c.value or 0.0)
+
+
+def worst_rows(spec_results: Sequence[Mapping[str, Any]], limit: int = 10) -> list[WorstRow]:
+    """The ``limit`` worst signals of all specs: failing first, then the closest to failing."""
+    rows = [
+        WorstRow(str(spec.get("name", "")), i, s, _worst_cell(s))
+        for i, spec in enumerate(spec_results)
+        for s in items(spec.get("signals"))
+    ]
+    rows.sort(key=lambda r: signal_order(r.signal))
+    return rows[:limit]
+
+
+def summary(spec_results: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+    specs = list(spec_results)
+    signals = [s for spec in specs for s in items(spec.get("signals"))]
+    return {
+        "specs": len(specs),
+        "specs_failed": sum(1 for spec in specs if spec.get("passed") is False),
+        "signals": len(signals),
+        "signals_failed": sum(1 for s in signals if s.get("passed") is False),
+    }

@@ -1,0 +1,244 @@
+"""Machine- and chat-readable reports: JSON (the source of truth), Markdown, CI annotations.
+
+Standard library only, so these work without the ``html`` extra.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path, PurePath
+from typing import Any
+
+from . import model
+
+__all__ = [
+    "REPORT_SCHEMA_VERSION",
+    "github_annotations",
+    "json_safe",
+    "render_json",
+    "render_markdown",
+]
+
+#: Version of the report.json layout (the per-spec dicts carry their own ``schema_version``).
+REPORT_SCHEMA_VERSION = 1
+
+# A step summary or PR comment should stay readable; the full list is in the HTML/JSON.
+_MARKDOWN_SIGNALS = 15
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` as plain JSON data: NaN/inf become ``null``, numpy scalars Python numbers."""
+    if isinstance(value, Mapping):
+        return {str(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if value is None or isinstance(value, (bool, str, int)):
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, PurePath):
+        return value.as_posix()
+    # numpy arrays and scalars: tolist() gives plain Python numbers (or nested lists).
+    tolist = getattr(value, "tolist", None)
+    if callable(tolist):
+        return json_safe(tolist())
+    return str(value)
+
+
+def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    out = []
+    for row in model.worst_rows(spec_results, limit=12):
+        cell = row.worst
+        out.append(
+            {
+                "spec": row.spec,
+                "spec_index": row.spec_index,
+                "path": row.signal.get("path"),
+                "passed": row.signal.get("passed"),
+                "characteristic": cell.characteristic if cell else None,
+                "value": cell.value if cell else None,
+                "threshold": cell.threshold if cell else None,
+                "margin": row.margin,
+                "origins": list(model.items(row.signal.get("origins"))),
+            }
+        )
+    return out
+
+
+def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
+    """report.json: every spec result as given, plus the summary and worst-signal table.
+
+    Keys are sorted and separators fixed, so equal results give byte-identical files.
+    """
+    payload = {
+        "report_schema_version": REPORT_SCHEMA_VERSION,
+        "summary": model.summary(spec_results),
+        "worst": _worst_json(spec_results),
+        "specs": list(spec_results),
+    }
+    options: dict[str, Any] = {
+        "sort_keys": True,
+        "ensure_ascii": False,
+        "allow_nan": False,
+        "separators": (",", ":"),
+    }
+    try:
+        # Fast path: plain data goes straight to the C encoder; only numpy values and paths
+        # need the hook. Walking tens of MB of figure data in Python would take many seconds.
+        text = json.dumps(payload, default=_json_default, **options)
+    except ValueError:  # NaN or inf somewhere: clean the whole tree
+        text = json.dumps(json_safe(payload), **options)
+    return text + "\n"
+
+
+def _json_default(value: Any) -> Any:
+    cleaned = json_safe(value)
+    if isinstance(cleaned, str) and not isinstance(value, (str, PurePath)):
+        raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+    return cleaned
+
+
+def _num(value: object, digits: int = 4) -> str:
+    return f"{float(value):.{digits}f}" if model.is_finite_number(value) else "—"
+
+
+def _md(text: object) -> str:
+    """Text safe inside a GitHub Markdown table cell (no table breaks, no raw HTML)."""
+    return (
+        str(text)
+        .replace("\\", "\\\\")
+        .replace("|", "\\|")
+        .replace("<", "&lt;")
+        .replace(">", "&gt;")
+        .replace("\n", " ")
+    )
+
+
+def _code(text: object) -> str:
+    body = _md(text).replace("`", "'")
+    return f"`{body}`"
+
+
+def _below(signal: Mapping[str, Any]) -> list[str]:
+    parts = []
+    for c in model.cells(signal):
+        if c.status == "fail":
+            threshold = f" < {_num(c.threshold, 3)}" if c.threshold is not None else ""
+            parts.append(
+                f"{c.label} {model.LABELS[c.characteristic]} {_num(c.value, 3)}{threshold}"
+            )
+    return parts
+
+
+def _where(signal: Mapping[str, Any]) -> tuple[bool, list[str]]:
+    """Whether the error appears in ``signal`` itself, and the other signals it appears in."""
+    path = str(signal.get("path") or "")
+    origins = [str(o) for o in model.items(signal.get("origins"))]
+    others = [o for o in origins if o != path]
+    here = bool(signal.get("origin")) or path in origins or not origins
+    return here, others
+
+
+def _where_text(signal: Mapping[str, Any]) -> str:
+    here, others = _where(signal)
+    return ", ".join((["here"] if here else []) + others)
+
+
+def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
+    """A short summary for a GitHub step summary or PR comment."""
+    counts = model.summary(spec_results)
+    ok = counts["specs_failed"] == 0
+    mark = "✅" if ok else "❌"
+    lines = [
+        f"### {mark} hevval: {counts['specs'] - counts['specs_failed']} of {counts['specs']} "
+        f"specs passed · {counts['signals_failed']} of {counts['signals']} signals failing",
+        "",
+        "| | spec | Φ | min Φ | failing signals |",
+        "|:-:|---|--:|--:|--:|",
+    ]
+    for spec in spec_results:
+        failing = model.failing_signals(spec)
+        lines.append(
+            f"| {'❌' if spec.get('passed') is False else '✅'} | {_md(spec.get('name', ''))} "
+            f"| {_num(spec.get('phi'))} | {_num(spec.get('min_phi'))} "
+            f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
+        )
+    for spec in spec_results:
+        failing = model.failing_signals(spec)
+        if spec.get("passed") is not False and not failing:
+            continue
+        phi, min_phi = spec.get("phi"), spec.get("min_phi")
+        relation = (
+            "<"
+            if model.is_finite_number(phi)
+            and model.is_finite_number(min_phi)
+            and float(phi) < float(min_phi)
+            else "≥"
+        )
+        mark = "❌" if spec.get("passed") is False else "✅"
+        lines += [
+            "",
+            f"**{mark} {_md(spec.get('name', ''))}** — Φ {_num(phi)} {relation} min Φ "
+            f"{_num(min_phi)} ({_code(spec.get('spec', ''))})",
+        ]
+        if not failing:
+            continue
+        lines += ["", "| signal | below threshold | error appears in |", "|---|---|---|"]
+        for signal in failing[:_MARKDOWN_SIGNALS]:
+            line = signal.get("line")
+            where = f" (line {line})" if isinstance(line, int) else ""
+            below = "; ".join(_below(signal)) or "—"
+            places = _md(_where_text(signal))
+            lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
+        if len(failing) > _MARKDOWN_SIGNALS:
+            lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
+    return "\n".join(lines) + "\n"
+
+
+def _escape_data(text: str) -> str:
+    return text.replace("%", "%25").replace("\r", "%0D").replace("\n", "%0A")
+
+
+def _escape_property(text: str) -> str:
+    return _escape_data(text).replace(":", "%3A").replace(",", "%2C")
+
+
+def _relative(spec_path: str, rootdir: Path | str) -> str:
+    path = Path(spec_path)
+    if path.is_absolute():
+        with contextlib.suppress(ValueError):
+            path = path.resolve().relative_to(Path(rootdir).resolve())
+    return path.as_posix()
+
+
+def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path | str) -> list[str]:
+    """``::error`` workflow commands pointing at the spec line of every failing signal.
+
+    A spec whose Φ is below min Φ gets one more, file-level annotation first. Within a spec the
+    worst signals come first, because GitHub shows only the first few annotations of a step.
+    """
+    out: list[str] = []
+    for spec in spec_results:
+        name = str(spec.get("name", ""))
+        file = _escape_property(_relative(str(spec.get("spec", "")), rootdir))
+        phi, min_phi = spec.get("phi"), spec.get("min_phi")
+        if (
+            model.is_finite_number(phi)
+            and model.is_finite_number(min_phi)
+            and float(phi) < float(min_phi)
+        ):
+            message = f"{name}: Φ {_num(phi)} is below min Φ {_num(min_phi)}"
+            out.append(f"::error file={file},title=hevval::{_escape_data(message)}")
+        for signal in model.failing_signals(spec):
+            below = "; ".join(_below(signal)) or "failed"
+            here, others = _where(signal)
+            places = (["this signal"] if here else []) + others
+            origin = "the error appears in " + " and ".join(places)
+            message = f"{name}: {signal.get('path', '')}: {below} ({origin})"
+            line = signal.get("line")
+            location = f",line={line}" if isinstance(line, int) and line > 0 else ""
+            out.append(f"::error file={file}{location},title=hevval::{_escape_data(message)}")
+    return out

@@ -1,0 +1,113 @@
+"""Writing report files: the ``--hevval-report`` grammar and atomic writes."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import secrets
+from collections.abc import Mapping, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from ..errors import HevvalError, did_you_mean
+
+__all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
+
+#: Report formats in the order they are written, with their file names.
+FILE_NAMES: dict[str, str] = {"html": "report.html", "json": "report.json", "md": "report.md"}
+FORMATS: tuple[str, ...] = tuple(FILE_NAMES)
+_ALIASES = {"markdown": "md", "htm": "html"}
+
+
+class ReportOptionError(HevvalError, ValueError):
+    """A ``--hevval-report`` value names no known format."""
+
+
+def parse_formats(value: str) -> set[str]:
+    """Formats named in a comma-separated ``--hevval-report`` value, e.g. ``"html,json,md"``.
+
+    Names are case-insensitive and may repeat; ``markdown`` means ``md``.
+
+    Raises
+    ------
+    ReportOptionError
+        An empty value or an unknown name.
+    """
+    names = [part.strip().lower() for part in value.split(",")]
+    names = [_ALIASES.get(name, name) for name in names if name]
+    choices = ", ".join(FORMATS)
+    if not names:
+        raise ReportOptionError(
+            f"--hevval-report: expected a comma-separated list of formats (got {value!r})",
+            hint=f"choose from {choices}, e.g. --hevval-report=html,json,md",
+        )
+    for name in names:
+        if name not in FILE_NAMES:
+            suggestion = did_you_mean(name, FORMATS)
+            raise ReportOptionError(
+                f"--hevval-report: unknown report format {name!r} (choose from {choices})",
+                hint=suggestion or None,
+            )
+    return set(names)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Readers see the old file or the new one, never half of one.
+
+    The temporary file is opened with mode "x" rather than by :func:`tempfile.mkstemp`, so it
+    gets the usual permissions (umask applied) instead of 0600.
+    """
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "x", encoding="utf-8", newline="\n") as handle:
+            handle.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_reports(
+    spec_results: Sequence[Mapping[str, Any]],
+    formats: set[str],
+    directory: Path,
+    *,
+    title: str = "hevval validation report",
+    generated_utc: str | None = None,
+) -> list[Path]:
+    """Write report.html / report.json / report.md for ``formats`` into ``directory``.
+
+    The directory is created if needed; each file is replaced atomically. Returns the written
+    paths in the order html, json, md.
+    """
+    unknown = sorted(set(formats) - set(FILE_NAMES))
+    if unknown:
+        raise ReportOptionError(
+            f"--hevval-report: unknown report format {unknown[0]!r} "
+            f"(choose from {', '.join(FORMATS)})"
+        )
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    stamp = generated_utc or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    written: list[Path] = []
+    for name in FORMATS:
+        if name not in formats:
+            continue
+        if name == "html":
+            from .html import render_html
+
+            text = render_html(spec_results, title=title, generated_utc=stamp)
+        elif name == "json":
+            from .text import render_json
+
+            text = render_json(spec_results)
+        else:
+            from .text import render_markdown
+
+            text = render_markdown(spec_results)
+        path = directory / FILE_NAMES[name]
+        _write_atomic(path, text)
+        written.append(path)
+    return written

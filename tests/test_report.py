@@ -1,0 +1,629 @@
+"""Reports: figure data, the view-model, HTML / JSON / Markdown, CI annotations, files."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import re
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_hevval.core.characteristics import signal_characteristics
+from pytest_hevval.errors import DegenerateSignalError, HevvalError, MissingExtraError
+from pytest_hevval.report import (
+    ReportOptionError,
+    figure_data,
+    github_annotations,
+    model,
+    parse_formats,
+    render_html,
+    render_json,
+    render_markdown,
+    svg,
+    write_reports,
+)
+
+STAMP = "2026-01-01 00:00:00 UTC"
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _pair(n: int, seed: int = 0, lag: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    ref = 40.0 * np.sin(t / 97.0) + 5.0 * np.sin(t / 7.0) + rng.normal(0.0, 1.0, n)
+    sim = np.roll(ref, lag) * 0.97 + rng.normal(0.0, 1.5, n)
+    return ref, sim
+
+
+def _signal(
+    path: str,
+    *,
+    lambdas: list[float] | None = None,
+    thresholds: dict[str, float] | None = None,
+    figures: dict[str, Any] | None = None,
+    origin: bool = False,
+    origins: list[str] | None = None,
+    line: int = 10,
+    level: int | None = None,
+    position: int = 1,
+) -> dict[str, Any]:
+    lambdas = lambdas or [0.99, 0.9, 0.95, 0.94, 0.99, 0.95, 1.0]
+    thresholds = thresholds or {}
+    failures = [
+        {"characteristic": name, "value": lambdas[i], "threshold": thresholds[name]}
+        for i, name in enumerate(model.CHARACTERISTICS)
+        if name in thresholds and lambdas[i] < thresholds[name]
+    ]
+    return {
+        "path": path,
+        "name": path.rsplit("/", 1)[-1],
+        "set": 1,
+        "level": level if level is not None else path.count("/") + 1,
+        "position": position,
+        "alpha": 1.0,
+        "line": line,
+        "unit": "kW",
+        "lambdas": lambdas,
+        "lag_s": -0.2,
+        "peak_correlation": 0.99,
+        "mae": 1.2,
+        "rms": 2.0,
+        "delta_e": 0.8,
+        "error_std": 1.9,
+        "mean_error": 0.1,
+        "reference_range": 80.0,
+        "n_samples": 1000,
+        "thresholds": thresholds,
+        "failures": failures,
+        "passed": not failures,
+        "origin": origin,
+        "origins": origins if origins is not None else ([path] if failures else []),
+        "figures": figures,
+        "diagnosis": None,
+        "history": None,
+    }
+
+
+def _spec(signals: list[dict[str, Any]], *, phi: float = 0.94, min_phi: float = 0.9) -> dict:
+    return {
+        "schema_version": 1,
+        "name": "i3 trip A01",
+        "spec": "specs/trip_a01.hevval.yaml",
+        "spec_hash": "abc123",
+        "phi": phi,
+        "min_phi": min_phi,
+        "passed": phi >= min_phi and all(s["passed"] for s in signals),
+        "alignment": {
+            "rate_hz": 10.0,
+            "start_s": 0.0,
+            "stop_s": 99.9,
+            "n_samples": 1000,
+            "offset_s": 0.0,
+            "coverage": 1.0,
+        },
+        "signals": signals,
+    }
+
+
+@pytest.fixture(scope="module")
+def figures() -> dict[str, Any]:
+    ref, sim = _pair(5000, lag=3)
+    return figure_data(ref, sim, dt=0.1, start_s=0.0, max_lag=100)
+
+
+@pytest.fixture
+def results(figures: dict[str, Any]) -> list[dict[str, Any]]:
+    return _results(figures)
+
+
+@pytest.fixture(scope="module")
+def page(figures: dict[str, Any]) -> str:
+    """The HTML report of :func:`_results`, rendered once for the read-only checks."""
+    return render_html(_results(figures), title="Validation", generated_utc=STAMP)
+
+
+def _results(figures: dict[str, Any]) -> list[dict[str, Any]]:
+    """A spec whose P_batt fails on MAE (origin) and whose parent E_batt inherits it."""
+    parent = _signal(
+        "E_batt",
+        lambdas=[0.99, 0.9, 0.95, 0.94, 0.99, 0.95, 0.82],
+        thresholds={"emergent": 0.85},
+        origins=["E_batt/P_batt"],
+        line=8,
+        figures=figures,
+    )
+    child = _signal(
+        "E_batt/P_batt",
+        lambdas=[0.99, 0.9, 0.85, 0.94, 0.99, 0.95, 1.0],
+        thresholds={"mae": 0.9, "lag_correlation": 0.95},
+        origin=True,
+        line=14,
+        figures=figures,
+    )
+    sibling = _signal(
+        "E_batt/U_batt", thresholds={"mae": 0.9}, line=20, position=2, figures=figures
+    )
+    good = _spec([_signal("v", thresholds={"mae": 0.9}, figures=figures)], phi=0.97)
+    good["name"] = "i3 trip A02"
+    good["spec"] = "specs/trip_a02.hevval.yaml"
+    return [_spec([sibling, parent, child], phi=0.8123), good]
+
+
+# --------------------------------------------------------------------------- figure data
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n=st.integers(min_value=3, max_value=5000),
+    points=st.integers(min_value=1, max_value=700),
+    seed=st.integers(min_value=0, max_value=2**31),
+)
+def test_envelope_holds_the_true_extremes_of_every_bucket(n: int, points: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ref = rng.normal(0.0, 10.0, n).cumsum()
+    sim = ref + rng.standard_cauchy(n)
+    data = figure_data(ref, sim, dt=0.01, start_s=3.0, max_lag=min(50, n - 1), points=points)
+    ov = data["overlay"]
+    buckets = min(points, n)
+    assert len(ov["time"]) == buckets
+    assert sum(ov["count"]) == n
+    edges = np.cumsum([0, *ov["count"]])
+    residual = ref - sim
+    for series, values in (("ref", ref), ("sim", sim), ("res", residual)):
+        low = np.asarray(ov[f"{series}_min"])
+        high = np.asarray(ov[f"{series}_max"])
+        # Six significant digits relative to the largest magnitude of the series.
+        tol = 1e-5 * max(float(np.max(np.abs(values))), 1e-300)
+        for b in range(buckets):
+            chunk = values[edges[b] : edges[b + 1]]
+            assert low[b] == pytest.approx(chunk.min(), abs=tol)
+            assert high[b] == pytest.approx(chunk.max(), abs=tol)
+    assert data["n_samples"] == n
+    assert ov["time"][0] >= 3.0
+    assert ov["time"][-1] <= 3.0 + (n - 1) * 0.01 + 1e-9
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n=st.integers(min_value=3, max_value=4000),
+    points=st.integers(min_value=1, max_value=500),
+    seed=st.integers(min_value=0, max_value=2**31),
+)
+def test_derivative_match_per_bucket_averages_to_lambda2(n: int, points: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    ref = rng.normal(0.0, 1.0, n).cumsum()
+    # Quantised samples give flat steps (derivative 0), the case that is easy to get wrong.
+    sim = np.round(ref + rng.normal(0.0, 0.7, n))
+    data = figure_data(ref, sim, dt=0.5, start_s=0.0, max_lag=1)
+    match = np.asarray(data["derivative"]["match"])
+    counts = np.asarray(data["overlay"]["count"])
+    weighted = float((match * counts).sum() / counts.sum())
+    expected = signal_characteristics(ref, sim, dt=0.5).derivative_match
+    assert data["derivative"]["fraction"] == pytest.approx(expected, abs=1e-12)
+    assert weighted == pytest.approx(expected, abs=1e-4)  # match is rounded to 4 decimals
+    assert ((match >= 0.0) & (match <= 1.0)).all()
+
+
+def test_histogram_counts_every_sample_and_its_cdf_ends_at_one() -> None:
+    ref, sim = _pair(12345)
+    data = figure_data(ref, sim, dt=0.01, start_s=0.0, max_lag=200, bins=50)
+    hist = data["histogram"]
+    assert sum(hist["counts"]) == 12345
+    assert len(hist["edges"]) == 51
+    assert len(hist["cdf"]) == 50
+    assert hist["cdf"][-1] == pytest.approx(1.0)
+    assert all(a <= b for a, b in zip(hist["cdf"], hist["cdf"][1:], strict=False))
+    residual = ref - sim
+    assert hist["edges"][0] == pytest.approx(residual.min(), rel=1e-5)
+    assert hist["edges"][-1] == pytest.approx(residual.max(), rel=1e-5)
+    assert hist["std"] == pytest.approx(residual.std(ddof=1), rel=1e-5)
+
+
+def test_correlation_peak_is_at_the_models_lag_with_the_papers_sign() -> None:
+    # The simulation lags the measurement by 4 samples: the peak must be at −4·dt (Fig. 5).
+    ref, sim = _pair(4000, lag=4)
+    data = figure_data(ref, sim, dt=0.05, start_s=0.0, max_lag=40)
+    corr = data["correlation"]
+    assert corr["peak_lag_s"] == pytest.approx(-0.2)
+    assert corr["peak"] == max(corr["value"])
+    assert corr["zero_lag"] < corr["peak"]
+    assert corr["max_lag_s"] == pytest.approx(2.0)
+    assert len(corr["lag_s"]) == len(corr["value"]) == 81
+
+
+def test_figure_data_is_json_safe_and_small() -> None:
+    ref, sim = _pair(100_000)
+    data = figure_data(ref, sim, dt=0.01, start_s=0.0, max_lag=1000)
+    text = json.dumps(data, allow_nan=False)
+    assert len(data["overlay"]["time"]) == 2000
+    assert len(text) < 250_000
+    assert json.loads(text) == data
+
+
+@pytest.mark.parametrize(
+    ("reference", "simulated", "dt", "message"),
+    [
+        ([1.0, 2.0, 3.0], [1.0, 2.0], 0.1, "equal length"),
+        ([1.0, 2.0], [1.0, 2.0], 0.1, "at least 3 samples"),
+        ([1.0, math.nan, 3.0], [1.0, 2.0, 3.0], 0.1, "finite"),
+        ([1.0, 2.0, 3.0], [1.0, 2.0, 3.0], 0.0, "dt must be"),
+    ],
+)
+def test_figure_data_rejects_unusable_input(
+    reference: list[float], simulated: list[float], dt: float, message: str
+) -> None:
+    with pytest.raises(DegenerateSignalError, match=message):
+        figure_data(reference, simulated, dt=dt, start_s=0.0, max_lag=1)
+
+
+@pytest.mark.slow
+def test_figure_data_of_one_hour_at_100_hz_is_fast() -> None:
+    ref, sim = _pair(360_000, lag=20)
+    figure_data(ref[:1000], sim[:1000], dt=0.01, start_s=0.0, max_lag=10)  # warm imports
+    timings = []
+    for max_lag in (36_000, 500):
+        for _ in range(3):
+            start = time.perf_counter()
+            figure_data(ref, sim, dt=0.01, start_s=0.0, max_lag=max_lag)
+            timings.append(time.perf_counter() - start)
+    # The target is well under 0.1 s; the bound leaves room for a loaded CI machine while
+    # still catching anything that is not linear-time.
+    assert min(timings) < 0.25
+
+
+# --------------------------------------------------------------------------- view-model
+
+
+def test_cells_colour_every_lambda_against_its_threshold() -> None:
+    signal = _signal(
+        "a", lambdas=[0.99, 0.5, 0.85, 0.9, 1.0, 0.9, 1.0], thresholds={"mae": 0.9, "rms": 0.9}
+    )
+    statuses = [c.status for c in model.cells(signal)]
+    assert statuses == ["ungated", "ungated", "fail", "pass", "ungated", "ungated", "ungated"]
+    assert model.margin(signal) == pytest.approx(-0.05)
+
+
+def test_tree_rows_put_children_under_their_parent_in_position_order(
+    results: list[dict[str, Any]],
+) -> None:
+    rows = model.tree_rows(results[0])
+    assert [(s["path"], depth) for s, depth in rows] == [
+        ("E_batt", 0),
+        ("E_batt/P_batt", 1),
+        ("E_batt/U_batt", 1),
+    ]
+
+
+def test_worst_rows_put_failing_signals_first(results: list[dict[str, Any]]) -> None:
+    rows = model.worst_rows(results, limit=3)
+    assert [r.signal["path"] for r in rows[:2]] == ["E_batt/P_batt", "E_batt"]
+    assert rows[0].worst is not None
+    assert rows[0].worst.characteristic == "mae"
+
+
+def test_glyph_points_weigh_each_lambda_by_alpha_times_beta(
+    results: list[dict[str, Any]],
+) -> None:
+    spec = copy.deepcopy(results[0])
+    spec["weights"] = [1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 2.0]
+    spec["signals"][0]["alpha"] = 0.7
+    points = [p for p in model.glyph_points(spec) if p.signal == "E_batt/U_batt"]
+    assert [p.weight for p in points] == pytest.approx([0.7, 0.35, 0.7, 0.7, 0.7, 0.7, 1.4])
+    assert {p.level for p in points} == {2}
+
+
+def test_nice_ticks_are_round_and_cover_the_range() -> None:
+    assert svg.nice_ticks(0.0, 1007.9, 5) == [0.0, 250.0, 500.0, 750.0, 1000.0]
+    assert svg.nice_ticks(-0.37, 0.41, 4) == pytest.approx([-0.2, 0.0, 0.2, 0.4])
+    assert svg.nice_ticks(3.0, 17.0, 7) == [4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0]
+    assert svg.nice_ticks(2.0, 2.0) == [2.0]
+
+
+# --------------------------------------------------------------------------- markdown / json
+
+
+def test_markdown_summarises_each_spec_and_its_failing_signals(
+    results: list[dict[str, Any]],
+) -> None:
+    text = render_markdown(results)
+    assert text.startswith("### ❌ hevval: 1 of 2 specs passed · 2 of 4 signals failing")
+    assert "| ❌ | i3 trip A01 | 0.8123 | 0.9000 | 2 / 3 |" in text
+    assert "| ✅ | i3 trip A02 | 0.9700 | 0.9000 | 0 / 1 |" in text
+    assert "**❌ i3 trip A01** — Φ 0.8123 < min Φ 0.9000" in text
+    assert "| `E_batt/P_batt` (line 14) | λ3 MAE 0.850 &lt; 0.900 | here |" in text
+    assert "| `E_batt` (line 8) | λ7 emergent 0.820 &lt; 0.850 | E_batt/P_batt |" in text
+    assert "U_batt" not in text  # passing signals stay out of a short summary
+    assert "i3 trip A02**" not in text
+
+
+def test_markdown_escapes_table_breaking_names(results: list[dict[str, Any]]) -> None:
+    results[0]["signals"][2]["path"] = "a|b<c>"
+    text = render_markdown(results)
+    assert "`a\\|b&lt;c&gt;`" in text
+    assert "<c>" not in text
+
+
+def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> None:
+    results[0]["signals"][0]["mae"] = math.nan
+    text = render_json(results)
+    assert text == render_json(copy.deepcopy(results))
+    payload = json.loads(text)
+    compact = json.dumps(payload, sort_keys=True, ensure_ascii=False, separators=(",", ":"))
+    assert text == compact + "\n"
+    assert payload["report_schema_version"] == 1
+    assert payload["summary"] == {"signals": 4, "signals_failed": 2, "specs": 2, "specs_failed": 1}
+    assert payload["specs"][0]["signals"][0]["mae"] is None
+    assert payload["specs"][0]["signals"][1]["figures"] == results[0]["signals"][1]["figures"]
+    assert [w["path"] for w in payload["worst"][:2]] == ["E_batt/P_batt", "E_batt"]
+
+
+def test_json_turns_numpy_values_into_plain_numbers(results: list[dict[str, Any]]) -> None:
+    results[0]["phi"] = np.float32(0.5)
+    results[0]["signals"][0]["lambdas"] = np.array([1.0, 0.5, np.inf, 1, 1, 1, 1])
+    payload = json.loads(render_json(results))
+    assert payload["specs"][0]["phi"] == 0.5
+    assert payload["specs"][0]["signals"][0]["lambdas"][:3] == [1.0, 0.5, None]
+
+
+# --------------------------------------------------------------------------- annotations
+
+
+def test_annotations_point_at_the_failing_signals_spec_line(
+    results: list[dict[str, Any]], tmp_path: Path
+) -> None:
+    lines = github_annotations(results, tmp_path)
+    assert lines == [
+        "::error file=specs/trip_a01.hevval.yaml,title=hevval::i3 trip A01: Φ 0.8123 is below "
+        "min Φ 0.9000",
+        "::error file=specs/trip_a01.hevval.yaml,line=14,title=hevval::i3 trip A01: "
+        "E_batt/P_batt: λ3 MAE 0.850 < 0.900 (the error appears in this signal)",
+        "::error file=specs/trip_a01.hevval.yaml,line=8,title=hevval::i3 trip A01: E_batt: "
+        "λ7 emergent 0.820 < 0.850 (the error appears in E_batt/P_batt)",
+    ]
+
+
+def test_annotations_make_paths_relative_and_escape_commands(
+    results: list[dict[str, Any]], tmp_path: Path
+) -> None:
+    results[0]["spec"] = str(tmp_path / "specs" / "a,b.hevval.yaml")
+    results[0]["name"] = "two\nlines 100%"
+    first = github_annotations(results, tmp_path)[0]
+    assert first.startswith("::error file=specs/a%2Cb.hevval.yaml,title=hevval::two%0Alines 100%25")
+    assert "\n" not in first
+
+
+# --------------------------------------------------------------------------- html
+
+
+def test_html_is_one_self_contained_file(page: str) -> None:
+    html = page
+    assert html.startswith("<!DOCTYPE html>")
+    assert "http://" not in html
+    assert "https://" not in html
+    assert "<script" not in html.lower()
+    assert "<link" not in html.lower()
+    assert not re.search(r"url\((?!#)", html)  # CSS may only reference in-page ids
+    sources = re.findall(r'\ssrc="([^"]*)"', html)
+    assert sources
+    assert all(s.startswith("data:image/png;base64,") for s in sources)
+    hrefs = re.findall(r'\shref="([^"]*)"', html)
+    assert hrefs
+    assert all(h.startswith("#") for h in hrefs)
+    ids = set(re.findall(r'\sid="([^"]*)"', html))
+    assert {h[1:] for h in hrefs} <= ids  # every in-page link has a target
+
+
+def test_html_shows_phi_tree_glyph_plot_and_every_signal_plot(page: str) -> None:
+    html = page
+    assert "Φ = 0.8123" in html
+    assert "Φ = 0.9700" in html
+    assert 'class="phi fail"' in html
+    assert 'class="phi pass"' in html
+    assert html.count("data:image/png;base64,") == 2  # one glyph plot per spec
+    assert html.count('<svg class="hv-plot"') == 4  # one plot per signal
+    assert html.count('class="badge origin"') >= 2
+    # The failing MAE cell is red, the emergent one too; ungated ones are grey.
+    assert re.search(r'<td class="lam fail"[^>]*>0\.8500', html)
+    assert re.search(r'<td class="lam fail"[^>]*>0\.8200', html)
+    assert 'class="lam ungated"' in html
+    assert STAMP in html
+
+
+def test_html_puts_failing_signals_first(page: str) -> None:
+    html = page
+    details = re.findall(r'<details class="signal([^"]*)" id="([^"]*)"', html)
+    first_spec = [anchor for _, anchor in details if anchor.startswith("spec0-")]
+    assert [a.split("-", 2)[2] for a in first_spec] == ["E_batt-P_batt", "E_batt", "E_batt-U_batt"]
+
+
+def test_html_escapes_names_and_text(results: list[dict[str, Any]]) -> None:
+    results[0]["name"] = "<script>alert(1)</script>"
+    results[0]["signals"][0]["unit"] = '"><img src=x>'
+    results[0]["signals"][0]["diagnosis"] = {
+        "summary": "<b>bold</b>",
+        "candidates": [
+            {
+                "name": "<i>",
+                "kind": "lag",
+                "explained_fraction": 0.5,
+                "coefficient": 1.0,
+                "significant": True,
+            }
+        ],
+    }
+    html = render_html(results, title="<T>", generated_utc=STAMP)
+    assert "<script>alert" not in html
+    assert "<img src=x>" not in html
+    assert "<b>bold</b>" not in html
+    assert "&lt;b&gt;bold&lt;/b&gt;" in html
+    assert "<title>&lt;T&gt;</title>" in html
+
+
+def test_html_shows_diagnosis_and_history_when_present(
+    results: list[dict[str, Any]],
+) -> None:
+    signal = results[0]["signals"][2]
+    signal["diagnosis"] = {
+        "summary": "lag explains most of the residual",
+        "candidates": [
+            {
+                "name": "lag(0.2 s)",
+                "kind": "lag",
+                "explained_fraction": 0.62,
+                "coefficient": 0.2,
+                "significant": True,
+            },
+        ],
+    }
+    signal["history"] = [
+        {"version": "v1", "phi": 0.90, "lambdas": [0.9] * 7},
+        {"version": "v2", "phi": 0.81, "lambdas": [0.8] * 7},
+    ]
+    html = render_html(results, title="Validation", generated_utc=STAMP)
+    assert "lag explains most of the residual" in html
+    assert "62.0 %" in html
+    assert html.count('<svg class="hv-plot hv-small"') == 1
+    assert ">v2</text>" in html
+
+
+def test_html_survives_missing_optional_fields() -> None:
+    bare = {"name": "bare", "phi": None, "signals": [{"path": "x", "lambdas": [1.0]}]}
+    html = render_html([bare], title="t", generated_utc=STAMP)
+    assert "No figure data for this signal." in html
+    assert "Φ = —" in html
+
+
+@pytest.mark.slow
+def test_html_of_20_signals_one_hour_at_100_hz_stays_under_5_mb() -> None:
+    n = 360_000
+    signals = []
+    for k in range(20):
+        ref, sim = _pair(n, seed=k, lag=k % 5)
+        chars = signal_characteristics(ref, sim, dt=0.01, max_lag_s=5.0)
+        signal = _signal(f"sys/s{k:02d}", lambdas=[*chars.lambdas, 1.0], thresholds={"mae": 0.97})
+        signal["figures"] = figure_data(ref, sim, dt=0.01, start_s=0.0, max_lag=500)
+        signals.append(signal)
+    html = render_html([_spec(signals)], title="one hour", generated_utc=STAMP)
+    size = len(html.encode("utf-8"))
+    assert html.count('<svg class="hv-plot"') == 20
+    assert 500_000 < size < 5_000_000
+
+
+def test_html_needs_jinja2(monkeypatch: pytest.MonkeyPatch, results: list[dict]) -> None:
+    monkeypatch.setitem(sys.modules, "jinja2", None)
+    with pytest.raises(MissingExtraError, match=r"pytest-hevval\[html\]"):
+        render_html(results, title="t", generated_utc=STAMP)
+
+
+def test_glyph_plot_needs_matplotlib(monkeypatch: pytest.MonkeyPatch, results: list[dict]) -> None:
+    from pytest_hevval.report import plots
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)
+    with pytest.raises(MissingExtraError, match=r"pytest-hevval\[html\]"):
+        plots.glyph_plot(results[0])
+
+
+def test_importing_the_report_package_loads_no_plotting_or_templating() -> None:
+    code = (
+        "import sys, pytest_hevval.report as r; "
+        "print(sorted(m for m in ('matplotlib', 'jinja2') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+# --------------------------------------------------------------------------- files and options
+
+
+def test_write_reports_writes_each_format_atomically(
+    results: list[dict[str, Any]], tmp_path: Path
+) -> None:
+    directory = tmp_path / "deep" / "report"
+    paths = write_reports(results, {"md", "json", "html"}, directory, title="T")
+    assert [p.name for p in paths] == ["report.html", "report.json", "report.md"]
+    assert sorted(p.name for p in directory.iterdir()) == [
+        "report.html",
+        "report.json",
+        "report.md",
+    ]
+    assert json.loads((directory / "report.json").read_text("utf-8"))["summary"]["specs"] == 2
+    umask = os.umask(0)
+    os.umask(umask)
+    # Permissions as for any new file (not mkstemp's 0600): others may serve the report.
+    assert stat.S_IMODE((directory / "report.html").stat().st_mode) == 0o666 & ~umask
+    assert (directory / "report.md").read_text("utf-8") == render_markdown(results)
+    # Only the requested formats; an existing file is replaced.
+    (directory / "report.md").write_text("old", "utf-8")
+    assert write_reports(results, {"md"}, directory, title="T") == [directory / "report.md"]
+    assert (directory / "report.md").read_text("utf-8") == render_markdown(results)
+
+
+def test_write_reports_leaves_no_temporary_file_when_rendering_fails(
+    results: list[dict[str, Any]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from pytest_hevval.report import writer
+
+    def broken(path: Path, text: str) -> None:
+        raise OSError("disk full")
+
+    (tmp_path / "report.json").write_text("previous", "utf-8")
+    monkeypatch.setattr(writer.os, "replace", lambda *a: broken(Path(), ""))
+    with pytest.raises(OSError, match="disk full"):
+        write_reports(results, {"json"}, tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["report.json"]
+    assert (tmp_path / "report.json").read_text("utf-8") == "previous"
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"),
+    [
+        ("html,json,md", {"html", "json", "md"}),
+        (" HTML , md ", {"html", "md"}),
+        ("markdown", {"md"}),
+        ("json,json", {"json"}),
+    ],
+)
+def test_parse_formats_accepts_known_names(value: str, expected: set[str]) -> None:
+    assert parse_formats(value) == expected
+
+
+def test_parse_formats_names_the_option_and_suggests_a_fix() -> None:
+    with pytest.raises(ReportOptionError) as info:
+        parse_formats("html,jsn")
+    message = str(info.value)
+    assert "--hevval-report" in message
+    assert "'jsn'" in message
+    assert "'json'" in message
+    assert isinstance(info.value, HevvalError)
+    assert isinstance(info.value, ValueError)
+    with pytest.raises(ReportOptionError, match="comma-separated"):
+        parse_formats(" , ")
+
+
+def test_write_reports_rejects_unknown_formats(
+    results: list[dict[str, Any]], tmp_path: Path
+) -> None:
+    with pytest.raises(ReportOptionError, match="'pdf'"):
+        write_reports(results, {"pdf"}, tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
+def test_an_origin_with_failing_descendants_names_both(results: list[dict[str, Any]]) -> None:
+    child = results[0]["signals"][2]
+    child["origins"] = ["E_batt/P_batt", "E_batt/P_batt/I_cell"]
+    assert "| here, E_batt/P_batt/I_cell |" in render_markdown(results)
+    annotation = github_annotations(results, ".")[1]
+    assert annotation.endswith("(the error appears in this signal and E_batt/P_batt/I_cell)")
