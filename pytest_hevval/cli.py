@@ -67,13 +67,36 @@ def _run(args: argparse.Namespace) -> int:
     wants_figures = "html" in (args.report or "")
     results = []
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
-    for spec in specs:
-        evaluation = evaluate_spec(spec, cache=cache, rootdir=Path.cwd(), figures=wants_figures)
-        result = evaluation.result
-        result.spec = os.path.relpath(result.spec)
-        results.append(result)
-        progress.update(1)
+    if args.dask:
+        from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
+        from .result import SpecResult
+
+        done = [0]
+
+        def advance(count: int) -> None:
+            progress.update(count - done[0])
+            done[0] = count
+
+        payloads = evaluate_on_dask(
+            [s.path for s in specs],
+            args.dask,
+            rootdir=Path.cwd(),
+            figures=wants_figures,
+            progress=advance,
+        )
+        for payload in payloads:
+            if is_error_payload(payload):
+                raise error_from_payload(payload)
+            results.append(SpecResult.from_dict(payload))
+    else:
+        for spec in specs:
+            evaluation = evaluate_spec(spec, cache=cache, rootdir=Path.cwd(), figures=wants_figures)
+            results.append(evaluation.result)
+            progress.update(1)
     progress.close()
+    for result in results:
+        if "://" not in result.spec:
+            result.spec = os.path.relpath(result.spec)
     for line in tree_summary(results, details=args.details):
         print(line)
     passed = all(r.passed for r in results)
@@ -150,6 +173,11 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--no-history", action="store_true", help="do not record this run")
     run.add_argument("--history-dir", default=".hevval/history", help="folder of run records")
     run.add_argument("--model-version", help="model version recorded in the history")
+    run.add_argument(
+        "--dask",
+        metavar="ADDRESS",
+        help="evaluate specs on this dask.distributed scheduler ('local' starts one here)",
+    )
     return parser
 
 

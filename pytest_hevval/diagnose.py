@@ -8,6 +8,7 @@ does not use, and the time derivative of each — on the aligned grid, and forma
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import sys
 from collections.abc import Sequence
@@ -36,14 +37,14 @@ def _full_reference(evaluation: Evaluation) -> Record:
     if isinstance(cached, Record):
         return cached
     spec = evaluation.spec
+    assert evaluation.aligned is not None
     record = evaluation.aligned.reference
     if spec.reference.kind == "file" and spec.reference.path:
         from .data.formats import read_record
 
-        try:
+        # If the whole file cannot be read, diagnose with the channels already read.
+        with contextlib.suppress(DataError):
             record = read_record(str(spec.reference.path), None, spec.reference.options)
-        except DataError:
-            record = evaluation.aligned.reference
     evaluation._full_reference = record  # type: ignore[attr-defined]
     return record
 
@@ -52,6 +53,8 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
     """Declared expressions, then unused channels and their derivatives, on the grid."""
     spec = evaluation.spec
     aligned = evaluation.aligned
+    if aligned is None:
+        return []
     time = aligned.time
     keep = None if aligned.gap_mask is None else ~aligned.gap_mask
     found: list[Candidate] = []
@@ -97,7 +100,7 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
 
 def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True) -> dict[str, Any]:
     """The full diagnosis of one signal as JSON-safe data (see docs/diagnosis.md)."""
-    if path not in evaluation.arrays:
+    if evaluation.aligned is None or path not in evaluation.arrays:
         known = ", ".join(repr(p) for p in evaluation.arrays) or "none kept"
         raise DataError(
             f"no signal {path!r} in this spec (signals: {known})",

@@ -118,7 +118,8 @@ class Evaluation:
 
     spec: Spec
     result: SpecResult
-    aligned: AlignedData
+    #: None when the spec was scored elsewhere (a Dask worker): only the result came back.
+    aligned: AlignedData | None
     arrays: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     characteristics: dict[str, SignalCharacteristics] = field(default_factory=dict)
 

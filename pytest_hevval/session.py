@@ -144,9 +144,37 @@ class HevvalSession:
         self.cache.declare(spec.reference, spec.reference_columns())
         self.cache.declare(spec.model, spec.model_columns())
 
+    def prefetch_on_dask(self) -> None:
+        """Score every collected spec on the Dask cluster at once, before the items run."""
+        address = self.option("dask")
+        if not address or not self.specs:
+            return
+        from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
+
+        specs = list(self.specs.values())
+        try:
+            payloads = evaluate_on_dask(
+                [s.path for s in specs],
+                str(address),
+                rootdir=self.rootdir,
+                figures=self.wants_figures(),
+            )
+        except HevvalError as exc:
+            raise pytest.UsageError(f"--hevval-dask={address}: {exc}") from None
+        for spec, payload in zip(specs, payloads, strict=True):
+            key = str(spec.path)
+            if is_error_payload(payload):
+                self.evaluations[key] = error_from_payload(payload)
+            else:
+                evaluation = Evaluation(spec, SpecResult.from_dict(payload), None)
+                self._make_relative(evaluation)
+                self.evaluations[key] = evaluation
+
     def evaluate(self, spec: Spec) -> Evaluation:
         """Evaluate a spec once per process; later items of the same spec reuse it."""
         key = str(spec.path)
+        if key not in self.evaluations and self.option("dask"):
+            self.prefetch_on_dask()
         if key not in self.evaluations:
             try:
                 self.evaluations[key] = evaluate_spec(
@@ -181,6 +209,8 @@ class HevvalSession:
         """The diagnosis of the signal where this signal's error appears, if enabled."""
         mode = self.option("diagnose")
         if evaluation is None or mode == "off" or (mode == "failed" and signal.passed):
+            return None
+        if evaluation.aligned is None:  # scored on a Dask worker: no data here to diagnose
             return None
         from .diagnose import diagnose_signal
 

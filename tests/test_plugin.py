@@ -338,3 +338,23 @@ def test_github_annotations_point_at_the_spec_line(
     result.stdout.fnmatch_lines(
         ["::error file=pack.hevval.yaml,line=18,title=hevval::pack: E/P/I:*"]
     )
+
+
+def test_dask_gives_the_same_outcomes(project: pytest.Pytester) -> None:
+    pytest.importorskip("distributed")
+    write_data(project.path, fault="leaf")
+    serial = project.runpytest("--hevval", "--hevval-no-history", "--junitxml=serial.xml")
+    remote = project.runpytest(
+        "--hevval", "--hevval-no-history", "--hevval-dask=local", "--junitxml=dask.xml"
+    )
+    assert serial.parseoutcomes() == remote.parseoutcomes()
+
+    def properties(name: str) -> dict[str, dict[str, str | None]]:
+        tree = ET.parse(project.path / name)
+        return {
+            c.get("name", ""): {p.get("name", ""): p.get("value") for p in c.iter("property")}
+            for c in tree.iter("testcase")
+        }
+
+    assert properties("serial.xml") == properties("dask.xml")
+    remote.stdout.fnmatch_lines(["E/P/I missed its thresholds (pack.hevval.yaml:18)"])
