@@ -13,6 +13,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, TypeGuard, cast
 
+from ..core.characteristics import CHARACTERISTICS
+
 __all__ = [
     "CHARACTERISTICS",
     "CHARACTERISTIC_COLOURS",
@@ -34,16 +36,6 @@ __all__ = [
     "worst_rows",
 ]
 
-# Kept literally (not imported from core) so that rendering never imports numpy/scipy.
-CHARACTERISTICS: tuple[str, ...] = (
-    "lag_correlation",
-    "derivative_match",
-    "mae",
-    "rms",
-    "anomaly",
-    "error_std",
-    "emergent",
-)
 LABELS: dict[str, str] = {
     "lag_correlation": "lag correlation",
     "derivative_match": "derivative match",
