@@ -23,12 +23,22 @@ from .data.record import Record
 from .engine import DataCache, Evaluation, evaluate_spec
 from .errors import DataError, HevvalError
 
-__all__ = ["candidates_for", "diagnose_main", "diagnose_signal", "headline"]
+__all__ = ["candidates_for", "diagnose_main", "diagnose_origin", "diagnose_signal"]
 
 FloatArray = npt.NDArray[np.float64]
 
 #: Channels beyond this many are not tried automatically (the spec's own come first).
 MAX_CHANNELS = 50
+#: Window of the centred mean applied to a channel before its derivative is taken.
+DERIVATIVE_SMOOTHING_S = 1.0
+
+
+def _smoothed(values: FloatArray, window: int) -> FloatArray:
+    if window <= 1:
+        return values
+    from scipy.ndimage import uniform_filter1d
+
+    return np.asarray(uniform_filter1d(values, size=window, mode="nearest"), dtype=np.float64)
 
 
 def _full_reference(evaluation: Evaluation) -> Record:
@@ -80,6 +90,10 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
         if node.ref.is_column:
             used.add(node.ref.source)
     record = _full_reference(evaluation)
+    # Logged channels are quantised (GPS elevation in centimetre steps) or held between CAN
+    # frames; differentiated sample by sample they are mostly steps. A centred 1 s mean first
+    # keeps the slow slope the model may lack.
+    smoothing = max(1, round(DERIVATIVE_SMOOTHING_S / aligned.grid.dt))
     time_name = spec.reference.options.time
     names = [
         n
@@ -94,7 +108,7 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
             continue
         on_grid = np.interp(time, channel.time[ok], values[ok])
         add(name, "channel", on_grid)
-        add(f"d/dt {name}", "derivative", np.gradient(on_grid, time))
+        add(f"d/dt {name}", "derivative", np.gradient(_smoothed(on_grid, smoothing), time))
     return found
 
 
@@ -131,14 +145,37 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
     return payload
 
 
-def headline(evaluation: Evaluation, path: str) -> str | None:
-    """One line for a failure report: the diagnosis summary of the signal where it appears."""
-    try:
-        found = diagnose_signal(evaluation, path)
-    except HevvalError:
-        return None
-    summary = found.get("summary")
-    return str(summary) if summary else None
+def _strongest_finding(found: dict[str, Any]) -> float:
+    """The largest share of the residual that one significant candidate explains alone."""
+    return max(
+        (float(c["explained_fraction"]) for c in found.get("candidates", []) if c["significant"]),
+        default=0.0,
+    )
+
+
+def diagnose_origin(evaluation: Evaluation, path: str) -> dict[str, Any]:
+    """Diagnose the signal where an error appears, looking one level down when it emerges.
+
+    When the origin has children (they pass, and the error emerges where they combine), the
+    origin's own residual may be a running sum or a product, and the weakest child's residual
+    often names the cause more directly. Both are diagnosed and the one with the stronger
+    significant finding is returned, with ``diagnosed`` saying which.
+    """
+    found = diagnose_signal(evaluation, path)
+    found["diagnosed"] = path
+    result = evaluation.result
+    node = result.signal(path)
+    if node.children:
+        weakest = min(
+            (result.signal(child) for child in node.children),
+            key=lambda s: sum(s.lambdas[:6]),
+        )
+        below = diagnose_signal(evaluation, weakest.path)
+        if _strongest_finding(below) > _strongest_finding(found):
+            below["diagnosed"] = weakest.path
+            below["summary"] = f"(in {weakest.path}, below {path}) {below['summary']}"
+            return below
+    return found
 
 
 def _describe(found: dict[str, Any]) -> list[str]:

@@ -118,7 +118,10 @@ class SignalItem(_SpecItem):
             self.hevval_diagnosis = {"spec": result.spec, **diagnosis}
         if signal.failures:
             line = diagnosis.get("summary") if diagnosis else None
-            raise ThresholdMissed(signal_failure_report(result, signal, diagnosis_line=line))
+            target = diagnosis.get("diagnosed") if diagnosis else None
+            raise ThresholdMissed(
+                signal_failure_report(result, signal, diagnosis_line=line, diagnose_target=target)
+            )
         _raise_regressions(self.state.regressions_for(result, signal.path), self.name)
 
 

@@ -212,13 +212,13 @@ class HevvalSession:
             return None
         if evaluation.aligned is None:  # scored on a Dask worker: no data here to diagnose
             return None
-        from .diagnose import diagnose_signal
+        from .diagnose import diagnose_origin
 
         target = signal.origins[0] if signal.origins else signal.path
         key = (str(evaluation.spec.path), target)
         if key not in self.diagnoses:
             try:
-                self.diagnoses[key] = diagnose_signal(evaluation, target)
+                self.diagnoses[key] = diagnose_origin(evaluation, target)
             except HevvalError as exc:
                 self.diagnoses[key] = {"signal": target, "summary": f"not diagnosed: {exc}"}
         return self.diagnoses[key]

@@ -21,7 +21,11 @@ def _location(spec: str, line: int) -> str:
 
 
 def signal_failure_report(
-    result: SpecResult, signal: SignalResult, *, diagnosis_line: str | None = None
+    result: SpecResult,
+    signal: SignalResult,
+    *,
+    diagnosis_line: str | None = None,
+    diagnose_target: str | None = None,
 ) -> str:
     lines = [
         f"{signal.path} missed its thresholds ({_location(result.spec, signal.line)})",
@@ -54,7 +58,7 @@ def signal_failure_report(
             lines.append(f"    {path}{level}{worst}")
     if diagnosis_line:
         lines.append(f"  diagnosis: {diagnosis_line}")
-    target = signal.origins[0] if signal.origins else signal.path
+    target = diagnose_target or (signal.origins[0] if signal.origins else signal.path)
     lines.append(
         "  next: "
         + f"hevval diagnose {shlex.quote(result.spec)} --signal {shlex.quote(target)}"

@@ -78,6 +78,9 @@ class BusParams:
     driver_kp_nm_per_m_s: float = 6000.0
     driver_ki_nm_per_m: float = 600.0
     brake_torque_max_nm: float = 12000.0
+    # Engine-driven accessories (air compressor, alternator, fan), as a mean torque at the
+    # crankshaft. Version 1 has none; see the bus case in docs/closing-the-loop.md.
+    accessory_torque_nm: float = 0.0
 
 
 def engine_torque_limit(rpm: float) -> float:
@@ -179,8 +182,12 @@ def simulate_cycle(time_s: FloatArray, cycle_kmh: FloatArray, p: BusParams) -> p
 
         out_v[k] = v
         out_n[k] = rpm
-        out_t[k] = t_engine
-        out_fc[k] = fuel_rate_g_s(rpm, t_engine, p, overrun=demand < 0.0)
+        overrun = demand < 0.0 and rpm > p.idle_rpm + 50.0
+        # On overrun the wheels turn the engine and drive the accessories; it burns no fuel
+        # and its reported torque is zero.
+        brake = 0.0 if overrun else t_engine + p.accessory_torque_nm
+        out_t[k] = brake
+        out_fc[k] = fuel_rate_g_s(rpm, brake, p, overrun=overrun)
         out_soc[k] = soc
         out_mot[k] = t_motor
         out_gear[k] = gear

@@ -91,6 +91,22 @@ def test_bus_model_follows_its_cycle_and_keeps_soc_in_window() -> None:
     assert out["gear"].max() >= 3
 
 
+def test_bus_accessory_load_adds_torque_and_fuel_only_while_fuelled() -> None:
+    time = np.arange(0.0, 120.0, 0.01)
+    cycle = np.interp(time, [0, 5, 25, 60, 80, 120], [0, 0, 40, 40, 0, 0])
+    plain = simulate_cycle(time, cycle, BusParams())
+    loaded = simulate_cycle(time, cycle, BusParams(accessory_torque_nm=25.0))
+    # The accessory does not change how the bus drives; only the engine's load.
+    assert np.array_equal(plain["v"], loaded["v"])
+    extra = loaded["Teng"] - plain["Teng"]
+    overrun = plain["FCinst"] == 0.0
+    assert overrun.any()
+    assert np.allclose(extra[~overrun], 25.0)
+    assert np.allclose(extra[overrun], 0.0)
+    assert (loaded["FCinst"][~overrun] > plain["FCinst"][~overrun]).all()
+    assert (loaded["FCinst"][overrun] == 0.0).all()
+
+
 def test_bus_answer_key_is_labelled_and_not_named_in_the_spec() -> None:
     key = json.loads((ROOT / "bus" / "data" / "undeclared_effects.json").read_text("utf-8"))
     assert key["label"].startswith("SYNTHETIC")

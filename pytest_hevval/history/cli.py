@@ -15,7 +15,7 @@ from typing import Any, NoReturn, TextIO
 
 from ..errors import HevvalError, did_you_mean
 from ._base import CHARACTERISTICS, HistoryError
-from .compare import compare, parse_compare_fail, regressions, specs_of
+from .compare import Comparison, compare, parse_compare_fail, regressions, specs_of
 from .records import migrate_record
 from .render import FORMATS, render
 from .store import DEFAULT_HISTORY_DIR, HistoryStore
@@ -241,7 +241,24 @@ def _compare(argv: list[str]) -> int:
     after, after_label = load_side(args.after, directory)
     if before_label == after_label:
         before_label, after_label = f"{before_label} (before)", f"{after_label} (after)"
-    comparison = compare(after, before, before_label=before_label, after_label=after_label)
+    # Two runs named on the command line are meant to be compared, so one spec against one
+    # spec pairs even when the model version lives in the file name (trip-v1 → trip-v2).
+    comparison = compare(
+        after, before, before_label=before_label, after_label=after_label, pair_single=True
+    )
     found = regressions(comparison, rules) if rules is not None else None
-    _write(render(comparison, args.format, found), args.output)
+    text = _with_pairings(render(comparison, args.format, found), comparison, args.format)
+    _write(text, args.output)
     return 1 if found else 0
+
+
+def _with_pairings(text: str, comparison: Comparison, fmt: str) -> str:
+    """Say under the title which different specs were compared; JSON carries ``pairings``."""
+    if fmt == "json" or not comparison.pairings:
+        return text
+    title, _, rest = text.partition("\n")
+    if fmt == "md":
+        # A blank line ends the heading; two trailing spaces break lines inside the paragraph.
+        notes = [note.replace("|", "\\|") for note in comparison.pairings]
+        return title + "\n\n" + "  \n".join(notes) + "\n" + rest
+    return title + "\n" + "".join(note + "\n" for note in comparison.pairings) + rest

@@ -28,6 +28,7 @@ __all__ = [
     "BaselineDecision",
     "Comparison",
     "FieldDelta",
+    "MatchedBy",
     "Regression",
     "Rule",
     "SignalComparison",
@@ -174,9 +175,14 @@ class SignalComparison:
         }
 
 
+#: How a spec of the current run found its baseline: the same spec file, the same spec name,
+#: or being the only spec on each side (``compare(..., pair_single=True)``).
+MatchedBy = Literal["path", "name", "single"]
+
+
 @dataclass(frozen=True)
 class SpecComparison:
-    """One spec present in both runs."""
+    """One spec present in both runs: ``key`` in the current run, ``before_key`` in the baseline."""
 
     key: str
     name: str
@@ -186,10 +192,27 @@ class SpecComparison:
     signals: tuple[SignalComparison, ...]
     added_signals: tuple[str, ...]
     removed_signals: tuple[str, ...]
+    before_key: str | None = None
+    matched_by: MatchedBy = "path"
+
+    @property
+    def pairing(self) -> str | None:
+        """A sentence naming both sides when they are different specs, else ``None``."""
+        before = self.before_key if self.before_key is not None else self.key
+        if self.matched_by == "path" and before == self.key:
+            return None
+        why = {
+            "path": "the same spec",
+            "name": f"the same spec name {self.name!r}",
+            "single": "the only spec on each side",
+        }[self.matched_by]
+        return f"comparing {before} (before) with {self.key} (after): {why}"
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "spec": self.key,
+            "before_spec": self.before_key if self.before_key is not None else self.key,
+            "matched_by": self.matched_by,
             "name": self.name,
             "phi": self.phi.to_dict(),
             "passed": {"before": self.passed_before, "after": self.passed_after},
@@ -212,10 +235,16 @@ class Comparison:
     added_specs: tuple[str, ...]
     removed_specs: tuple[str, ...]
 
+    @property
+    def pairings(self) -> tuple[str, ...]:
+        """One sentence per pair of different specs compared with each other."""
+        return tuple(p for p in (s.pairing for s in self.specs) if p is not None)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "before": self.before_label,
             "after": self.after_label,
+            "pairings": list(self.pairings),
             "specs": [s.to_dict() for s in self.specs],
             "added_specs": list(self.added_specs),
             "removed_specs": list(self.removed_specs),
@@ -249,25 +278,72 @@ def compare(
     *,
     before_label: str | None = None,
     after_label: str | None = None,
+    pair_single: bool = False,
 ) -> Comparison:
     """Compare the current spec results with a baseline (a record, run result or list).
 
-    Specs are matched by spec file path (falling back to name), signals by tree path.
+    Specs are matched by spec file path, then the ones left over by spec name (when the name is
+    unique on both sides). With ``pair_single``, a run of exactly one spec is compared with a
+    baseline of exactly one spec whatever their paths and names: that is how a model version
+    written as a new spec file (``trip-v1`` → ``trip-v2``) is compared with the one before.
+    Signals are matched by tree path.
     """
-    before_specs = {spec_key(s): s for s in specs_of(baseline_record)}
-    after_specs = {spec_key(s): s for s in specs_of(current)}
-    compared = []
-    for key, after in after_specs.items():
-        before = before_specs.get(key)
-        if before is not None:
-            compared.append(_compare_spec(key, before, after))
+    before_specs = _by_key(specs_of(baseline_record))
+    after_specs = _by_key(specs_of(current))
+    pairs = _pair(before_specs, after_specs, pair_single=pair_single)
+    compared = [
+        _compare_spec(key, before_specs[before_key], after_specs[key], before_key, matched_by)
+        for key, (before_key, matched_by) in pairs.items()
+    ]
+    paired_before = {before_key for before_key, _ in pairs.values()}
     return Comparison(
         before_label=before_label or _label(baseline_record, "baseline"),
         after_label=after_label or _label(current, "current"),
         specs=tuple(compared),
-        added_specs=tuple(k for k in after_specs if k not in before_specs),
-        removed_specs=tuple(k for k in before_specs if k not in after_specs),
+        added_specs=tuple(k for k in after_specs if k not in pairs),
+        removed_specs=tuple(k for k in before_specs if k not in paired_before),
     )
+
+
+def _by_key(specs: Sequence[Mapping[str, Any]]) -> dict[str, Mapping[str, Any]]:
+    # A spec listed twice in one run keeps its last result, as before.
+    return {spec_key(s): s for s in specs}
+
+
+def _pair(
+    before: Mapping[str, Mapping[str, Any]],
+    after: Mapping[str, Mapping[str, Any]],
+    *,
+    pair_single: bool,
+) -> dict[str, tuple[str, MatchedBy]]:
+    """Current key → (baseline key, how they were matched), in the current run's order."""
+    if pair_single and len(before) == 1 and len(after) == 1:
+        (before_key,), (after_key,) = before, after
+        how: MatchedBy = "path" if before_key == after_key else "single"
+        return {after_key: (before_key, how)}
+    pairs: dict[str, tuple[str, MatchedBy]] = {k: (k, "path") for k in after if k in before}
+    left_before = [k for k in before if k not in pairs]
+    left_after = [k for k in after if k not in pairs]
+    before_names = _unique_names(before, left_before)
+    after_names = _unique_names(after, left_after)
+    for name, after_key in after_names.items():
+        if name in before_names:
+            pairs[after_key] = (before_names[name], "name")
+    return {k: pairs[k] for k in after if k in pairs}
+
+
+def _unique_names(specs: Mapping[str, Mapping[str, Any]], keys: Sequence[str]) -> dict[str, str]:
+    """Name → key over ``keys``, leaving out names that more than one spec carries."""
+    found: dict[str, str] = {}
+    shared: set[str] = set()
+    for key in keys:
+        name = specs[key].get("name")
+        if not isinstance(name, str) or not name:
+            continue
+        if name in found:
+            shared.add(name)
+        found[name] = key
+    return {name: key for name, key in found.items() if name not in shared}
 
 
 def _number(value: Any) -> float | None:
@@ -301,7 +377,13 @@ def _lambda(signal: Mapping[str, Any], index: int) -> float | None:
     return None
 
 
-def _compare_spec(key: str, before: Mapping[str, Any], after: Mapping[str, Any]) -> SpecComparison:
+def _compare_spec(
+    key: str,
+    before: Mapping[str, Any],
+    after: Mapping[str, Any],
+    before_key: str,
+    matched_by: MatchedBy,
+) -> SpecComparison:
     before_signals = _signals(before)
     after_signals = _signals(after)
     signals = []
@@ -335,6 +417,8 @@ def _compare_spec(key: str, before: Mapping[str, Any], after: Mapping[str, Any])
         signals=tuple(signals),
         added_signals=tuple(p for p in after_signals if p not in before_signals),
         removed_signals=tuple(p for p in before_signals if p not in after_signals),
+        before_key=before_key,
+        matched_by=matched_by,
     )
 
 
