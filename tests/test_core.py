@@ -241,21 +241,23 @@ def test_zero_simulation_against_signal_has_zero_correlation() -> None:
     assert got.lag_correlation == 0.0
 
 
-def test_float32_accumulates_in_float64() -> None:
+@pytest.mark.parametrize("n", [200_001, 300_001])  # the exact and the pyramid lag path
+def test_float32_accumulates_in_float64(n: int) -> None:
     rng = np.random.default_rng(7)
-    reference = rng.normal(size=200_001).astype(np.float32) + np.float32(100)
-    simulated = reference + rng.normal(size=200_001).astype(np.float32)
+    reference = rng.normal(size=n).astype(np.float32) + np.float32(100)
+    simulated = reference + rng.normal(size=n).astype(np.float32)
     wide = signal_characteristics(reference.astype(np.float64), simulated.astype(np.float64), dt=1)
     narrow = signal_characteristics(reference, simulated, dt=1)
     assert narrow.mae == pytest.approx(wide.mae, rel=1e-12)
     assert narrow.lambdas == pytest.approx(wide.lambdas, rel=1e-12)
 
 
+@pytest.mark.parametrize("n", [1000, 300_001])
 @pytest.mark.parametrize("magnitude", [1e-300, 1e-200, 1e200, 1e300])
-def test_huge_and_tiny_magnitudes(magnitude: float) -> None:
+def test_huge_and_tiny_magnitudes(magnitude: float, n: int) -> None:
     rng = np.random.default_rng(11)
-    reference = np.cumsum(rng.normal(size=1000))
-    simulated = reference + rng.normal(0, 0.3, size=1000)
+    reference = np.cumsum(rng.normal(size=n))
+    simulated = reference + rng.normal(0, 0.3, size=n)
     unit = signal_characteristics(reference, simulated, dt=1)
     scaled = signal_characteristics(reference * magnitude, simulated * magnitude, dt=1)
     assert scaled.lambdas == pytest.approx(unit.lambdas, rel=1e-9)

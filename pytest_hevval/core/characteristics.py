@@ -57,9 +57,9 @@ CHARACTERISTIC_LABELS: dict[str, str] = {
 CorrelationKind = Literal["xcorr", "pearson"]
 
 # Samples per chunk (a multiple of 16 and of lag._BLAS_PIECE). A chunk costs about 45 numpy
-# calls of roughly a microsecond each; 2**16 samples amortise them, and still measured faster
-# than 2**15 although the chunk then spills from L2 into L3 (benchmarks/README.md).
-_CHUNK = 1 << 16
+# calls of roughly a microsecond each; 2**17 samples amortise them, and measured faster than
+# 2**15 although the chunk then spills from L2 (1 MiB here) into L3.
+_CHUNK = 1 << 17
 # Below this many samples a single vectorised pass is faster than chunking.
 _SMALL = 1 << 17
 # Magnitudes beyond these would overflow or underflow sums of squares; rescale by a power of 2.

@@ -45,7 +45,7 @@ _FACTOR = 4
 _REFINE = _FACTOR + 2
 # Samples per chunk of the streamed loops (a multiple of _BLAS_PIECE): large enough to amortise
 # numpy's per-call overhead, which measured heavier than spilling from L2 into L3.
-_CHUNK = 1 << 16
+_CHUNK = 1 << 17
 
 
 @dataclass(frozen=True)
