@@ -129,7 +129,7 @@ def test_ratchet_tightens_and_never_loosens(project: pytest.Pytester) -> None:
 
 
 def test_xdist_controller_writes_one_record(project: pytest.Pytester) -> None:
-    result = project.runpytest("--hevval", "-p", "xdist", "-n", "2")
+    result = project.runpytest("--hevval", "-p", "xdist", "-n", "4")
     result.assert_outcomes(passed=6)
     assert len(records(project.path)) == 1
 

@@ -1,0 +1,132 @@
+"""One common time grid: rates, windows, offsets, interpolation, gaps and units."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pytest_hevval.data.align import align_records
+from pytest_hevval.data.record import Channel, Record
+from pytest_hevval.engine import evaluate_spec
+from pytest_hevval.errors import DataError
+from pytest_hevval.spec.load import parse_spec_text
+
+
+def record(name: str, time: np.ndarray, **columns: np.ndarray) -> Record:
+    return Record(
+        source=name,
+        channels={k: Channel(time=time, values=v) for k, v in columns.items()},
+        available=tuple(columns),
+    )
+
+
+def test_default_grid_is_the_reference_rate_over_the_overlap() -> None:
+    ref = record("ref.csv", np.arange(0, 100, 0.1), x=np.arange(1000.0))
+    sim = record("sim.csv", np.arange(5, 200, 1.0), x=np.arange(195.0))
+    aligned = align_records(ref, sim, reference_columns=["x"], model_columns=["x"])
+    assert aligned.grid.rate_hz == pytest.approx(10.0)
+    assert aligned.grid.start_s == 5.0
+    assert aligned.grid.stop_s == pytest.approx(99.9)
+    assert aligned.grid.n_samples == 950
+
+
+def test_linear_and_zero_order_hold() -> None:
+    time = np.array([0.0, 1.0, 2.0, 3.0])
+    ref = record("ref.csv", np.arange(0, 3.01, 0.5), gear=np.arange(7.0))
+    sim = record("sim.csv", time, gear=np.array([1.0, 2.0, 3.0, 4.0]))
+    aligned = align_records(ref, sim, reference_columns=["gear"], model_columns=["gear"])
+    assert list(aligned.column("model", "gear", "linear")) == [1, 1.5, 2, 2.5, 3, 3.5, 4]
+    assert list(aligned.column("model", "gear", "previous")) == [1, 1, 2, 2, 3, 3, 4]
+
+
+def test_declared_rate_and_window() -> None:
+    ref = record("ref.csv", np.arange(0, 100, 0.01), x=np.zeros(10_000))
+    sim = record("sim.csv", np.arange(0, 100, 0.01), x=np.zeros(10_000))
+    aligned = align_records(
+        ref, sim, reference_columns=["x"], model_columns=["x"], rate_hz=2, window=(10, 20)
+    )
+    assert aligned.grid.n_samples == 21
+    assert aligned.time[0] == 10.0
+
+
+def test_declared_offset_shifts_the_model() -> None:
+    t = np.arange(0, 50, 0.1)
+    ref = record("ref.csv", t, x=np.sin(t))
+    sim = record("sim.csv", t + 2.0, x=np.sin(t))  # the model's clock runs 2 s late
+    aligned = align_records(ref, sim, reference_columns=["x"], model_columns=["x"], offset_s=-2.0)
+    np.testing.assert_allclose(aligned.column("model", "x", "linear"), aligned.column(
+        "reference", "x", "linear"
+    ), atol=1e-12)  # fmt: skip
+
+
+def test_offset_found_by_cross_correlating_speed() -> None:
+    rng = np.random.default_rng(2)
+    t = np.arange(0, 300, 0.1)
+    speed = np.convolve(rng.normal(size=t.size), np.ones(30) / 30, "same") * 20 + 30
+    ref = record("ref.csv", t, v=speed)
+    sim = record("sim.csv", t + 2.5, v=speed)
+    aligned = align_records(
+        ref, sim, reference_columns=["v"], model_columns=["v"], offset_from=("v", "v")
+    )
+    assert aligned.offset_found
+    assert aligned.offset_s == pytest.approx(-2.5)
+
+
+def test_no_overlap_is_a_clear_error() -> None:
+    ref = record("ref.csv", np.arange(0, 10, 0.1), x=np.zeros(100))
+    sim = record("sim.csv", np.arange(20, 30, 0.1), x=np.zeros(100))
+    with pytest.raises(DataError) as info:
+        align_records(ref, sim, reference_columns=["x"], model_columns=["x"])
+    assert str(info.value) == (
+        "sim.csv: the reference and the model output do not overlap in time "
+        "(reference 0–9.9 s, model 20–29.9 s); check both time columns, their units "
+        "(time_scale) and alignment.offset_s"
+    )
+
+
+def test_window_outside_the_overlap() -> None:
+    ref = record("ref.csv", np.arange(0, 10, 0.1), x=np.zeros(100))
+    sim = record("sim.csv", np.arange(0, 10, 0.1), x=np.zeros(100))
+    with pytest.raises(DataError, match=r"window \[5, 50\] s is not covered by both records"):
+        align_records(ref, sim, reference_columns=["x"], model_columns=["x"], window=(5, 50))
+
+
+def test_nan_raise_and_omit() -> None:
+    t = np.arange(0, 10, 0.1)
+    values = np.ones(100)
+    values[40:45] = np.nan
+    ref = record("ref.csv", t, x=values)
+    sim = record("sim.csv", t, x=np.ones(100))
+    strict = align_records(ref, sim, reference_columns=["x"], model_columns=["x"])
+    with pytest.raises(DataError) as info:
+        strict.column("reference", "x", "linear")
+    assert str(info.value) == (
+        "ref.csv: column 'x': 5 NaN or inf values (first at t = 4 s); "
+        "set alignment.nan: omit to score only where data exists"
+    )
+    lenient = align_records(
+        ref, sim, reference_columns=["x"], model_columns=["x"], nan_policy="omit"
+    )
+    lenient.column("reference", "x", "linear")
+    assert lenient.gap_mask is not None
+    assert int(lenient.gap_mask.sum()) == 6  # the 5 bad samples and the step after them
+    assert lenient.coverage == pytest.approx(0.94)
+
+
+def test_units_are_converted_with_pint(tmp_path: Path) -> None:
+    pytest.importorskip("pint")
+    t = np.arange(0, 60, 0.5)
+    energy_kwh = np.cumsum(np.abs(np.sin(t))) * 0.01
+    pd.DataFrame({"time": t, "E": energy_kwh}).to_csv(tmp_path / "ref.csv", index=False)
+    pd.DataFrame({"time": t, "E": energy_kwh * 3.6e6}).to_csv(tmp_path / "sim.csv", index=False)
+    text = (
+        "reference: ref.csv\nmodel: {path: sim.csv}\n"
+        "sets:\n  - {signal: E, unit: kWh, sim_unit: J}\n"
+    )
+    spec = parse_spec_text(text, tmp_path / "u.hevval.yaml")
+    result = evaluate_spec(spec).result
+    assert result.signals[0].mae == pytest.approx(0.0, abs=1e-12)
+    assert result.signals[0].lambdas[2] == 1.0
