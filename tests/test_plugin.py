@@ -344,7 +344,9 @@ def test_dask_gives_the_same_outcomes(project: pytest.Pytester) -> None:
     pytest.importorskip("distributed")
     write_data(project.path, fault="leaf")
     serial = project.runpytest("--hevval", "--hevval-no-history", "--junitxml=serial.xml")
-    remote = project.runpytest(
+    # In a subprocess: importing distributed inside an in-process run would leave state
+    # (tblib's pickling hooks) pointing at modules pytester removes afterwards.
+    remote = project.runpytest_subprocess(
         "--hevval", "--hevval-no-history", "--hevval-dask=local", "--junitxml=dask.xml"
     )
     assert serial.parseoutcomes() == remote.parseoutcomes()
