@@ -24,6 +24,7 @@ well; one huge spec is bounded by one worker's cores, memory and read bandwidth.
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -41,6 +42,8 @@ __all__ = ["error_from_payload", "error_payload", "evaluate_on_dask", "is_error_
 
 #: The address that starts a throw-away ``LocalCluster`` on this machine.
 LOCAL = "local"
+#: ``dashboard_address`` for local clusters: any free port.
+FREE_PORT = ":0"
 
 _KINDS: dict[str, type[HevvalError]] = {
     cls.__name__: cls
@@ -55,6 +58,12 @@ _KINDS: dict[str, type[HevvalError]] = {
 }
 
 Progress = Callable[[int], None]
+
+# A Dask worker runs several tasks on threads of one process. Spec loading parses signal
+# expressions with ast.parse, whose recursion counter CPython 3.11 shares between threads:
+# two specs loaded at once can fail with "SystemError: AST constructor recursion depth
+# mismatch" (python/cpython#106905). Loading takes milliseconds; evaluation stays parallel.
+_PARSE_LOCK = threading.Lock()
 
 
 def error_payload(spec_path: str, exc: HevvalError) -> dict[str, Any]:
@@ -108,7 +117,8 @@ def evaluate_spec_file(
     from .spec.load import load_spec
 
     try:
-        spec = load_spec(spec_path)
+        with _PARSE_LOCK:
+            spec = load_spec(spec_path)
         evaluation = evaluate_spec(
             spec, rootdir=Path(rootdir), figures=figures, workers=threads_per_spec
         )
@@ -165,9 +175,11 @@ def evaluate_on_dask(
     ------
     MissingExtraError
         When ``distributed`` is not installed.
+    HevvalError
+        When no scheduler answers at ``address``.
     Exception
-        Whatever a task raised that is not a :class:`HevvalError` (a bug), or the cluster's
-        own errors (a worker killed for memory, an unreachable scheduler).
+        Whatever a task raised that is not a :class:`HevvalError` (a bug). A spec whose
+        worker died comes back as an error payload instead, so the other results survive.
     """
     paths = [str(p) for p in spec_paths]
     if not paths:
@@ -175,13 +187,15 @@ def evaluate_on_dask(
     distributed = _distributed()
     if address == LOCAL:
         # Worker processes, one thread each: YAML parsing and CSV reading hold the GIL, and
-        # the engine adds its own threads for the numpy work.
+        # the engine adds its own threads for the numpy work. The scheduler's web server takes
+        # a free port: the default 8787 may be held by another cluster (a second run, an xdist
+        # worker), which distributed reports with a warning.
         with (
             distributed.LocalCluster(
                 n_workers=os.cpu_count() or 1,
                 threads_per_worker=1,
                 processes=True,
-                dashboard_address=None,
+                dashboard_address=FREE_PORT,
             ) as cluster,
             distributed.Client(cluster) as client,
         ):
@@ -191,7 +205,17 @@ def evaluate_on_dask(
         if address.endswith(".json") and os.path.isfile(address)
         else {"address": address}
     )
-    with distributed.Client(**connect) as client:
+    try:
+        client = distributed.Client(**connect)
+    except (OSError, ValueError) as exc:
+        # distributed raises OSError for a scheduler that does not answer within its connect
+        # timeout and ValueError for an address it cannot parse.
+        raise HevvalError(
+            f"cannot connect to the Dask scheduler at {address!r} ({exc})",
+            hint="start one with `dask scheduler`, pass its address or scheduler file, "
+            "or use 'local'",
+        ) from None
+    with client:
         return _run(client, distributed, paths, rootdir, figures, progress, threads_per_spec)
 
 
@@ -222,7 +246,21 @@ def _run(
     done = 0
     try:
         for future in distributed.as_completed(futures):
-            results[position[future.key]] = future.result()
+            index = position[future.key]
+            try:
+                results[index] = future.result()
+            except distributed.KilledWorker as exc:
+                # The worker died running this spec (most often: out of memory); the other
+                # specs' results are still good.
+                results[index] = error_payload(
+                    paths[index],
+                    HevvalError(
+                        f"the Dask worker evaluating this spec died ({exc})",
+                        file=paths[index],
+                        hint="it most likely ran out of memory; give workers more memory "
+                        "(docs/scaling.md says how much a spec needs)",
+                    ),
+                )
             # Drop the finished future so the worker can free the result.
             future.release()
             done += 1

@@ -10,7 +10,7 @@ import hashlib
 import os
 import threading
 from collections.abc import Callable, Iterable, Mapping
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +47,13 @@ def file_digest(path: str) -> str:
     return digest.hexdigest()
 
 
+def _digest_or_empty(path: str) -> str:
+    try:
+        return file_digest(path)
+    except OSError:
+        return ""
+
+
 class DataCache:
     """Reads each data file once per session, with the union of the columns every spec needs.
 
@@ -58,7 +65,8 @@ class DataCache:
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
         self._declared: dict[tuple[str, str], set[str]] = {}
-        self._digests: dict[str, str] = {}
+        self._digests: dict[str, Future[str]] = {}
+        self._hasher: ThreadPoolExecutor | None = None
         #: How many times each file was actually read (tests and benchmarks check it).
         self.reads: dict[str, int] = {}
 
@@ -100,16 +108,21 @@ class DataCache:
             record = _reader()(str(source.path), sorted(union), source.options)
             self.reads[key[0]] = self.reads.get(key[0], 0) + 1
             self._records[key] = record
+            self._start_digest(key[0])
             return record
+
+    def _start_digest(self, path: str) -> Future[str]:
+        # hashlib releases the GIL, so hashing overlaps with reading the model and scoring.
+        if path not in self._digests:
+            if self._hasher is None:
+                self._hasher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hevval-sha")
+            self._digests[path] = self._hasher.submit(_digest_or_empty, path)
+        return self._digests[path]
 
     def digest(self, path: str) -> str:
         with self._lock:
-            if path not in self._digests:
-                try:
-                    self._digests[path] = file_digest(path)
-                except OSError:
-                    self._digests[path] = ""
-            return self._digests[path]
+            future = self._start_digest(path)
+        return future.result()
 
 
 @dataclass

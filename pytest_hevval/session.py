@@ -91,6 +91,10 @@ class HevvalSession:
         from .history import HistoryError, parse_compare_fail, parse_margin
 
         self.workers()
+        if self.option("dask") and self.config.getoption("numprocesses", None):
+            raise pytest.UsageError(
+                "--hevval-dask and -n both spread the specs over processes; use one of them"
+            )
         try:
             expression = self.option("compare-fail")
             if expression:

@@ -56,12 +56,23 @@ class AlignedData:
     offset_found: bool
     nan_policy: Literal["raise", "omit"] = "raise"
     _cache: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
+    _times: FloatArray | None = None
+    _on_grid: dict[tuple[int, float], bool] = field(default_factory=dict)
     #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
     gap_mask: npt.NDArray[np.bool_] | None = None
 
     @property
     def time(self) -> FloatArray:
-        return self.grid.times()
+        if self._times is None:
+            self._times = self.grid.times()
+        return self._times
+
+    def _sampled_on_grid(self, time: FloatArray, shift: float) -> bool:
+        # Keyed by the array's identity: table formats share one time array among channels.
+        key = (id(time), shift)
+        if key not in self._on_grid:
+            self._on_grid[key] = on_grid(time, shift, self.time, self.grid.dt)
+        return self._on_grid[key]
 
     def column(self, side: Literal["reference", "model"], name: str, method: Method) -> FloatArray:
         key = (side, name, method)
@@ -72,7 +83,14 @@ class AlignedData:
         channel = record.channel(name)
         shift = self.offset_s if side == "model" else 0.0
         values, gaps = _interpolate(
-            channel, self.time, shift, method, record.source, name, self.nan_policy
+            channel,
+            self.time,
+            shift,
+            method,
+            record.source,
+            name,
+            self.nan_policy,
+            on_grid=self._sampled_on_grid(channel.time, shift),
         )
         if gaps is not None:
             self.gap_mask = gaps if self.gap_mask is None else (self.gap_mask | gaps)
@@ -89,6 +107,20 @@ class AlignedData:
         if self.gap_mask is None or self.grid.n_samples == 0:
             return 1.0
         return float(1.0 - self.gap_mask.mean())
+
+
+#: A channel whose samples lie within this fraction of a step of the grid points is used as
+#: it is: interpolating it would change no value by more than this fraction of one step's
+#: change, and would copy it.
+ON_GRID_TOLERANCE = 1e-6
+
+
+def on_grid(time: FloatArray, shift: float, grid_times: FloatArray, dt: float) -> bool:
+    """True when ``time + shift`` are ``grid_times``, to within ON_GRID_TOLERANCE steps."""
+    if time.shape != grid_times.shape:
+        return False
+    deviation = np.abs(time + shift - grid_times) if shift else np.abs(time - grid_times)
+    return bool(deviation.max() <= ON_GRID_TOLERANCE * dt)
 
 
 def median_step(time: FloatArray) -> float:
@@ -231,11 +263,16 @@ def _interpolate(
     source: str,
     name: str,
     nan_policy: Literal["raise", "omit"],
+    *,
+    on_grid: bool = False,
 ) -> tuple[FloatArray, npt.NDArray[np.bool_] | None]:
     time = channel.time + shift if shift else channel.time
     values = np.asarray(channel.values, dtype=np.float64)
     bad = ~np.isfinite(values)
     gaps = None
+    if on_grid and not bad.any():
+        # Already sampled on the grid: the channel's own values, not a copy of them.
+        return values, None
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
         if nan_policy == "raise":

@@ -17,6 +17,8 @@ import importlib
 import io
 import os
 import re
+import struct
+import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from types import ModuleType
@@ -712,7 +714,11 @@ def _read_parquet(path: str, columns: Iterable[str] | None, options: SourceOptio
     pq = _import("pyarrow.parquet", "reading Parquet files", "parquet")
     try:
         source, filesystem = parquet_source(path)
-        parquet_file = pq.ParquetFile(source, filesystem=filesystem)
+        # Pre-buffering coalesces reads for object stores; on a local file it keeps a second
+        # copy of every column chunk alive during the read (about 2x the loaded columns).
+        parquet_file = pq.ParquetFile(
+            source, filesystem=filesystem, pre_buffer=filesystem is not None
+        )
         schema = parquet_file.schema_arrow
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise _corrupt(path, "Parquet", exc) from None
@@ -818,14 +824,20 @@ def _read_hdf5(path: str, columns: Iterable[str] | None, options: SourceOptions)
         )
 
 
+def _hdf5_name(name: str | bytes) -> str:
+    # h5py hands out a link name it cannot decode as UTF-8 (a damaged or foreign file) as bytes.
+    return name.decode("utf-8", errors="replace") if isinstance(name, bytes) else name
+
+
 def _hdf5_groups(handle: Any) -> list[str]:
     import h5py
 
     found: list[str] = []
 
-    def visit(name: str, obj: Any) -> None:
-        if isinstance(obj, h5py.Group) and not name.startswith("#"):
-            found.append(name)
+    def visit(name: str | bytes, obj: Any) -> None:
+        text = _hdf5_name(name)
+        if isinstance(obj, h5py.Group) and not text.startswith("#"):
+            found.append(text)
 
     handle.visititems(visit)
     return found
@@ -861,7 +873,8 @@ def _read_hdf5_group(
             hint=suggestion or f"set `group:` to one of: {listing}",
         )
     datasets: dict[str, Any] = {}
-    for name, obj in node.items():
+    for raw_name, obj in node.items():
+        name = _hdf5_name(raw_name)
         if name.startswith("#") or not isinstance(obj, h5py.Dataset):
             continue
         if _vector_length(obj.shape) is not None:
@@ -986,8 +999,58 @@ def _read_mat(path: str, columns: Iterable[str] | None, options: SourceOptions) 
     return _read_mat5(path, _as_list(columns), options)
 
 
+# MAT v5 data types: miINT8 … miUINT32, miSINGLE, miDOUBLE, miINT64, miUINT64, miMATRIX,
+# miCOMPRESSED, miUTF8 … miUTF32. 0, 8, 10, 11 and anything above 18 are not defined.
+_MAT5_TYPES = frozenset({1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 14, 15, 16, 17, 18})
+_MAT5_MATRIX = 14
+_MAT5_COMPRESSED = 15
+
+
+def _mat5_bad_type(path: str) -> str | None:
+    """Describe the first data element with an undefined type code, if any.
+
+    scipy.io.loadmat looks element types up in a table without a bounds check and crashes the
+    process (a segmentation fault, not an exception) on an undefined type, which a single
+    damaged byte produces. Only the element tags are walked; sizes that run past their
+    container end the walk there, as scipy reports those as errors itself.
+    """
+    with open(path, "rb") as stream:
+        data = stream.read()
+    order = ">" if data[126:128] == b"MI" else "<"
+    # (buffer, start, end, inside a matrix: sub-elements are padded to 8 bytes)
+    pending: list[tuple[bytes, int, int, bool]] = [(data, 128, len(data), False)]
+    while pending:
+        buffer, position, end, nested = pending.pop()
+        while position + 8 <= end:
+            first, second = struct.unpack_from(order + "II", buffer, position)
+            if first >> 16:
+                # A small element packs its size into the upper half of the first word.
+                kind, size, body = first & 0xFFFF, first >> 16, position + 4
+                following = position + 8
+            else:
+                kind, size, body = first, second, position + 8
+                following = body + size + ((-size) % 8 if nested else 0)
+            if kind not in _MAT5_TYPES:
+                return f"undefined data type {kind} at byte {position}"
+            if body + size > end:
+                break
+            if kind == _MAT5_MATRIX:
+                pending.append((buffer, body, body + size, True))
+            elif kind == _MAT5_COMPRESSED:
+                try:
+                    inner = zlib.decompress(buffer[body : body + size])
+                except zlib.error:
+                    break
+                pending.append((inner, 0, len(inner), False))
+            position = following
+    return None
+
+
 def _read_mat5(path: str, columns: list[str] | None, options: SourceOptions) -> Record:
     sio = _import("scipy.io", "reading MAT files", "mat")
+    problem = _mat5_bad_type(path)
+    if problem is not None:
+        raise _corrupt(path, "MAT", ValueError(problem))
     try:
         variables = sio.whosmat(path)
     except Exception as exc:
@@ -1166,6 +1229,8 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
         names = list(first)
         numeric = [n for n in names if numeric_flag[n]]
         wanted = _channel_list(path, columns, names, numeric)
+        for group_index in sorted({first[n][0] for n in wanted}):
+            _check_mdf_record(path, version, mdf.groups[group_index])
         try:
             signals = mdf.select([(n, *first[n]) for n in wanted], raw=False) if wanted else []
         except Exception as exc:
@@ -1173,6 +1238,9 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
             raise _corrupt(path, "MDF", exc) from None
 
     channels: dict[str, Channel] = {}
+    # Channels of one MDF group share its master time: check it once and keep one array,
+    # instead of one copy per channel (as much memory again as the values).
+    group_times: dict[int, FloatArray] = {}
     for name, signal in zip(wanted, signals, strict=True):
         samples = np.asarray(signal.samples)
         if samples.ndim != 1 or not _is_numeric_dtype(samples.dtype):
@@ -1189,7 +1257,11 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
                 column=name,
                 hint="choose a channel that was recorded",
             )
-        time = _check_time(path, name, np.asarray(signal.timestamps), options)
+        group = first[name][0]
+        time = group_times.get(group)
+        if time is None or time.shape[0] != samples.shape[0]:
+            time = _check_time(path, name, np.asarray(signal.timestamps), options)
+            group_times.setdefault(group, time)
         unit = str(signal.unit) if signal.unit else None
         channels[name] = Channel(time=time, values=_as_values(path, name, samples), unit=unit)
     meta: dict[str, Any] = {"mdf_version": version}
@@ -1203,6 +1275,43 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
         numeric=tuple(numeric),
         meta=meta,
     )
+
+
+# MDF4 channel types whose samples sit in the group's records (value, VLSD offset, master,
+# sync, VLSC offset); virtual and MLSD channels have no bytes of their own there.
+_MDF4_RECORD_TYPES = (0, 1, 2, 4, 7)
+
+
+def _check_mdf_record(path: str, version: str, group: Any) -> None:
+    """Refuse a channel group whose channels reach past the end of its record.
+
+    asammdf copies each channel out of the records in C without checking the channel's byte
+    range against the record size; a damaged channel block (or record size) then corrupts the
+    heap and the process aborts, so the file is refused before anything is read.
+    """
+    size = int(group.channel_group.samples_byte_nr)
+    if version.startswith("4"):
+        size += int(group.channel_group.invalidation_bytes_nr)
+    for channel in group.channels:
+        bits = int(channel.bit_count)
+        if version.startswith("4"):
+            if int(channel.channel_type) not in _MDF4_RECORD_TYPES:
+                continue
+            start = 8 * int(channel.byte_offset) + int(channel.bit_offset)
+        else:
+            if getattr(channel, "component_addr", 0):
+                continue
+            start = int(channel.start_offset) + 8 * int(
+                getattr(channel, "additional_byte_offset", 0)
+            )
+        end = -(-(start + bits) // 8)
+        if bits and end > size:
+            raise DataError(
+                f"channel {str(channel.name)!r} ends at byte {end} of a {size}-byte record "
+                "(file truncated or corrupt?)",
+                file=path,
+                hint="write the file again",
+            )
 
 
 def _mdf_numeric(version: str, data_type: int) -> bool:

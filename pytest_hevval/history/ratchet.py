@@ -75,7 +75,12 @@ def parse_margin(text: str | float, *, option: str = "--hevval-ratchet") -> floa
 
 def _floor(value: float) -> float:
     # The epsilon keeps 0.93 from flooring to 0.9299 through binary float error.
-    return math.floor(value * _SCALE + 1e-9) / _SCALE
+    steps = math.floor(value * _SCALE + 1e-9)
+    if steps / _SCALE > value:
+        # ... but must not lift a value just below a step (0.9999999999999999) onto it: the
+        # run that set the threshold would then miss it.
+        steps -= 1
+    return steps / _SCALE
 
 
 def _stricter(a: Mapping[str, float], b: Mapping[str, float]) -> dict[str, float]:

@@ -42,13 +42,13 @@ class _LineLoader(yaml.SafeLoader):
             return super().construct_object(node, deep=deep)
         except (yaml.YAMLError, RecursionError):
             raise
-        except (ValueError, TypeError, KeyError, AttributeError, OverflowError) as exc:
+        except (ValueError, TypeError, LookupError, AttributeError, ArithmeticError) as exc:
             # PyYAML's safe constructors fail with plain Python errors on values such as
-            # `2001-13-01`, `!!int 0x`, `!!bool maybe` or an integer of 5000 digits; as a YAML
-            # error the value keeps its line.
+            # `2001-13-01`, `!!int 0x`, `!!int` (empty), `!!bool maybe` or an integer of 5000
+            # digits; as a YAML error the value keeps its line.
             tag = str(node.tag).rsplit(":", 1)[-1]
             problem = f"cannot read this value as {tag}"
-            if isinstance(exc, (ValueError, OverflowError)) and str(exc):
+            if isinstance(exc, (ValueError, ArithmeticError)) and str(exc):
                 problem += f" ({exc})"
             raise yaml.constructor.ConstructorError(None, None, problem, node.start_mark) from None
 
