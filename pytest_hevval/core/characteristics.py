@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
-from .lag import _EXACT_LIMIT, LagSearch, _dot, _search, dot_overlap
+from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
 
 __all__ = [
     "CHARACTERISTICS",
@@ -348,16 +348,19 @@ def _all_sums(
                 acc.merge(_chunk_sums(ref, sim, start, stop, scale, scratch, levels))
         return acc
 
-    if workers <= 1:
-        return run(spans)
-    # numpy releases the GIL inside its loops, so threads share the pass across cores. Each
-    # takes one contiguous run of chunks so that the merge order stays fixed.
-    per = math.ceil(len(spans) / workers)
+    # numpy releases the GIL inside its loops, so threads share the pass across cores. The
+    # record is always cut into the same contiguous parts and merged in order, whatever the
+    # thread count, so that results are bit-identical on any machine.
+    per = math.ceil(len(spans) / PARTS)
     parts = [spans[i : i + per] for i in range(0, len(spans), per)]
+    if workers <= 1:
+        partials = [run(part) for part in parts]
+    else:
+        with ThreadPoolExecutor(max_workers=min(workers, len(parts))) as pool:
+            partials = list(pool.map(run, parts))
     total = _Sums()
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for partial in pool.map(run, parts):
-            total.merge(partial)
+    for partial in partials:
+        total.merge(partial)
     return total
 
 

@@ -228,6 +228,10 @@ def _centre_into(
     return out
 
 
+#: Long records are summed in this many contiguous parts, one per thread at most.
+PARTS = 2
+
+
 def _split(spans: list[tuple[int, int]], workers: int) -> list[list[tuple[int, int]]]:
     """Contiguous runs of spans, one per worker, so each thread streams its own region."""
     per = math.ceil(len(spans) / max(1, workers))
@@ -277,12 +281,16 @@ def _exact_window(
                 acc[count] += _dot(rw[:width], rw[:width])
             return np.array(acc, dtype=np.float64)
 
-        if workers > 1 and len(spans) > 8:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                for partial in pool.map(run, _split(spans, workers)):
-                    out += partial
+        # Always the same split and summing order, whatever the thread count, so that the
+        # result is bit-identical on any machine.
+        parts = _split(spans, PARTS) if len(spans) > 8 else [spans]
+        if workers > 1 and len(parts) > 1:
+            with ThreadPoolExecutor(max_workers=min(workers, len(parts))) as pool:
+                partials = list(pool.map(run, parts))
         else:
-            out += run(spans)
+            partials = [run(part) for part in parts]
+        for partial in partials:
+            out += partial
     return out[:count], float(out[count])
 
 
@@ -361,7 +369,9 @@ def _best(values: npt.NDArray[np.float64], energy: npt.NDArray[np.float64], lo: 
         score = np.where(energy > 0, values / np.sqrt(energy), -np.inf)
     peak = float(np.max(score))
     if not np.isfinite(peak):
-        return lo + int(np.argmax(values))
+        # A constant (zero-energy) reference carries no timing: no lag is better than 0.
+        lags = np.arange(lo, lo + values.shape[0])
+        return int(lags[np.argmin(np.abs(lags))])
     tolerance = 1e-12 * max(abs(peak), 1e-300)
     candidates = np.flatnonzero(score >= peak - tolerance) + lo
     return int(candidates[np.argmin(np.abs(candidates))])
