@@ -530,6 +530,9 @@ def signal_characteristics(
         # Subnormal peaks need more than 2**1023; 2**1000 already makes them normal.
         scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
         sums = _all_sums(ref, sim, scale, workers)
+        # The first pass's block means are unscaled and may have overflowed; the lag search
+        # builds its own from the records instead (this case is rare enough to pay a read).
+        levels = None
 
     span = (sums.ref_max - sums.ref_min) / scale
     if reference_range is not None:
