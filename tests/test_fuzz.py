@@ -609,9 +609,16 @@ def _seed_files(folder: Path) -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in SEED_NAMES}
 
 
+class Seeds(dict[str, bytes]):
+    """The seed files by name; Hypothesis prints fixtures with a failing example, so briefly."""
+
+    def __repr__(self) -> str:
+        return f"<seed files {', '.join(self)}>"
+
+
 @pytest.fixture(scope="module")
-def seeds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
-    return _seed_files(tmp_path_factory.mktemp("seeds"))
+def seeds(tmp_path_factory: pytest.TempPathFactory) -> Seeds:
+    return Seeds(_seed_files(tmp_path_factory.mktemp("seeds")))
 
 
 # One damage: (operation, position, byte, inserted bytes). Drawn in a fixed shape, apart from
@@ -653,7 +660,7 @@ def damage(seed: bytes, damages: list[tuple[str, int, int, bytes]]) -> bytes:
 @budget(50)
 def test_damaged_binary_files(
     tmp_path_factory: pytest.TempPathFactory,
-    seeds: dict[str, bytes],
+    seeds: Seeds,
     seed_name: str,
     damages: list[tuple[str, int, int, bytes]],
     columns: list[str] | None,
@@ -667,9 +674,7 @@ def test_damaged_binary_files(
 
 
 @pytest.mark.parametrize("value", [0x00, 0xFF])
-def test_every_damaged_hdf5_header_byte(
-    tmp_path: Path, seeds: dict[str, bytes], value: int
-) -> None:
+def test_every_damaged_hdf5_header_byte(tmp_path: Path, seeds: Seeds, value: int) -> None:
     # Some superblock damage lets the file open and fails only when its groups are walked
     # (RuntimeError "Object visitation failed" from the HDF5 library).
     for index in range(256):
@@ -683,7 +688,7 @@ def test_every_damaged_hdf5_header_byte(
 
 @pytest.mark.parametrize("index", [8, 9, 10, 11])
 def test_mdf_with_a_non_ascii_version_leaks_no_file(
-    tmp_path: Path, seeds: dict[str, bytes], index: int
+    tmp_path: Path, seeds: Seeds, index: int
 ) -> None:
     # asammdf leaves the file open when the version field does not decode; the reader closes it.
     content = bytearray(seeds["seed.mf4"])
@@ -705,9 +710,7 @@ def test_unusable_encoding_is_a_data_error(tmp_path: Path, encoding: str) -> Non
 
 
 @pytest.mark.parametrize("kind", [0, 8, 10, 11, 19, 200])
-def test_mat_element_of_undefined_type_is_refused(
-    tmp_path: Path, seeds: dict[str, bytes], kind: int
-) -> None:
+def test_mat_element_of_undefined_type_is_refused(tmp_path: Path, seeds: Seeds, kind: int) -> None:
     # scipy.io.loadmat crashes the process (SIGSEGV) on such an element instead of raising.
     content = bytearray(seeds["seed.mat"])
     real_part = content.index(struct.pack("<II", 9, 160))  # 20 doubles of the first vector
@@ -720,7 +723,7 @@ def test_mat_element_of_undefined_type_is_refused(
 
 @pytest.mark.parametrize(("name", "field"), [("seed.mdf", 20), ("seed.mf4", 96)])
 def test_mdf_channel_past_the_end_of_its_record_is_refused(
-    tmp_path: Path, seeds: dict[str, bytes], name: str, field: int
+    tmp_path: Path, seeds: Seeds, name: str, field: int
 ) -> None:
     # asammdf copies channel bytes out of each record in C without bounds checks; a record
     # size smaller than a channel's end overruns the heap (seen as SIGABRT/SIGSEGV).
@@ -825,3 +828,43 @@ def test_damaged_binary_files_never_crash_the_process(tmp_path: Path) -> None:
     tally = json.loads(completed.stdout.strip().splitlines()[-1])
     assert {key.split(" ")[1] for key in tally} <= {"record", "DataError"}, tally
     assert sum(tally.values()) == CRASH_HUNT * len(SEED_NAMES)
+
+
+def test_mat_array_flagged_complex_without_imaginary_part_is_refused(
+    tmp_path: Path, seeds: Seeds
+) -> None:
+    # scipy.io.loadmat then reads the next variable's tag as the imaginary part: SIGSEGV.
+    content = bytearray(seeds["seed.mat"])
+    flags = content.index(struct.pack("<II", 6, 8), 128) + 8  # array flags of the first array
+    content[flags + 1] |= 0x08  # the complex bit, 0x800 of the flags word
+    path = tmp_path / "complex.mat"
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match="the array at byte 128 ends before all its parts"):
+        read_record(str(path), None, SourceOptions())
+
+
+def test_mat_warning_about_corrupt_data_is_an_error(tmp_path: Path) -> None:
+    # A MAT v4 header claiming VAX byte order makes scipy warn "returned data may be corrupt"
+    # and carry on; that data must not be scored, and under -W error the warning would escape.
+    path = tmp_path / "vax.mat"
+    path.write_bytes(b"\x00\x08" + bytes(18))
+    with pytest.raises(DataError, match="returned data may be corrupt"):
+        read_record(str(path), None, SourceOptions())
+    _data_outcome(str(path), None, SourceOptions())
+
+
+def test_mdf_record_larger_than_its_data_is_refused(tmp_path: Path, seeds: Seeds) -> None:
+    # A damaged invalidation-byte count (one byte of the channel group block) once made
+    # asammdf allocate gigabytes for a 2 kB file, until the process was killed.
+    from asammdf import MDF
+
+    path = tmp_path / "seed.mf4"
+    path.write_bytes(seeds["seed.mf4"])
+    mdf = MDF(path)
+    address = int(mdf.groups[0].channel_group.address)
+    mdf.close()
+    content = bytearray(seeds["seed.mf4"])
+    struct.pack_into("<I", content, address + 100, 0xD8000000)  # cg_inval_bytes
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match=r"a record of \d+ bytes is larger than the 480 bytes"):
+        read_record(str(path), None, SourceOptions())

@@ -769,9 +769,12 @@ def test_python_yaml_tags_are_rejected_and_run_nothing(
 
 
 def test_spec_yaml_goes_through_the_safe_loader_only() -> None:
-    loader = load_yaml_with_lines.__globals__["_LineLoader"]
-    assert issubclass(loader, yaml.SafeLoader)
-    assert not issubclass(loader, (yaml.FullLoader, yaml.UnsafeLoader))
+    from pytest_hevval.spec import yaml_lines
+
+    assert issubclass(yaml_lines._LineLoader, yaml.SafeLoader)
+    assert not issubclass(yaml_lines._LineLoader, (yaml.FullLoader, yaml.UnsafeLoader))
+    with pytest.raises(yaml.constructor.ConstructorError):
+        load_yaml_with_lines("!!python/object/apply:os.getcwd []")
 
 
 PACKAGE = Path(pytest_hevval.__file__).parent

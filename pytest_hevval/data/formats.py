@@ -18,6 +18,7 @@ import io
 import os
 import re
 import struct
+import warnings
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -999,60 +1000,123 @@ def _read_mat(path: str, columns: Iterable[str] | None, options: SourceOptions) 
     return _read_mat5(path, _as_list(columns), options)
 
 
-# MAT v5 data types: miINT8 … miUINT32, miSINGLE, miDOUBLE, miINT64, miUINT64, miMATRIX,
-# miCOMPRESSED, miUTF8 … miUTF32. 0, 8, 10, 11 and anything above 18 are not defined.
-_MAT5_TYPES = frozenset({1, 2, 3, 4, 5, 6, 7, 9, 12, 13, 14, 15, 16, 17, 18})
+# MAT v5 data types: miINT8 … miUINT32, miSINGLE, miDOUBLE, miINT64, miUINT64 hold numbers;
+# miMATRIX and miCOMPRESSED hold variables; miUTF8 … miUTF32 hold text. 0, 8, 10, 11 and
+# anything above 18 are not defined.
+_MAT5_NUMBERS = frozenset({1, 2, 3, 4, 5, 6, 7, 9, 12, 13})
 _MAT5_MATRIX = 14
 _MAT5_COMPRESSED = 15
+_MAT5_TEXT = frozenset({16, 17, 18})
+# Array classes (mxClass) by what follows flags, dimensions and name: cell, struct and object
+# hold variables; char, sparse and the numeric classes 6–15 hold number (or text) elements.
+_MAT5_CONTAINERS = frozenset({1, 2, 3})
+_MAT5_CHAR = 4
+_MAT5_SPARSE = 5
+_MAT5_COMPLEX_FLAG = 0x800
 
 
-def _mat5_bad_type(path: str) -> str | None:
-    """Describe the first data element with an undefined type code, if any.
+def _mat5_elements(
+    buffer: bytes, start: int, end: int, order: str, padded: bool
+) -> list[tuple[int, int, int, int]]:
+    """(position, type, body start, body size) of each element tag between start and end.
 
-    scipy.io.loadmat looks element types up in a table without a bounds check and crashes the
-    process (a segmentation fault, not an exception) on an undefined type, which a single
-    damaged byte produces. Only the element tags are walked; sizes that run past their
-    container end the walk there, as scipy reports those as errors itself.
+    A tag whose body runs past ``end`` ends the list; scipy reports such sizes itself.
+    """
+    found = []
+    position = start
+    while position + 8 <= end:
+        first, second = struct.unpack_from(order + "II", buffer, position)
+        if first >> 16:
+            # A small element packs its size into the upper half of the first word.
+            kind, size, body, following = first & 0xFFFF, first >> 16, position + 4, position + 8
+            if size > 4:
+                size = end  # cannot be: mark it as running past the end
+        else:
+            kind, size, body = first, second, position + 8
+            following = body + size + ((-size) % 8 if padded else 0)
+        if body + size > end:
+            found.append((position, kind, body, -1))
+            break
+        found.append((position, kind, body, size))
+        position = following
+    return found
+
+
+def _mat5_problem(path: str) -> str | None:
+    """Describe the first element scipy.io.loadmat would read as numbers but cannot, if any.
+
+    scipy looks element types up in a table without a bounds check and reads an array's parts
+    one after the other without checking that they lie inside the array. An undefined type,
+    or a variable where numbers should be (a complex flag on an array without an imaginary
+    part makes scipy read the next variable's tag as one), then crashes the process with a
+    segmentation fault instead of an exception. One damaged byte is enough for either.
     """
     with open(path, "rb") as stream:
         data = stream.read()
+    if data[126:128] not in (b"IM", b"MI"):
+        return None  # MAT v4, or not a MAT file: scipy tells
     order = ">" if data[126:128] == b"MI" else "<"
-    # (buffer, start, end, inside a matrix: sub-elements are padded to 8 bytes)
-    pending: list[tuple[bytes, int, int, bool]] = [(data, 128, len(data), False)]
-    while pending:
-        buffer, position, end, nested = pending.pop()
-        while position + 8 <= end:
-            first, second = struct.unpack_from(order + "II", buffer, position)
-            if first >> 16:
-                # A small element packs its size into the upper half of the first word.
-                kind, size, body = first & 0xFFFF, first >> 16, position + 4
-                following = position + 8
-            else:
-                kind, size, body = first, second, position + 8
-                following = body + size + ((-size) % 8 if nested else 0)
-            if kind not in _MAT5_TYPES:
-                return f"undefined data type {kind} at byte {position}"
-            if body + size > end:
-                break
-            if kind == _MAT5_MATRIX:
-                pending.append((buffer, body, body + size, True))
-            elif kind == _MAT5_COMPRESSED:
-                try:
-                    inner = zlib.decompress(buffer[body : body + size])
-                except zlib.error:
+    # (buffer, start, end): the file's top level, or the body of a compressed variable.
+    levels: list[tuple[bytes, int, int]] = [(data, 128, len(data))]
+    # (buffer, body start, body end) of each matrix still to check
+    matrices: list[tuple[bytes, int, int]] = []
+    while levels or matrices:
+        if levels:
+            buffer, start, end = levels.pop()
+            for position, kind, body, size in _mat5_elements(buffer, start, end, order, False):
+                if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX, _MAT5_COMPRESSED}:
+                    return f"undefined data type {kind} at byte {position}"
+                if size < 0:
                     break
-                pending.append((inner, 0, len(inner), False))
-            position = following
+                if kind == _MAT5_MATRIX:
+                    matrices.append((buffer, body, body + size))
+                elif kind == _MAT5_COMPRESSED:
+                    try:
+                        inner = zlib.decompress(buffer[body : body + size])
+                    except zlib.error:
+                        continue
+                    levels.append((inner, 0, len(inner)))
+            continue
+        buffer, start, end = matrices.pop()
+        parts = _mat5_elements(buffer, start, end, order, True)
+        for position, kind, _, _ in parts:
+            if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX}:
+                return f"undefined data type {kind} at byte {position}"
+        if len(parts) < 3 or parts[0][1] != 6 or parts[0][3] < 4:
+            continue  # no usable array flags: scipy rejects the variable itself
+        flags = struct.unpack_from(order + "I", buffer, parts[0][2])[0]
+        mx_class = flags & 0xFF
+        if mx_class in _MAT5_CONTAINERS:
+            for _, kind, body, size in parts[3:]:
+                if kind == _MAT5_MATRIX and size >= 0:
+                    matrices.append((buffer, body, body + size))
+            continue
+        if mx_class == _MAT5_SPARSE:
+            needed = 6  # flags, dims, name, row indices, column indices, values
+        elif mx_class == _MAT5_CHAR or 6 <= mx_class <= 15:
+            needed = 4  # flags, dims, name, values
+        else:
+            continue  # function handles and opaque objects: scipy reads them differently
+        if flags & _MAT5_COMPLEX_FLAG and mx_class != _MAT5_CHAR:
+            needed += 1
+        allowed = _MAT5_NUMBERS | (_MAT5_TEXT if mx_class == _MAT5_CHAR else frozenset())
+        for position, kind, _, _ in parts[3:needed]:
+            if kind not in allowed:
+                return f"data type {kind} where numbers should be, at byte {position}"
+        if len(parts) < needed or parts[needed - 1][3] < 0:
+            position = parts[0][0]
+            return f"the array at byte {position - 8} ends before all its parts"
     return None
 
 
 def _read_mat5(path: str, columns: list[str] | None, options: SourceOptions) -> Record:
     sio = _import("scipy.io", "reading MAT files", "mat")
-    problem = _mat5_bad_type(path)
+    problem = _mat5_problem(path)
     if problem is not None:
         raise _corrupt(path, "MAT", ValueError(problem))
     try:
-        variables = sio.whosmat(path)
+        with _mat_warnings_as_errors():
+            variables = sio.whosmat(path)
     except Exception as exc:
         # scipy raises a mix of ValueError, TypeError, OSError and its own MatReadError for
         # damaged files; all mean the same to the user.
@@ -1148,9 +1212,23 @@ def _read_mat5(path: str, columns: list[str] | None, options: SourceOptions) -> 
     return _table_record(path, time_name, time, values, available=names, numeric=numeric, meta=meta)
 
 
+@contextmanager
+def _mat_warnings_as_errors() -> Iterator[None]:
+    """Raise scipy's warnings while reading a MAT file instead of letting them through.
+
+    They all describe a damaged file ("We do not support byte ordering 'VAX D-float';
+    returned data may be corrupt", duplicate or unreadable variables), so the data must not be
+    used; and under ``-W error`` a warning would escape as an exception of its own.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        yield
+
+
 def _loadmat(sio: ModuleType, path: str, names: list[str]) -> dict[str, Any]:
     try:
-        loaded: dict[str, Any] = sio.loadmat(path, variable_names=names, simplify_cells=True)
+        with _mat_warnings_as_errors():
+            loaded: dict[str, Any] = sio.loadmat(path, variable_names=names, simplify_cells=True)
     except Exception as exc:
         # See _read_mat5: scipy's errors for damaged files have no common base class.
         raise _corrupt(path, "MAT", exc) from None
@@ -1292,6 +1370,16 @@ def _check_mdf_record(path: str, version: str, group: Any) -> None:
     size = int(group.channel_group.samples_byte_nr)
     if version.startswith("4"):
         size += int(group.channel_group.invalidation_bytes_nr)
+    # asammdf sizes its buffers by the record size, so a damaged size field (4 GB of
+    # invalidation bytes in a 2 kB file) would exhaust the memory before anything is read.
+    stored = sum(int(getattr(block, "original_size", 0) or 0) for block in group.data_blocks)
+    if stored and size > stored:
+        raise DataError(
+            f"a record of {size} bytes is larger than the {stored} bytes of data holding it "
+            "(file truncated or corrupt?)",
+            file=path,
+            hint="write the file again",
+        )
     for channel in group.channels:
         bits = int(channel.bit_count)
         if version.startswith("4"):
