@@ -761,12 +761,16 @@ def test_hdf5_names_that_are_not_utf8(tmp_path: Path) -> None:
 CRASH_HUNT = int(os.environ.get("HEVVAL_CRASH_HUNT", "0") or 0)
 
 HUNTER = """
-import json, random, sys, warnings
+import json, random, re, resource, sys, warnings
 from pathlib import Path
 from pytest_hevval.data.formats import read_record
 from pytest_hevval.data.record import SourceOptions
 from pytest_hevval.errors import DataError
 
+# A damaged size field can make a reader allocate tens of gigabytes; with the address space
+# capped, such an allocation fails here instead of the machine running out of memory.
+resource.setrlimit(resource.RLIMIT_AS, (6 << 30, 6 << 30))
+UNITS = {"KiB": 1 << 10, "MiB": 1 << 20, "GiB": 1 << 30, "TiB": 1 << 40, "PiB": 1 << 50}
 warnings.simplefilter("ignore")
 folder, count, seed = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 rng = random.Random(seed)
@@ -799,11 +803,18 @@ for source in sorted(folder.glob("seed*")):
         try:
             read_record(str(current), columns, SourceOptions(group=group))
             outcome = "record"
-        except DataError:
+        except DataError as exc:
             outcome = "DataError"
+            wanted = re.search(r"Unable to allocate ([0-9.]+) (KiB|MiB|GiB|TiB|PiB)", str(exc))
+            # Beyond any machine's memory the request fails at once, which is harmless; a
+            # request a machine could grant is the memory exhaustion this looks for.
+            if wanted and 1 << 30 < float(wanted[1]) * UNITS[wanted[2]] < 1 << 40:
+                outcome = "allocation of " + wanted[0][len("Unable to allocate ") :]
+                current.rename(folder / f"allocation-{rng.random()}{source.suffix}")
         except Exception as exc:
             outcome = type(exc).__name__
             current.rename(folder / f"{type(exc).__name__}-{rng.random()}{source.suffix}")
+        current.unlink(missing_ok=True)
         key = source.name + " " + outcome
         tally[key] = tally.get(key, 0) + 1
 print(json.dumps(tally))
@@ -817,11 +828,15 @@ def test_damaged_binary_files_never_crash_the_process(tmp_path: Path) -> None:
     # The binary readers are C extensions: a defect there kills the process, which a
     # Hypothesis target cannot report. A child process reads the damaged files instead.
     _seed_files(tmp_path)
+    # glibc's and Python's checking allocators stop at a heap overrun instead of crashing
+    # somewhere later, or not at all.
+    env = {**os.environ, "MALLOC_CHECK_": "3", "PYTHONMALLOC": "malloc_debug"}
     completed = subprocess.run(
         [sys.executable, "-c", HUNTER, str(tmp_path), str(CRASH_HUNT), "20240501"],
         capture_output=True,
         text=True,
         check=False,
+        env=env,
     )
     crashed = sorted(tmp_path.glob("current.*"))
     assert completed.returncode == 0, f"reader crashed ({completed.returncode}) on {crashed}"
@@ -867,4 +882,20 @@ def test_mdf_record_larger_than_its_data_is_refused(tmp_path: Path, seeds: Seeds
     struct.pack_into("<I", content, address + 100, 0xD8000000)  # cg_inval_bytes
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match=r"a record of \d+ bytes is larger than the 480 bytes"):
+        read_record(str(path), None, SourceOptions())
+
+
+def test_mdf_records_beyond_the_stored_data_are_refused(tmp_path: Path, seeds: Seeds) -> None:
+    # A damaged record count made asammdf allocate 7.9 GB per channel for a 2 kB file.
+    from asammdf import MDF
+
+    path = tmp_path / "seed.mf4"
+    path.write_bytes(seeds["seed.mf4"])
+    mdf = MDF(path)
+    address = int(mdf.groups[0].channel_group.address)
+    mdf.close()
+    content = bytearray(seeds["seed.mf4"])
+    struct.pack_into("<Q", content, address + 80, 1_056_964_628)  # cg_cycle_count
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match="1056964628 records of 24 bytes need 25367151072 bytes"):
         read_record(str(path), None, SourceOptions())

@@ -1020,7 +1020,8 @@ def _mat5_elements(
 ) -> list[tuple[int, int, int, int]]:
     """(position, type, body start, body size) of each element tag between start and end.
 
-    A tag whose body runs past ``end`` ends the list; scipy reports such sizes itself.
+    A tag whose body runs past ``end`` ends the list, with a size of -1: scipy still reads
+    what there is of it before it notices.
     """
     found = []
     position = start
@@ -1066,16 +1067,16 @@ def _mat5_problem(path: str) -> str | None:
             for position, kind, body, size in _mat5_elements(buffer, start, end, order, False):
                 if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX, _MAT5_COMPRESSED}:
                     return f"undefined data type {kind} at byte {position}"
-                if size < 0:
-                    break
                 if kind == _MAT5_MATRIX:
-                    matrices.append((buffer, body, body + size))
-                elif kind == _MAT5_COMPRESSED:
+                    matrices.append((buffer, body, body + size if size >= 0 else end))
+                elif kind == _MAT5_COMPRESSED and size >= 0:
                     try:
                         inner = zlib.decompress(buffer[body : body + size])
                     except zlib.error:
-                        continue
+                        continue  # scipy cannot decompress it either, and says so
                     levels.append((inner, 0, len(inner)))
+                if size < 0:
+                    break
             continue
         buffer, start, end = matrices.pop()
         parts = _mat5_elements(buffer, start, end, order, True)
@@ -1088,8 +1089,8 @@ def _mat5_problem(path: str) -> str | None:
         mx_class = flags & 0xFF
         if mx_class in _MAT5_CONTAINERS:
             for _, kind, body, size in parts[3:]:
-                if kind == _MAT5_MATRIX and size >= 0:
-                    matrices.append((buffer, body, body + size))
+                if kind == _MAT5_MATRIX:
+                    matrices.append((buffer, body, body + size if size >= 0 else end))
             continue
         if mx_class == _MAT5_SPARSE:
             needed = 6  # flags, dims, name, row indices, column indices, values
@@ -1370,13 +1371,23 @@ def _check_mdf_record(path: str, version: str, group: Any) -> None:
     size = int(group.channel_group.samples_byte_nr)
     if version.startswith("4"):
         size += int(group.channel_group.invalidation_bytes_nr)
-    # asammdf sizes its buffers by the record size, so a damaged size field (4 GB of
-    # invalidation bytes in a 2 kB file) would exhaust the memory before anything is read.
+    # asammdf sizes its buffers by the record size and the record count, so one damaged
+    # field (4 GB of invalidation bytes, or 10^9 records, in a 2 kB file) would exhaust the
+    # memory before anything is read. Complete records never need more than the stored data
+    # (decompressed sizes, so compressed files pass).
     stored = sum(int(getattr(block, "original_size", 0) or 0) for block in group.data_blocks)
-    if stored and size > stored:
+    cycles = int(group.channel_group.cycles_nr)
+    if size > stored and (stored or cycles):
         raise DataError(
             f"a record of {size} bytes is larger than the {stored} bytes of data holding it "
             "(file truncated or corrupt?)",
+            file=path,
+            hint="write the file again",
+        )
+    if size * cycles > stored:
+        raise DataError(
+            f"{cycles} records of {size} bytes need {size * cycles} bytes, but the file holds "
+            f"{stored} bytes of data for them (file truncated or corrupt?)",
             file=path,
             hint="write the file again",
         )
@@ -1392,8 +1403,9 @@ def _check_mdf_record(path: str, version: str, group: Any) -> None:
             start = int(channel.start_offset) + 8 * int(
                 getattr(channel, "additional_byte_offset", 0)
             )
-        end = -(-(start + bits) // 8)
-        if bits and end > size:
+        # asammdf reads at least one byte even for a channel of 0 bits.
+        end = -(-(start + max(bits, 1)) // 8)
+        if end > size:
             raise DataError(
                 f"channel {str(channel.name)!r} ends at byte {end} of a {size}-byte record "
                 "(file truncated or corrupt?)",
