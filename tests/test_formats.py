@@ -275,6 +275,31 @@ def test_parquet_all_numeric(tmp_path: Path) -> None:
     np.testing.assert_allclose(record.channels["torque"].time[:3], [0.0, 0.01, 0.02])
 
 
+@pytest.mark.parametrize("batch_bytes", [1, 8 * 40 * 2, 64 << 20])
+def test_parquet_read_a_few_columns_at_a_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, batch_bytes: int
+) -> None:
+    # Columns are read in batches (one column, two, or all at once) and come back in the
+    # order asked, the time column included when a spec asks for it as a signal.
+    import pyarrow as pa
+
+    from pytest_hevval.data import formats
+
+    monkeypatch.setattr(formats, "_PARQUET_BATCH_BYTES", batch_bytes)
+    path = _write_parquet(tmp_path / "run.parquet", n=40)
+    pool_before = pa.default_memory_pool().backend_name
+    record = read_record(path, ["soc", "time", "gear", "speed", "flag"], OPTS)
+    # The read borrows another allocator and gives pyarrow's default back.
+    assert pa.default_memory_pool().backend_name == pool_before
+    frame = pd.read_parquet(path)
+    assert list(record.channels) == ["soc", "time", "gear", "speed", "flag"]
+    for name in record.channels:
+        np.testing.assert_array_equal(
+            record.channels[name].values, frame[name].to_numpy(dtype=np.float64, na_value=np.nan)
+        )
+    assert record.channels["speed"].values.dtype == np.float32
+
+
 def test_parquet_timestamp_time_becomes_seconds(tmp_path: Path) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -502,6 +527,126 @@ def test_mdf_missing_channel_suggests(tmp_path: Path) -> None:
     assert str(info.value) == (
         f"{path}: column 'speed': no such column in this file; did you mean 'Speed'?"
     )
+
+
+def _select_all(path: str) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
+    """Every channel as asammdf's own ``select`` returns it (the reference for the streamer)."""
+    from asammdf import MDF
+
+    out = {}
+    with MDF(path) as mdf:
+        for group_index, group in enumerate(mdf.groups):
+            master = mdf.masters_db.get(group_index)
+            for index, channel in enumerate(group.channels):
+                if index != master:
+                    (signal,) = mdf.select([(channel.name, group_index, index)])
+                    out[channel.name] = (signal.samples, signal.timestamps, signal.unit)
+    return out
+
+
+def _mdf_plans(path: str) -> list[object]:
+    from asammdf import MDF
+
+    from pytest_hevval.data.formats import _plain_mdf_plan
+
+    with MDF(path) as mdf:
+        return [
+            _plain_mdf_plan(
+                mdf,
+                str(mdf.version),
+                group_index,
+                [i for i in range(len(group.channels)) if i != mdf.masters_db.get(group_index)],
+            )
+            for group_index, group in enumerate(mdf.groups)
+        ]
+
+
+@pytest.mark.parametrize("stream_bytes", [1, 100, 32 << 20])
+def test_mdf_records_streamed_equal_asammdf_select(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, stream_bytes: int
+) -> None:
+    # Plain groups are streamed record by record (a record may straddle the buffer's end);
+    # the result must be asammdf's own, value for value, dtype for dtype.
+    from asammdf import MDF, Signal
+
+    from pytest_hevval.data import formats
+
+    monkeypatch.setattr(formats, "_MDF_STREAM_BYTES", stream_bytes)
+    t = np.arange(0, 30, 0.01)
+    path = tmp_path / "plain.mf4"
+    with MDF(version="4.10") as mdf:
+        mdf.append(
+            [
+                Signal(np.sin(t), t, name="v", unit="km/h"),
+                Signal(np.cos(t).astype(np.float32), t, name="w"),
+                Signal((t * 10).astype(np.int16), t, name="gear"),
+                Signal((t * 3).astype(np.uint8), t, name="flag"),
+            ]
+        )
+        slow = t[::7]
+        mdf.append([Signal(slow * 2.0, slow, name="soc", unit="%")])
+        mdf.save(str(path), overwrite=True)
+    assert all(plan is not None for plan in _mdf_plans(str(path)))
+    expected = _select_all(str(path))
+    record = read_record(str(path), None, OPTS)
+    assert list(record.channels) == list(expected)
+    for name, (samples, timestamps, unit) in expected.items():
+        channel = record.channels[name]
+        np.testing.assert_array_equal(channel.values, samples.astype(channel.values.dtype))
+        np.testing.assert_array_equal(channel.time, timestamps)
+        assert channel.unit == (unit or None)
+    assert record.channels["w"].values.dtype == np.float32
+    assert record.channels["v"].time is record.channels["gear"].time
+
+
+def test_mdf_groups_that_are_not_plain_go_through_asammdf(tmp_path: Path) -> None:
+    # A conversion, or compressed data blocks, leave the reading to asammdf's select.
+    from asammdf import MDF, Signal
+
+    t = np.arange(0, 5, 0.01)
+    path = tmp_path / "converted.mf4"
+    with MDF(version="4.10") as mdf:
+        raw = Signal(
+            np.arange(t.size, dtype=np.uint16),
+            t,
+            name="temp",
+            conversion={"a": 0.5, "b": -40.0},
+        )
+        mdf.append([raw])
+        mdf.append([Signal(np.sin(t), t, name="v")])
+        mdf.save(str(path), overwrite=True)
+    plans = _mdf_plans(str(path))
+    assert plans[0] is None and plans[1] is not None
+    record = read_record(str(path), None, OPTS)
+    np.testing.assert_allclose(record.channels["temp"].values, np.arange(t.size) * 0.5 - 40.0)
+    np.testing.assert_array_equal(record.channels["v"].values, np.sin(t))
+
+    packed = tmp_path / "packed.mf4"
+    with MDF(str(path)) as mdf:
+        mdf.save(str(packed), overwrite=True, compression=2)
+    assert _mdf_plans(str(packed)) == [None, None]
+    again = read_record(str(packed), None, OPTS)
+    np.testing.assert_array_equal(again.channels["v"].values, np.sin(t))
+
+
+def test_mdf_data_block_cut_short_is_a_data_error(tmp_path: Path) -> None:
+    from asammdf import MDF, Signal
+
+    from pytest_hevval.data import formats
+
+    t = np.arange(0, 30, 0.01)
+    path = tmp_path / "log.mf4"
+    with MDF(version="4.10") as mdf:
+        mdf.append([Signal(np.sin(t), t, name="v")])
+        mdf.save(str(path), overwrite=True)
+    with MDF(str(path)) as mdf:
+        plan = formats._plain_mdf_plan(mdf, "4.10", 0, [1])
+    assert plan is not None
+    address, size = plan.segments[0]
+    cut = tmp_path / "cut.mf4"
+    cut.write_bytes(path.read_bytes()[: address + size // 2])
+    with pytest.raises(DataError, match="ends past the end of the file"):
+        formats._read_plain_mdf(str(cut), plan)
 
 
 # --------------------------------------------------------------------------------------------

@@ -841,6 +841,8 @@ def test_damaged_binary_files_never_crash_the_process(tmp_path: Path) -> None:
     crashed = sorted(tmp_path.glob("current.*"))
     assert completed.returncode == 0, f"reader crashed ({completed.returncode}) on {crashed}"
     tally = json.loads(completed.stdout.strip().splitlines()[-1])
+    # The per-format outcomes are the figures docs/reliability.md records (shown with -s).
+    print("damaged files read, by seed and outcome:", json.dumps(tally, sort_keys=True))
     assert {key.split(" ")[1] for key in tally} <= {"record", "DataError"}, tally
     assert sum(tally.values()) == CRASH_HUNT * len(SEED_NAMES)
 

@@ -21,7 +21,8 @@ import struct
 import warnings
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
+from dataclasses import dataclass
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -275,12 +276,18 @@ def _as_values(
         return arr
     if arr.dtype.kind in "biuf":
         return arr.astype(np.float64)
-    raise DataError(
-        f"holds {_kind_name(arr.dtype)}, not numbers",
+    raise _not_numbers(source, column, _kind_name(arr.dtype), line=line_of)
+
+
+def _not_numbers(
+    source: str, column: str, holds: str, *, line: int | None = None, noun: str = "column"
+) -> DataError:
+    return DataError(
+        f"holds {holds}, not numbers",
         file=source,
-        line=line_of,
+        line=line,
         column=column,
-        hint="choose a numeric column",
+        hint=f"choose a numeric {noun}",
     )
 
 
@@ -713,6 +720,13 @@ def _corrupt(path: str, kind: str, exc: BaseException) -> DataError:
 def _read_parquet(path: str, columns: Iterable[str] | None, options: SourceOptions) -> Record:
     pa = _import("pyarrow", "reading Parquet files", "parquet")
     pq = _import("pyarrow.parquet", "reading Parquet files", "parquet")
+    with _returning_arrow_pool(pa):
+        return _read_parquet_columns(path, columns, options, pa, pq)
+
+
+def _read_parquet_columns(
+    path: str, columns: Iterable[str] | None, options: SourceOptions, pa: Any, pq: Any
+) -> Record:
     try:
         source, filesystem = parquet_source(path)
         # Pre-buffering coalesces reads for object stores; on a local file it keeps a second
@@ -723,59 +737,98 @@ def _read_parquet(path: str, columns: Iterable[str] | None, options: SourceOptio
         schema = parquet_file.schema_arrow
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise _corrupt(path, "Parquet", exc) from None
-    names = [str(n) for n in schema.names]
-    types = pa.types
+    with closing(parquet_file):
+        names = [str(n) for n in schema.names]
+        types = pa.types
 
-    def is_numeric(name: str) -> bool:
-        kind = schema.field(name).type
-        return bool(types.is_integer(kind) or types.is_floating(kind) or types.is_boolean(kind))
+        def is_numeric(name: str) -> bool:
+            kind = schema.field(name).type
+            return bool(types.is_integer(kind) or types.is_floating(kind) or types.is_boolean(kind))
 
-    numeric = [n for n in names if is_numeric(n)]
-    time_name = _pick_time(path, names, options)
-    wanted = _channel_list(path, columns, names, [n for n in numeric if n != time_name])
-    needed = list(dict.fromkeys([time_name, *wanted]))
-    try:
-        table = parquet_file.read(columns=needed)
-    except (pa.ArrowException, OSError, ValueError) as exc:
-        raise _corrupt(path, "Parquet", exc) from None
-    finally:
-        parquet_file.close()
-    if table.num_rows == 0:
-        raise _no_rows(path)
-
-    time_column = table.column(time_name)
-    if types.is_timestamp(time_column.type) or types.is_duration(time_column.type):
-        # Absolute or elapsed time stamps become seconds since the first sample.
-        # Subtract in int64: epoch nanoseconds exceed float64's exact integer range.
-        stamps = np.asarray(time_column.cast(pa.int64()).to_numpy(), dtype=np.int64)
-        unit = time_column.type.unit
-        time_raw: npt.NDArray[Any] = (stamps - stamps[0]).astype(np.float64) * _SECONDS_PER[unit]
-    elif is_numeric(time_name):
-        time_raw = _arrow_to_numpy(time_column)
-    else:
-        raise DataError(
-            f"the time column holds {time_column.type}, not numbers",
-            file=path,
-            column=time_name,
-            hint="set `time:` to the numeric time column",
-        )
-    time = _check_time(path, time_name, time_raw, options)
-    values: dict[str, ValueArray] = {}
-    for name in wanted:
-        column = table.column(name)
-        if not is_numeric(name):
+        numeric = [n for n in names if is_numeric(n)]
+        time_name = _pick_time(path, names, options)
+        wanted = _channel_list(path, columns, names, [n for n in numeric if n != time_name])
+        needed = list(dict.fromkeys([time_name, *wanted]))
+        try:
+            time_table = parquet_file.read(columns=[time_name])
+        except (pa.ArrowException, OSError, ValueError) as exc:
+            raise _corrupt(path, "Parquet", exc) from None
+        if time_table.num_rows == 0:
+            raise _no_rows(path)
+        time_column = time_table.column(0)
+        if types.is_timestamp(time_column.type) or types.is_duration(time_column.type):
+            # Absolute or elapsed time stamps become seconds since the first sample.
+            # Subtract in int64: epoch nanoseconds exceed float64's exact integer range.
+            stamps = np.asarray(time_column.cast(pa.int64()).to_numpy(), dtype=np.int64)
+            unit = time_column.type.unit
+            time_raw: npt.NDArray[Any] = (stamps - stamps[0]).astype(np.float64) * _SECONDS_PER[
+                unit
+            ]
+        elif is_numeric(time_name):
+            time_raw = _arrow_to_numpy(time_column)
+        else:
             raise DataError(
-                f"holds {column.type}, not numbers",
+                f"the time column holds {time_column.type}, not numbers",
                 file=path,
-                column=name,
-                hint="choose a numeric column",
+                column=time_name,
+                hint="set `time:` to the numeric time column",
             )
-        values[name] = _as_values(path, name, _arrow_to_numpy(column))
+        del time_table, time_column
+        time = _check_time(path, time_name, time_raw, options)
+        for name in wanted:
+            if not is_numeric(name):
+                raise _not_numbers(path, name, str(schema.field(name).type))
+        loaded: dict[str, ValueArray] = {}
+        # A few columns per read: the decoder's buffers then hold a batch, not the whole
+        # table, beside the arrays already made (peak memory near the loaded columns).
+        column_bytes = 8 * max(1, time.shape[0])
+        # At most an eighth of what is loaded, so that a few columns of a wide file keep
+        # the same small overhead as all of them.
+        batch_bytes = min(_PARQUET_BATCH_BYTES, column_bytes * len(wanted) // 8)
+        per_read = max(1, batch_bytes // column_bytes)
+        for first in range(0, len(wanted), per_read):
+            batch = [n for n in wanted[first : first + per_read] if n != time_name]
+            if not batch:
+                continue
+            try:
+                table = parquet_file.read(columns=batch)
+            except (pa.ArrowException, OSError, ValueError) as exc:
+                raise _corrupt(path, "Parquet", exc) from None
+            for name in batch:
+                loaded[name] = _as_values(path, name, _arrow_to_numpy(table.column(name)))
+            del table
+        if time_name in wanted:
+            loaded[time_name] = _as_values(path, time_name, np.asarray(time_raw))
+        values = {name: loaded[name] for name in wanted}
     units = {n: _field_unit(schema.field(n)) for n in needed}
     return _table_record(
         path, time_name, time, values, available=names, numeric=numeric, units=units
     )
 
+
+@contextmanager
+def _returning_arrow_pool(pa: Any) -> Iterator[None]:
+    """Decode with an allocator that hands freed memory back while the read goes on.
+
+    pyarrow's default pool (mimalloc) keeps the decoder's freed buffers as resident memory, so
+    peak memory reached about 1.5x the loaded columns; jemalloc (or the system allocator)
+    returns them and the peak stays near the columns themselves. Each buffer remembers the
+    pool it came from, so switching back afterwards is safe.
+    """
+    previous = pa.default_memory_pool()
+    try:
+        pool = pa.jemalloc_memory_pool()
+    except (NotImplementedError, pa.ArrowException):
+        pool = pa.system_memory_pool()
+    pa.set_memory_pool(pool)
+    try:
+        yield
+    finally:
+        pa.set_memory_pool(previous)
+
+
+# Decoded bytes per Parquet read call (see _read_parquet).
+_PARQUET_BATCH_BYTES = 64 << 20
 
 _SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 
@@ -924,12 +977,7 @@ def _read_hdf5_group(
             kind = (
                 "text" if _is_numeric_dtype(datasets[name].dtype) else _kind_name(raw[name].dtype)
             )
-            raise DataError(
-                f"holds {kind}, not numbers",
-                file=path,
-                column=name,
-                hint="choose a numeric column",
-            )
+            raise _not_numbers(path, name, str(kind))
         values[name] = _as_values(path, name, raw[name])
     units = {
         n: _attr_text(datasets[n].attrs.get("unit", datasets[n].attrs.get("units")))
@@ -1288,6 +1336,167 @@ def _disarm_half_open_mdf(exc: BaseException) -> None:
         traceback = traceback.tb_next
 
 
+@dataclass(frozen=True)
+class _MdfSamples:
+    """One channel's samples and its group's time stamps, however they were read."""
+
+    samples: npt.NDArray[Any]
+    timestamps: npt.NDArray[Any]
+    unit: str | None
+
+
+@dataclass(frozen=True)
+class _PlainMdfPlan:
+    """Where the bytes of some channels of one plain MDF4 channel group lie.
+
+    ``fields`` holds (dtype, byte offset in the record, unit) for the master first, then for
+    every channel asked for; ``segments`` the (file offset, size) of each data block in order.
+    """
+
+    record_size: int
+    cycles: int
+    fields: list[tuple[np.dtype[Any], int, str | None]]
+    segments: list[tuple[int, int]]
+
+
+# Plain fixed-size channels: MDF4 channel type 0 (value) or 2 (master), data types 0–5
+# (integers and IEEE floats of either byte order).
+_PLAIN_MDF_CHANNEL_TYPES = (0, 2)
+_PLAIN_MDF_DATA_TYPES = (0, 1, 2, 3, 4, 5)
+
+
+def _plain_mdf_plan(
+    mdf: Any, version: str, group_index: int, channel_indices: list[int]
+) -> _PlainMdfPlan | None:
+    """A plan to copy these channels straight out of the records, or None to ask asammdf.
+
+    asammdf reads a whole channel group into memory before it extracts any channel (as much
+    memory again as a group's channels), so for the common layout — uncompressed data blocks
+    of fixed records, byte-aligned numbers without conversions or invalidation bits — the
+    records are streamed instead. asammdf still parses the file and describes the layout
+    (``group.record``); anything else goes through ``MDF.select``.
+    """
+    if not version.startswith("4"):
+        return None
+    try:
+        group = mdf.groups[group_index]
+        master = mdf.masters_db.get(group_index)
+        channel_group = group.channel_group
+        if master is None or group.uses_ld or int(group.data_location) != 0:
+            return None
+        if int(group.data_group.record_id_len) or int(channel_group.invalidation_bytes_nr):
+            return None
+        record_size = int(channel_group.samples_byte_nr)
+        cycles = int(channel_group.cycles_nr)
+        fields = []
+        for index in [master, *channel_indices]:
+            channel = group.channels[index]
+            layout = group.record[index]
+            if (
+                layout is None
+                or group.signal_data[index]
+                or group.channel_dependencies[index]
+                or channel.conversion is not None
+                or not channel.standard_C_size
+                or int(channel.channel_type) not in _PLAIN_MDF_CHANNEL_TYPES
+                or int(channel.data_type) not in _PLAIN_MDF_DATA_TYPES
+                or int(channel.flags) & 0b11  # all values invalid, or invalidation bits
+            ):
+                return None
+            dtype, byte_size, byte_offset, bit_offset = layout
+            dtype = np.dtype(dtype)
+            if bit_offset or dtype.itemsize != int(byte_size) or dtype.kind not in "fiu":
+                return None
+            if byte_offset + dtype.itemsize > record_size:
+                return None
+            fields.append((dtype, int(byte_offset), str(channel.unit) or None))
+        segments = []
+        for block in group.data_blocks:
+            if int(block.block_type) != 0:
+                return None
+            size = int(block.original_size)
+            if block.block_limit is not None:
+                size = min(size, int(block.block_limit))
+            segments.append((int(block.address), size))
+    except (AttributeError, IndexError, KeyError, TypeError, ValueError):
+        return None
+    if record_size <= 0 or sum(size for _, size in segments) < cycles * record_size:
+        return None
+    return _PlainMdfPlan(record_size, cycles, fields, segments)
+
+
+# Bytes of records held at once while streaming a plain MDF group.
+_MDF_STREAM_BYTES = 32 << 20
+
+
+def _read_plain_mdf(path: str, plan: _PlainMdfPlan) -> list[_MdfSamples]:
+    """Stream the records of a plain group, copying each field into its own array."""
+    size = plan.record_size
+    file_size = os.path.getsize(path)
+    outside = any(address < 0 or address + length > file_size for address, length in plan.segments)
+    if outside or plan.cycles * size > file_size:
+        # Checked before anything is allocated: a damaged block size must not size arrays.
+        raise DataError(
+            "a data block ends past the end of the file (file truncated?)",
+            file=path,
+            hint="write the file again",
+        )
+    # The buffer stays small beside the arrays it fills, so a spec that reads a few channels
+    # of a wide group does not pay for the whole record width in memory.
+    wanted_bytes = plan.cycles * sum(dtype.itemsize for dtype, _, _ in plan.fields)
+    per_pass = max(1, min(_MDF_STREAM_BYTES, wanted_bytes // 8) // size)
+    buffer = bytearray(per_pass * size)
+    view = memoryview(buffer)
+    outputs = [np.empty(plan.cycles, dtype=dtype) for dtype, _, _ in plan.fields]
+    done = 0  # records copied out
+    filled = 0  # bytes waiting in the buffer
+
+    def drain(count: int) -> None:
+        nonlocal done
+        records = np.frombuffer(buffer, dtype=np.uint8, count=count * size).reshape(count, size)
+        for (dtype, offset, _), out in zip(plan.fields, outputs, strict=True):
+            field = records[:, offset : offset + dtype.itemsize].view(dtype)[:, 0]
+            out[done : done + count] = field
+        done += count
+
+    try:
+        with open(path, "rb") as stream:
+            for address, length in plan.segments:
+                stream.seek(address)
+                while length > 0 and done < plan.cycles:
+                    got = stream.readinto(view[filled : filled + min(length, len(buffer) - filled)])
+                    if not got:
+                        raise DataError(
+                            "a data block ends past the end of the file (file truncated?)",
+                            file=path,
+                            hint="write the file again",
+                        )
+                    filled += got
+                    length -= got
+                    whole = min(filled // size, plan.cycles - done)
+                    if whole and (filled == len(buffer) or length == 0):
+                        drain(whole)
+                        leftover = filled - whole * size
+                        buffer[:leftover] = buffer[whole * size : filled]
+                        filled = leftover
+    except OSError as exc:
+        raise _corrupt(path, "MDF", exc) from None
+    finally:
+        view.release()
+    if done < plan.cycles:
+        raise DataError(
+            f"the data blocks hold {done} of the {plan.cycles} records the channel group "
+            "declares (file truncated or corrupt?)",
+            file=path,
+            hint="write the file again",
+        )
+    time = outputs[0]
+    return [
+        _MdfSamples(values, time, unit)
+        for values, (_, _, unit) in zip(outputs[1:], plan.fields[1:], strict=True)
+    ]
+
+
 def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) -> Record:
     with _open_mdf(path) as mdf:
         version = str(mdf.version)
@@ -1310,11 +1519,33 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
         wanted = _channel_list(path, columns, names, numeric)
         for group_index in sorted({first[n][0] for n in wanted}):
             _check_mdf_record(path, version, mdf.groups[group_index])
+        by_group: dict[int, list[str]] = {}
+        for name in wanted:
+            by_group.setdefault(first[name][0], []).append(name)
+        loaded: dict[str, _MdfSamples] = {}
+        rest: list[str] = []
+        for group_index, names_in_group in by_group.items():
+            plan = _plain_mdf_plan(mdf, version, group_index, [first[n][1] for n in names_in_group])
+            if plan is None:
+                rest.extend(names_in_group)
+                continue
+            loaded.update(zip(names_in_group, _read_plain_mdf(path, plan), strict=True))
         try:
-            signals = mdf.select([(n, *first[n]) for n in wanted], raw=False) if wanted else []
+            # copy_master=False: the channels of a group share one time array instead of
+            # one copy each, which for a 600-channel group doubled the memory and the time.
+            selected = (
+                mdf.select([(n, *first[n]) for n in rest], raw=False, copy_master=False)
+                if rest
+                else []
+            )
         except Exception as exc:
             # Same as opening: a damaged data block fails with assorted exception types.
             raise _corrupt(path, "MDF", exc) from None
+        for name, signal in zip(rest, selected, strict=True):
+            loaded[name] = _MdfSamples(
+                np.asarray(signal.samples), np.asarray(signal.timestamps), signal.unit
+            )
+        signals = [loaded[name] for name in wanted]
 
     channels: dict[str, Channel] = {}
     # Channels of one MDF group share its master time: check it once and keep one array,
@@ -1323,12 +1554,7 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
     for name, signal in zip(wanted, signals, strict=True):
         samples = np.asarray(signal.samples)
         if samples.ndim != 1 or not _is_numeric_dtype(samples.dtype):
-            raise DataError(
-                f"holds {_kind_name(samples.dtype)}, not numbers",
-                file=path,
-                column=name,
-                hint="choose a numeric channel",
-            )
+            raise _not_numbers(path, name, _kind_name(samples.dtype), noun="channel")
         if samples.size == 0:
             raise DataError(
                 "the channel has no samples",
