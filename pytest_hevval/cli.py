@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from .data.remote import is_url
 from .errors import HevvalError
 
 __all__ = ["main"]
@@ -95,7 +96,7 @@ def _run(args: argparse.Namespace) -> int:
             progress.update(1)
     progress.close()
     for result in results:
-        if "://" not in result.spec:
+        if not is_url(result.spec):
             result.spec = os.path.relpath(result.spec)
     for line in tree_summary(results, details=args.details):
         print(line)

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from .data.remote import is_url
 from .engine import DataCache, Evaluation, evaluate_spec
 from .errors import HevvalError
 from .options import get_option
@@ -204,7 +205,7 @@ class HevvalSession:
         result = outcome.result
         result.spec = self.relative(result.spec)
         for side in result.data.values():
-            if isinstance(side, dict) and side.get("path") and "://" not in str(side["path"]):
+            if isinstance(side, dict) and side.get("path") and not is_url(str(side["path"])):
                 side["path"] = self.relative(str(side["path"]))
 
     def diagnosis_for(
@@ -267,7 +268,7 @@ class HevvalSession:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
 
     def relative(self, path: str) -> str:
-        if "://" in path:
+        if is_url(path):
             return path
         try:
             return os.path.relpath(path, self.rootdir)

@@ -17,6 +17,7 @@ import yaml
 
 from ..core.characteristics import CHARACTERISTICS
 from ..data.record import SourceOptions
+from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
 from .model import AlignmentSpec, Interpolation, SignalSpec, SourceSpec, Spec
@@ -330,7 +331,7 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
     if kind in ("path", "fmu"):
         raw = context.text(mapping[kind], mapping.line_of(kind), _join(key, kind))
         where = _join(key, kind)
-        path = raw if "://" in raw else _resolve(context, base, raw, mapping.line_of(kind), where)
+        path = raw if is_url(raw) else _resolve(context, base, raw, mapping.line_of(kind), where)
     callable_ref = None
     if kind == "callable":
         callable_ref = context.text(mapping["callable"], mapping.line_of("callable"), key)
