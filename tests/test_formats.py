@@ -616,7 +616,8 @@ def test_mdf_groups_that_are_not_plain_go_through_asammdf(tmp_path: Path) -> Non
         mdf.append([Signal(np.sin(t), t, name="v")])
         mdf.save(str(path), overwrite=True)
     plans = _mdf_plans(str(path))
-    assert plans[0] is None and plans[1] is not None
+    assert plans[0] is None
+    assert plans[1] is not None
     record = read_record(str(path), None, OPTS)
     np.testing.assert_allclose(record.channels["temp"].values, np.arange(t.size) * 0.5 - 40.0)
     np.testing.assert_array_equal(record.channels["v"].values, np.sin(t))
