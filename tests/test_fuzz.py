@@ -759,9 +759,11 @@ def test_hdf5_names_that_are_not_utf8(tmp_path: Path) -> None:
 
 
 CRASH_HUNT = int(os.environ.get("HEVVAL_CRASH_HUNT", "0") or 0)
+# Another seed damages the files in other places.
+CRASH_SEED = os.environ.get("HEVVAL_CRASH_SEED", "20240501")
 
 HUNTER = """
-import json, random, re, resource, sys, warnings
+import json, random, re, resource, signal, sys, warnings
 from pathlib import Path
 from pytest_hevval.data.formats import read_record
 from pytest_hevval.data.record import SourceOptions
@@ -770,6 +772,18 @@ from pytest_hevval.errors import DataError
 # A damaged size field can make a reader allocate tens of gigabytes; with the address space
 # capped, such an allocation fails here instead of the machine running out of memory.
 resource.setrlimit(resource.RLIMIT_AS, (6 << 30, 6 << 30))
+
+
+class Hang(BaseException):  # not an Exception: readers that catch those must not hide it
+    pass
+
+
+def hang(signum, frame):
+    raise Hang()
+
+
+# A read that loops forever is a defect too: no file here takes a second to read.
+signal.signal(signal.SIGALRM, hang)
 UNITS = {"KiB": 1 << 10, "MiB": 1 << 20, "GiB": 1 << 30, "TiB": 1 << 40, "PiB": 1 << 50}
 warnings.simplefilter("ignore")
 folder, count, seed = Path(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
@@ -801,7 +815,11 @@ for source in sorted(folder.glob("seed*")):
         group = rng.choice(groups)
         columns = rng.choice([None, ["v"], ["v", "nope"], ["w [A]"]])
         try:
-            read_record(str(current), columns, SourceOptions(group=group))
+            signal.alarm(10)
+            try:
+                read_record(str(current), columns, SourceOptions(group=group))
+            finally:
+                signal.alarm(0)
             outcome = "record"
         except DataError as exc:
             outcome = "DataError"
@@ -811,7 +829,7 @@ for source in sorted(folder.glob("seed*")):
             if wanted and 1 << 30 < float(wanted[1]) * UNITS[wanted[2]] < 1 << 40:
                 outcome = "allocation of " + wanted[0][len("Unable to allocate ") :]
                 current.rename(folder / f"allocation-{rng.random()}{source.suffix}")
-        except Exception as exc:
+        except (Exception, Hang) as exc:
             outcome = type(exc).__name__
             current.rename(folder / f"{type(exc).__name__}-{rng.random()}{source.suffix}")
         current.unlink(missing_ok=True)
@@ -831,13 +849,18 @@ def test_damaged_binary_files_never_crash_the_process(tmp_path: Path) -> None:
     # glibc's and Python's checking allocators stop at a heap overrun instead of crashing
     # somewhere later, or not at all.
     env = {**os.environ, "MALLOC_CHECK_": "3", "PYTHONMALLOC": "malloc_debug"}
-    completed = subprocess.run(
-        [sys.executable, "-c", HUNTER, str(tmp_path), str(CRASH_HUNT), "20240501"],
-        capture_output=True,
-        text=True,
-        check=False,
-        env=env,
-    )
+    try:
+        completed = subprocess.run(
+            [sys.executable, "-c", HUNTER, str(tmp_path), str(CRASH_HUNT), CRASH_SEED],
+            capture_output=True,
+            text=True,
+            check=False,
+            env=env,
+            # A hang inside C code, where the child's own alarm cannot interrupt it.
+            timeout=300 + CRASH_HUNT * len(SEED_NAMES) * 0.1,
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"reader hung on {sorted(tmp_path.glob('current.*'))}")
     crashed = sorted(tmp_path.glob("current.*"))
     assert completed.returncode == 0, f"reader crashed ({completed.returncode}) on {crashed}"
     tally = json.loads(completed.stdout.strip().splitlines()[-1])
@@ -900,4 +923,52 @@ def test_mdf_records_beyond_the_stored_data_are_refused(tmp_path: Path, seeds: S
     struct.pack_into("<Q", content, address + 80, 1_056_964_628)  # cg_cycle_count
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match="1056964628 records of 24 bytes need 25367151072 bytes"):
+        read_record(str(path), None, SourceOptions())
+
+
+def test_mdf3_record_count_beyond_the_file_is_refused(tmp_path: Path, seeds: Seeds) -> None:
+    # MDF 3 stores no block sizes; asammdf derives them from the record count, so a damaged
+    # count asked for 13.9 GiB for a 1.6 kB file (found by the crash hunt).
+    from asammdf import MDF
+
+    path = tmp_path / "seed.mdf"
+    path.write_bytes(seeds["seed.mdf"])
+    mdf = MDF(path)
+    address = int(mdf.groups[0].channel_group.address)
+    mdf.close()
+    content = bytearray(seeds["seed.mdf"])
+    struct.pack_into("<I", content, address + 22, 1_865_263_528)  # cg number of records
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match=r"a data block ends at byte \d+, past the end of the"):
+        read_record(str(path), None, SourceOptions())
+
+
+def test_mdf_block_list_that_loops_is_refused(tmp_path: Path, seeds: Seeds) -> None:
+    # A channel whose "next" link points back at itself made asammdf's opening loop forever
+    # (found by the crash hunt).
+    from asammdf import MDF
+
+    path = tmp_path / "seed.mf4"
+    path.write_bytes(seeds["seed.mf4"])
+    mdf = MDF(path)
+    channel = int(mdf.groups[0].channels[-1].address)
+    mdf.close()
+    content = bytearray(seeds["seed.mf4"])
+    struct.pack_into("<Q", content, channel + 24, channel)  # cn_cn_next → itself
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match=rf"the block at byte {channel} is linked to twice"):
+        read_record(str(path), None, SourceOptions())
+
+
+def test_mat_small_element_claiming_more_than_four_bytes_is_refused(
+    tmp_path: Path, seeds: Seeds
+) -> None:
+    # A small-format tag (size in its upper half) claiming 128 bytes: scipy.io.loadmat copies
+    # them out of the 4-byte slot and segfaults (found by the crash hunt, seed 4).
+    content = bytearray(seeds["seed.mat"])
+    flags_tag = content.index(struct.pack("<II", 6, 8), 128)  # array flags of the first array
+    struct.pack_into("<I", content, flags_tag, (128 << 16) | 6)
+    path = tmp_path / "small.mat"
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match=rf"small data element at byte {flags_tag} claims more"):
         read_record(str(path), None, SourceOptions())

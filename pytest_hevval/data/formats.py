@@ -1069,7 +1069,8 @@ def _mat5_elements(
     """(position, type, body start, body size) of each element tag between start and end.
 
     A tag whose body runs past ``end`` ends the list, with a size of -1: scipy still reads
-    what there is of it before it notices.
+    what there is of it before it notices. A small element claiming more than 4 bytes ends it
+    with a size of ``_MAT5_OVERSIZED``.
     """
     found = []
     position = start
@@ -1079,7 +1080,9 @@ def _mat5_elements(
             # A small element packs its size into the upper half of the first word.
             kind, size, body, following = first & 0xFFFF, first >> 16, position + 4, position + 8
             if size > 4:
-                size = end  # cannot be: mark it as running past the end
+                # Cannot be: scipy would copy that many bytes out of a 4-byte slot.
+                found.append((position, kind, body, _MAT5_OVERSIZED))
+                break
         else:
             kind, size, body = first, second, position + 8
             following = body + size + ((-size) % 8 if padded else 0)
@@ -1089,6 +1092,16 @@ def _mat5_elements(
         found.append((position, kind, body, size))
         position = following
     return found
+
+
+_MAT5_OVERSIZED = -2
+
+
+def _mat5_oversized(elements: list[tuple[int, int, int, int]]) -> str | None:
+    for position, _, _, size in elements:
+        if size == _MAT5_OVERSIZED:
+            return f"a small data element at byte {position} claims more than 4 bytes"
+    return None
 
 
 def _mat5_problem(path: str) -> str | None:
@@ -1112,7 +1125,11 @@ def _mat5_problem(path: str) -> str | None:
     while levels or matrices:
         if levels:
             buffer, start, end = levels.pop()
-            for position, kind, body, size in _mat5_elements(buffer, start, end, order, False):
+            elements = _mat5_elements(buffer, start, end, order, False)
+            oversized = _mat5_oversized(elements)
+            if oversized:
+                return oversized
+            for position, kind, body, size in elements:
                 if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX, _MAT5_COMPRESSED}:
                     return f"undefined data type {kind} at byte {position}"
                 if kind == _MAT5_MATRIX:
@@ -1128,6 +1145,9 @@ def _mat5_problem(path: str) -> str | None:
             continue
         buffer, start, end = matrices.pop()
         parts = _mat5_elements(buffer, start, end, order, True)
+        oversized = _mat5_oversized(parts)
+        if oversized:
+            return oversized
         for position, kind, _, _ in parts:
             if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX}:
                 return f"undefined data type {kind} at byte {position}"
@@ -1293,9 +1313,73 @@ _MDF4_NUMERIC_TYPES = range(6)
 _MDF3_TEXT_TYPES = (7, 8)
 
 
+# Where the links of the block lists asammdf follows while opening a file sit: the first data
+# group in the header, and in each block its next sibling and first child.
+_MDF_LINKS = {
+    # version: (address size, header's first data group, next block, first child)
+    "3": (4, 68, 4, 8),
+    "4": (8, 88, 24, 32),
+}
+
+
+def _mdf_loop(path: str) -> str | None:
+    """Describe a loop in the data group, channel group or channel lists, or None.
+
+    asammdf walks these linked lists while opening a file and never remembers where it has
+    been; one damaged link that points back makes it loop forever, so the lists are walked
+    here first, each address visited at most once.
+    """
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(64 + 32)
+            size = os.fstat(stream.fileno()).st_size
+            if len(head) < 64 or not head.startswith(b"MDF"):
+                return None  # not an MDF file asammdf can open; it says why itself
+            major = chr(head[8]) if head[8:9].isdigit() else ""
+            if major not in _MDF_LINKS:
+                return None
+            width, first, next_at, child_at = _MDF_LINKS[major]
+            # MDF 3 declares its byte order in the identification block; MDF 4 is little-endian.
+            big = major == "3" and int.from_bytes(head[24:26], "little") != 0
+            order = ">" if big else "<"
+            code = "Q" if width == 8 else "I"
+
+            def link(address: int) -> int:
+                if address <= 0 or address + width > size:
+                    return 0
+                stream.seek(address)
+                return int(struct.unpack(order + code, stream.read(width))[0])
+
+            seen: set[int] = set()
+            # Each list: data groups (children: channel groups), channel groups (children:
+            # channels), channels (no children followed here).
+            pending = [(link(first), 0)]
+            while pending:
+                address, depth = pending.pop()
+                while address:
+                    if address in seen:
+                        return f"the block at byte {address} is linked to twice (a loop)"
+                    if address >= size:
+                        break  # asammdf reports addresses past the end itself
+                    seen.add(address)
+                    if depth < 2:
+                        pending.append((link(address + child_at), depth + 1))
+                    address = link(address + next_at)
+    except OSError:
+        return None
+    return None
+
+
 @contextmanager
 def _open_mdf(path: str) -> Iterator[Any]:
     asammdf = _import("asammdf", "reading MDF files", "mdf")
+    loop = _mdf_loop(path)
+    if loop is not None:
+        raise DataError(
+            f"cannot read this MDF file (file corrupt?): {loop}",
+            file=path,
+            hint="write the file again",
+        )
     try:
         mdf = asammdf.MDF(path)
     except Exception as exc:
@@ -1617,6 +1701,20 @@ def _check_mdf_record(path: str, version: str, group: Any) -> None:
             file=path,
             hint="write the file again",
         )
+    # MDF 3 has no block sizes: asammdf derives them from the record count, so a damaged count
+    # (10^9 records in a 2 kB file) passed the check above and asked for tens of gigabytes.
+    # Every block's stored bytes must lie inside the file.
+    file_size = os.path.getsize(path)
+    for block in group.data_blocks:
+        stored_size = block.compressed_size if block.block_type else block.original_size
+        end = int(block.address or 0) + int(stored_size or 0)
+        if end > file_size:
+            raise DataError(
+                f"a data block ends at byte {end}, past the end of the {file_size}-byte file "
+                "(file truncated or corrupt?)",
+                file=path,
+                hint="write the file again",
+            )
     for channel in group.channels:
         bits = int(channel.bit_count)
         if version.startswith("4"):
