@@ -943,18 +943,22 @@ def test_mdf3_record_count_beyond_the_file_is_refused(tmp_path: Path, seeds: See
         read_record(str(path), None, SourceOptions())
 
 
-def test_mdf_block_list_that_loops_is_refused(tmp_path: Path, seeds: Seeds) -> None:
+@pytest.mark.parametrize(("seed", "link"), [("seed.mf4", ("<Q", 24)), ("seed.mdf", ("<I", 4))])
+def test_mdf_block_list_that_loops_is_refused(
+    tmp_path: Path, seeds: Seeds, seed: str, link: tuple[str, int]
+) -> None:
     # A channel whose "next" link points back at itself made asammdf's opening loop forever
-    # (found by the crash hunt).
+    # (found by the crash hunt, in MDF 4 and MDF 3 files).
     from asammdf import MDF
 
-    path = tmp_path / "seed.mf4"
-    path.write_bytes(seeds["seed.mf4"])
+    path = tmp_path / seed
+    path.write_bytes(seeds[seed])
     mdf = MDF(path)
     channel = int(mdf.groups[0].channels[-1].address)
     mdf.close()
-    content = bytearray(seeds["seed.mf4"])
-    struct.pack_into("<Q", content, channel + 24, channel)  # cn_cn_next → itself
+    content = bytearray(seeds[seed])
+    code, offset = link
+    struct.pack_into(code, content, channel + offset, channel)  # next channel → itself
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match=rf"the block at byte {channel} is linked to twice"):
         read_record(str(path), None, SourceOptions())
@@ -972,3 +976,19 @@ def test_mat_small_element_claiming_more_than_four_bytes_is_refused(
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match=rf"small data element at byte {flags_tag} claims more"):
         read_record(str(path), None, SourceOptions())
+
+
+def test_mat_struct_array_larger_than_its_bytes_is_refused(tmp_path: Path) -> None:
+    # One damaged dimension of a struct array made scipy.io.loadmat allocate an object array of
+    # 2^30 elements (8 GB) for a 1 kB file (found by the crash hunt, seed 4).
+    import scipy.io
+
+    path = tmp_path / "log.mat"
+    scipy.io.savemat(path, {"s": {"time": np.arange(3.0), "v": np.ones(3)}})
+    content = bytearray(path.read_bytes())
+    # The struct's dimensions [1, 1] are the first int32 pair tagged (5, 8) after its flags.
+    dims = content.index(struct.pack("<IIii", 5, 8, 1, 1), 128)
+    struct.pack_into("<i", content, dims + 12, 0x40000001)
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match="claims 1073741825 elements"):
+        read_record(str(path), None, SourceOptions(group="s"))

@@ -1097,6 +1097,17 @@ def _mat5_elements(
 _MAT5_OVERSIZED = -2
 
 
+def _mat5_count(buffer: bytes, dims: tuple[int, int, int, int], order: str) -> int | None:
+    """The number of elements an array's dimensions element declares, if it is readable."""
+    _, kind, body, size = dims
+    if kind not in (5, 6) or size < 0 or size % 4:  # int32 or uint32 dimensions
+        return None
+    count = 1
+    for value in struct.unpack_from(f"{order}{size // 4}{'i' if kind == 5 else 'I'}", buffer, body):
+        count *= max(0, int(value))
+    return count
+
+
 def _mat5_oversized(elements: list[tuple[int, int, int, int]]) -> str | None:
     for position, _, _, size in elements:
         if size == _MAT5_OVERSIZED:
@@ -1156,6 +1167,15 @@ def _mat5_problem(path: str) -> str | None:
         flags = struct.unpack_from(order + "I", buffer, parts[0][2])[0]
         mx_class = flags & 0xFF
         if mx_class in _MAT5_CONTAINERS:
+            # scipy makes the object array the dimensions ask for before reading its elements:
+            # one damaged dimension asked for 8 GB in a 1 kB file. Every element needs a tag
+            # of 8 bytes at least, so more elements than that cannot be there.
+            count = _mat5_count(buffer, parts[1], order)
+            if count is not None and count * 8 > end - start:
+                return (
+                    f"the cell or struct array at byte {parts[0][0] - 8} claims {count} "
+                    f"elements in {end - start} bytes"
+                )
             for _, kind, body, size in parts[3:]:
                 if kind == _MAT5_MATRIX:
                     matrices.append((buffer, body, body + size if size >= 0 else end))
