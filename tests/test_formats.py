@@ -300,6 +300,20 @@ def test_parquet_read_a_few_columns_at_a_time(
     assert record.channels["speed"].values.dtype == np.float32
 
 
+def test_parquet_reads_in_threads_give_pyarrow_its_pool_back(tmp_path: Path) -> None:
+    # The borrowed allocator is process-wide; overlapping reads must not leave it behind.
+    from concurrent.futures import ThreadPoolExecutor
+
+    import pyarrow as pa
+
+    path = _write_parquet(tmp_path / "run.parquet", n=2000)
+    before = pa.default_memory_pool().backend_name
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        records = list(pool.map(lambda _: read_record(path, ["torque"], OPTS), range(40)))
+    assert pa.default_memory_pool().backend_name == before
+    assert all(r.channels["torque"].values.shape == (2000,) for r in records)
+
+
 def test_parquet_timestamp_time_becomes_seconds(tmp_path: Path) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq

@@ -18,6 +18,7 @@ import io
 import os
 import re
 import struct
+import threading
 import warnings
 import zlib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -806,6 +807,11 @@ def _read_parquet_columns(
     )
 
 
+_ARROW_POOL_LOCK = threading.Lock()
+# [readers inside, pyarrow's pool before the first of them entered]
+_ARROW_POOL_STATE: list[Any] = [0, None]
+
+
 @contextmanager
 def _returning_arrow_pool(pa: Any) -> Iterator[None]:
     """Decode with an allocator that hands freed memory back while the read goes on.
@@ -813,18 +819,26 @@ def _returning_arrow_pool(pa: Any) -> Iterator[None]:
     pyarrow's default pool (mimalloc) keeps the decoder's freed buffers as resident memory, so
     peak memory reached about 1.5x the loaded columns; jemalloc (or the system allocator)
     returns them and the peak stays near the columns themselves. Each buffer remembers the
-    pool it came from, so switching back afterwards is safe.
+    pool it came from, so switching back afterwards is safe. The pool is process-wide: with
+    several reads in threads, the last one out puts pyarrow's own pool back.
     """
-    previous = pa.default_memory_pool()
-    try:
-        pool = pa.jemalloc_memory_pool()
-    except (NotImplementedError, pa.ArrowException):
-        pool = pa.system_memory_pool()
-    pa.set_memory_pool(pool)
+    with _ARROW_POOL_LOCK:
+        if _ARROW_POOL_STATE[0] == 0:
+            _ARROW_POOL_STATE[1] = pa.default_memory_pool()
+            try:
+                pool = pa.jemalloc_memory_pool()
+            except (NotImplementedError, pa.ArrowException):
+                pool = pa.system_memory_pool()
+            pa.set_memory_pool(pool)
+        _ARROW_POOL_STATE[0] += 1
     try:
         yield
     finally:
-        pa.set_memory_pool(previous)
+        with _ARROW_POOL_LOCK:
+            _ARROW_POOL_STATE[0] -= 1
+            if _ARROW_POOL_STATE[0] == 0:
+                pa.set_memory_pool(_ARROW_POOL_STATE[1])
+                _ARROW_POOL_STATE[1] = None
 
 
 # Decoded bytes per Parquet read call (see _read_parquet).
