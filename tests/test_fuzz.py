@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import gc
+import io
 import json
 import os
 import struct
@@ -992,3 +993,19 @@ def test_mat_struct_array_larger_than_its_bytes_is_refused(tmp_path: Path) -> No
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match="claims 1073741825 elements"):
         read_record(str(path), None, SourceOptions(group="s"))
+
+
+def test_mdf3_that_fails_to_open_leaks_no_file(tmp_path: Path, seeds: Seeds) -> None:
+    # A damaged record-ID count in an MDF 3 data group: asammdf's constructor fails with
+    # KeyError 0 after opening the file, and left it open (found by the large fuzz run).
+    from asammdf import MDF
+
+    content = bytearray(seeds["seed.mdf"])
+    with MDF(io.BytesIO(bytes(content))) as mdf:
+        data_group = int(mdf.groups[0].data_group.address)
+    struct.pack_into("<H", content, data_group + 22, 137)  # number of record IDs
+    path = tmp_path / "ids.mdf"
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match="the reader said: KeyError: 0"):
+        read_record(str(path), None, SourceOptions())
+    _data_outcome(str(path), None, SourceOptions(), collect=True)

@@ -635,6 +635,9 @@ def _with_latin1_fallback(
 
 def _first_line(exc: BaseException) -> str:
     text = str(exc).strip().splitlines()
+    if isinstance(exc, LookupError) and text:
+        # A bare "0" or "'cn'" says nothing without the kind of lookup that failed.
+        return f"{type(exc).__name__}: {text[0]}"
     return text[0] if text else type(exc).__name__
 
 
@@ -1447,9 +1450,11 @@ def _disarm_half_open_mdf(exc: BaseException) -> None:
         obj: Any = frame.f_locals.get("self")
         half_open = obj is not None and not getattr(obj, "_closed", True)
         if half_open and type(obj).__module__.startswith("asammdf.blocks.mdf_v"):
-            tempfile = getattr(obj, "_tempfile", None)
-            if tempfile is not None:
-                tempfile.close()
+            # The MDF 3 reader opens the file as ``_mapped_file`` before it parses anything.
+            for attribute in ("_tempfile", "_mapped_file", "_file"):
+                stream = getattr(obj, attribute, None)
+                if stream is not None and not getattr(stream, "closed", True):
+                    stream.close()
             obj._closed = True
         traceback = traceback.tb_next
 
