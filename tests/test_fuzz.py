@@ -1009,3 +1009,31 @@ def test_mdf3_that_fails_to_open_leaks_no_file(tmp_path: Path, seeds: Seeds) -> 
     with pytest.raises(DataError, match="the reader said: KeyError: 0"):
         read_record(str(path), None, SourceOptions())
     _data_outcome(str(path), None, SourceOptions(), collect=True)
+
+
+def _loop_every_name_heap(content: bytearray) -> int:
+    """Make the free-space list of every local heap point back at itself; return how many."""
+    looped = 0
+    base = content.find(b"\x89HDF\r\n\x1a\n")  # addresses count from the superblock
+    start = content.find(b"HEAP")
+    while start >= 0:
+        _, free, data = struct.unpack_from("<QQQ", content, start + 8)
+        if free != 1:  # 1 ends the list
+            struct.pack_into("<Q", content, base + data + free, free)
+            looped += 1
+        start = content.find(b"HEAP", start + 4)
+    return looped
+
+
+@pytest.mark.parametrize(("seed", "group"), [("seed.h5", "g"), ("seed73.mat", None)])
+def test_hdf5_name_heap_that_loops_is_refused(
+    tmp_path: Path, seeds: Seeds, seed: str, group: str | None
+) -> None:
+    # A free-space list that points back at itself made libhdf5 loop forever while listing
+    # the group, where no signal reaches Python (found by the crash hunt, seed 2).
+    content = bytearray(seeds[seed])
+    assert _loop_every_name_heap(content) >= 1
+    path = tmp_path / seed
+    path.write_bytes(bytes(content))
+    with pytest.raises(DataError, match="lists free space a second time"):
+        read_record(str(path), None, SourceOptions(group=group))
