@@ -996,7 +996,8 @@ def _check_hdf5_group(path: str, group: Any) -> None:
 
 
 def _hdf5_get_checked(path: str, handle: Any, key: str) -> Any:
-    """``handle.get(key)``, checking every group on the way before a name is looked up in it."""
+    """``handle.get(key)``, checking every group on the way, and a group found, before a name
+    is looked up in it."""
     import h5py
 
     node = handle
@@ -1007,6 +1008,8 @@ def _hdf5_get_checked(path: str, handle: Any, key: str) -> Any:
         node = node.get(part)
         if node is None:
             return None
+    if isinstance(node, h5py.Group):
+        _check_hdf5_group(path, node)
     return node
 
 
@@ -1063,7 +1066,6 @@ def _read_hdf5_group(
             key="group",
             hint=suggestion or f"set `group:` to one of: {listing}",
         )
-    _check_hdf5_group(path, node)
     datasets: dict[str, Any] = {}
     for raw_name, obj in node.items():
         name = _hdf5_name(raw_name)
@@ -1233,6 +1235,10 @@ def _mat5_elements(
 
 
 _MAT5_OVERSIZED = -2
+# Element types scipy knows at the top level (and inside compressed variables), and inside
+# an array.
+_MAT5_IN_ARRAY = _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX}
+_MAT5_TOP_LEVEL = _MAT5_IN_ARRAY | {_MAT5_COMPRESSED}
 
 
 def _mat5_count(buffer: bytes, dims: tuple[int, int, int, int], order: str) -> int | None:
@@ -1246,10 +1252,16 @@ def _mat5_count(buffer: bytes, dims: tuple[int, int, int, int], order: str) -> i
     return count
 
 
-def _mat5_oversized(elements: list[tuple[int, int, int, int]]) -> str | None:
+def _mat5_tag_problem(
+    elements: list[tuple[int, int, int, int]], known: frozenset[int]
+) -> str | None:
+    """A small element claiming more than 4 bytes, else the first type scipy does not know."""
     for position, _, _, size in elements:
         if size == _MAT5_OVERSIZED:
             return f"a small data element at byte {position} claims more than 4 bytes"
+    for position, kind, _, _ in elements:
+        if kind not in known:
+            return f"undefined data type {kind} at byte {position}"
     return None
 
 
@@ -1275,12 +1287,10 @@ def _mat5_problem(path: str) -> str | None:
         if levels:
             buffer, start, end = levels.pop()
             elements = _mat5_elements(buffer, start, end, order, False)
-            oversized = _mat5_oversized(elements)
-            if oversized:
-                return oversized
-            for position, kind, body, size in elements:
-                if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX, _MAT5_COMPRESSED}:
-                    return f"undefined data type {kind} at byte {position}"
+            problem = _mat5_tag_problem(elements, _MAT5_TOP_LEVEL)
+            if problem:
+                return problem
+            for _, kind, body, size in elements:
                 if kind == _MAT5_MATRIX:
                     matrices.append((buffer, body, body + size if size >= 0 else end))
                 elif kind == _MAT5_COMPRESSED and size >= 0:
@@ -1294,12 +1304,9 @@ def _mat5_problem(path: str) -> str | None:
             continue
         buffer, start, end = matrices.pop()
         parts = _mat5_elements(buffer, start, end, order, True)
-        oversized = _mat5_oversized(parts)
-        if oversized:
-            return oversized
-        for position, kind, _, _ in parts:
-            if kind not in _MAT5_NUMBERS | _MAT5_TEXT | {_MAT5_MATRIX}:
-                return f"undefined data type {kind} at byte {position}"
+        problem = _mat5_tag_problem(parts, _MAT5_IN_ARRAY)
+        if problem:
+            return problem
         if len(parts) < 3 or parts[0][1] != 6 or parts[0][3] < 4:
             continue  # no usable array flags: scipy rejects the variable itself
         flags = struct.unpack_from(order + "I", buffer, parts[0][2])[0]
@@ -1676,10 +1683,10 @@ _MDF_STREAM_BYTES = 32 << 20
 def _read_plain_mdf(path: str, plan: _PlainMdfPlan) -> list[_MdfSamples]:
     """Stream the records of a plain group, copying each field into its own array."""
     size = plan.record_size
-    file_size = os.path.getsize(path)
-    outside = any(address < 0 or address + length > file_size for address, length in plan.segments)
-    if outside or plan.cycles * size > file_size:
-        # Checked before anything is allocated: a damaged block size must not size arrays.
+    # Checked before anything is allocated: a damaged record count must not size arrays.
+    # (_check_mdf_record has put every data block inside the file; a short read is caught
+    # below.)
+    if plan.cycles * size > os.path.getsize(path):
         raise DataError(
             "a data block ends past the end of the file (file truncated?)",
             file=path,
