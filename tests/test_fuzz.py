@@ -722,20 +722,26 @@ def test_mat_element_of_undefined_type_is_refused(tmp_path: Path, seeds: Seeds, 
         read_record(str(path), None, SourceOptions())
 
 
+def _mdf_seed_and_address(
+    seeds: Seeds, name: str, locate: Callable[[Any], Any]
+) -> tuple[bytearray, int]:
+    """A copy of an MDF seed to damage, and the address of the block ``locate`` picks in it."""
+    from asammdf import MDF
+
+    content = bytearray(seeds[name])
+    with MDF(io.BytesIO(bytes(content))) as mdf:
+        address = int(locate(mdf).address)
+    return content, address
+
+
 @pytest.mark.parametrize(("name", "field"), [("seed.mdf", 20), ("seed.mf4", 96)])
 def test_mdf_channel_past_the_end_of_its_record_is_refused(
     tmp_path: Path, seeds: Seeds, name: str, field: int
 ) -> None:
     # asammdf copies channel bytes out of each record in C without bounds checks; a record
     # size smaller than a channel's end overruns the heap (seen as SIGABRT/SIGSEGV).
-    from asammdf import MDF
-
+    content, address = _mdf_seed_and_address(seeds, name, lambda mdf: mdf.groups[0].channel_group)
     path = tmp_path / name
-    path.write_bytes(seeds[name])
-    mdf = MDF(path)
-    address = int(mdf.groups[0].channel_group.address)
-    mdf.close()
-    content = bytearray(seeds[name])
     # The record size field of the channel group block (MDF 3: uint16, MDF 4: uint32).
     struct.pack_into("<H" if name.endswith(".mdf") else "<I", content, address + field, 2)
     path.write_bytes(bytes(content))
@@ -897,14 +903,10 @@ def test_mat_warning_about_corrupt_data_is_an_error(tmp_path: Path) -> None:
 def test_mdf_record_larger_than_its_data_is_refused(tmp_path: Path, seeds: Seeds) -> None:
     # A damaged invalidation-byte count (one byte of the channel group block) once made
     # asammdf allocate gigabytes for a 2 kB file, until the process was killed.
-    from asammdf import MDF
-
+    content, address = _mdf_seed_and_address(
+        seeds, "seed.mf4", lambda mdf: mdf.groups[0].channel_group
+    )
     path = tmp_path / "seed.mf4"
-    path.write_bytes(seeds["seed.mf4"])
-    mdf = MDF(path)
-    address = int(mdf.groups[0].channel_group.address)
-    mdf.close()
-    content = bytearray(seeds["seed.mf4"])
     struct.pack_into("<I", content, address + 100, 0xD8000000)  # cg_inval_bytes
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match=r"a record of \d+ bytes is larger than the 480 bytes"):
@@ -913,14 +915,10 @@ def test_mdf_record_larger_than_its_data_is_refused(tmp_path: Path, seeds: Seeds
 
 def test_mdf_records_beyond_the_stored_data_are_refused(tmp_path: Path, seeds: Seeds) -> None:
     # A damaged record count made asammdf allocate 7.9 GB per channel for a 2 kB file.
-    from asammdf import MDF
-
+    content, address = _mdf_seed_and_address(
+        seeds, "seed.mf4", lambda mdf: mdf.groups[0].channel_group
+    )
     path = tmp_path / "seed.mf4"
-    path.write_bytes(seeds["seed.mf4"])
-    mdf = MDF(path)
-    address = int(mdf.groups[0].channel_group.address)
-    mdf.close()
-    content = bytearray(seeds["seed.mf4"])
     struct.pack_into("<Q", content, address + 80, 1_056_964_628)  # cg_cycle_count
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match="1056964628 records of 24 bytes need 25367151072 bytes"):
@@ -930,14 +928,10 @@ def test_mdf_records_beyond_the_stored_data_are_refused(tmp_path: Path, seeds: S
 def test_mdf3_record_count_beyond_the_file_is_refused(tmp_path: Path, seeds: Seeds) -> None:
     # MDF 3 stores no block sizes; asammdf derives them from the record count, so a damaged
     # count asked for 13.9 GiB for a 1.6 kB file (found by the crash hunt).
-    from asammdf import MDF
-
+    content, address = _mdf_seed_and_address(
+        seeds, "seed.mdf", lambda mdf: mdf.groups[0].channel_group
+    )
     path = tmp_path / "seed.mdf"
-    path.write_bytes(seeds["seed.mdf"])
-    mdf = MDF(path)
-    address = int(mdf.groups[0].channel_group.address)
-    mdf.close()
-    content = bytearray(seeds["seed.mdf"])
     struct.pack_into("<I", content, address + 22, 1_865_263_528)  # cg number of records
     path.write_bytes(bytes(content))
     with pytest.raises(DataError, match=r"a data block ends at byte \d+, past the end of the"):
@@ -950,14 +944,8 @@ def test_mdf_block_list_that_loops_is_refused(
 ) -> None:
     # A channel whose "next" link points back at itself made asammdf's opening loop forever
     # (found by the crash hunt, in MDF 4 and MDF 3 files).
-    from asammdf import MDF
-
+    content, channel = _mdf_seed_and_address(seeds, seed, lambda mdf: mdf.groups[0].channels[-1])
     path = tmp_path / seed
-    path.write_bytes(seeds[seed])
-    mdf = MDF(path)
-    channel = int(mdf.groups[0].channels[-1].address)
-    mdf.close()
-    content = bytearray(seeds[seed])
     code, offset = link
     struct.pack_into(code, content, channel + offset, channel)  # next channel → itself
     path.write_bytes(bytes(content))
@@ -998,11 +986,9 @@ def test_mat_struct_array_larger_than_its_bytes_is_refused(tmp_path: Path) -> No
 def test_mdf3_that_fails_to_open_leaks_no_file(tmp_path: Path, seeds: Seeds) -> None:
     # A damaged record-ID count in an MDF 3 data group: asammdf's constructor fails with
     # KeyError 0 after opening the file, and left it open (found by the large fuzz run).
-    from asammdf import MDF
-
-    content = bytearray(seeds["seed.mdf"])
-    with MDF(io.BytesIO(bytes(content))) as mdf:
-        data_group = int(mdf.groups[0].data_group.address)
+    content, data_group = _mdf_seed_and_address(
+        seeds, "seed.mdf", lambda mdf: mdf.groups[0].data_group
+    )
     struct.pack_into("<H", content, data_group + 22, 137)  # number of record IDs
     path = tmp_path / "ids.mdf"
     path.write_bytes(bytes(content))
