@@ -1512,8 +1512,7 @@ def _mdf_loop(path: str) -> str | None:
             def link(address: int) -> int:
                 if address <= 0 or address + width > size:
                     return 0
-                stream.seek(address)
-                return int(struct.unpack(order + code, stream.read(width))[0])
+                return int(struct.unpack(order + code, _read_at(stream, address, width))[0])
 
             seen: set[int] = set()
             # Each list: data groups (children: channel groups), channel groups (children:
