@@ -14,10 +14,7 @@ never loosen it. To loosen a threshold, lower it in the spec *and* delete the si
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
@@ -27,6 +24,7 @@ from typing import Any
 import yaml
 
 from ..errors import did_you_mean
+from ..files import write_atomic
 from ._base import CHARACTERISTICS, HistoryError
 from .records import format_utc
 
@@ -268,22 +266,12 @@ def write_sidecar(
     created_utc: datetime,
     margin: float,
 ) -> Path:
-    """Write the sidecar atomically (temporary file + ``os.replace``); return its path."""
+    """Write the sidecar atomically, with the usual file mode (it is committed); its path."""
     path = sidecar_path(spec_path)
     text = render_sidecar(
         thresholds, model_version=model_version, created_utc=created_utc, margin=margin
     )
-    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
-        raise
+    write_atomic(path, text)
     return path
 
 
