@@ -282,7 +282,12 @@ def _dispatch(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
     try:
-        args = _parser().parse_args(arguments)
+        args, unknown = _parser().parse_known_args(arguments)
+        if unknown:
+            # Named after the subcommand, whose --help lists what it takes.
+            raise _UsageError(
+                f"hevval {args.command}", f"unrecognized arguments: {' '.join(unknown)}"
+            )
     except _UsageError as exc:
         print(f"{exc.prog}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -403,7 +403,7 @@ def _evaluate(
         ref, sim = values[_signature(node)]
         figure_payload = None
         if figures:
-            from .report.figures import figure_data
+            from .core.figures import figure_data
 
             figure_payload = figure_data(
                 ref,

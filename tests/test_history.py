@@ -19,6 +19,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pytest_hevval import history as h
+from pytest_hevval.errors import SpecError
 from pytest_hevval.result import SpecResult
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
@@ -631,7 +632,7 @@ def test_merge_thresholds_sidecar_only_tightens() -> None:
 def test_load_sidecar_errors(tmp_path: Path, text: str, fragments: list[str]) -> None:
     spec_path = tmp_path / "t.hevval.yaml"
     h.sidecar_path(spec_path).write_text(text)
-    with pytest.raises(h.HistoryError) as info:
+    with pytest.raises(SpecError) as info:
         h.load_sidecar(spec_path)
     message = str(info.value)
     assert "t.hevval.thresholds.yaml" in message
@@ -825,7 +826,10 @@ def test_compare_main_fail_rules_and_latest(
 def test_compare_main_previous(
     history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.compare_main(["history:previous", "history:latest", "--history-dir", str(history_dir)]) == 0
+    assert (
+        h.compare_main(["history:previous", "history:latest", "--history-dir", str(history_dir)])
+        == 0
+    )
     assert "compare v2 → v3" in capsys.readouterr().out
     single = tmp_path / "single"
     h.HistoryStore(single).append(record("v1", T0))

@@ -21,6 +21,7 @@ from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
 from .model import AlignmentSpec, Interpolation, SignalSpec, SourceSpec, Spec
+from .sidecar import load_sidecar
 from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 
 __all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
@@ -211,8 +212,6 @@ def load_spec(path: str | Path) -> Spec:
             hint="save it as UTF-8",
         ) from None
     spec = parse_spec_text(text, spec_path, hashlib.sha256(raw).hexdigest())
-    from ..history.ratchet import load_sidecar
-
     # Thresholds tightened by --hevval-ratchet live beside the spec; only stricter ones apply.
     sidecar = load_sidecar(spec_path)
     return dataclasses.replace(spec, ratchet=sidecar) if sidecar else spec
