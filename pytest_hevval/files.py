@@ -2,7 +2,7 @@
 
 History records, reports, ratchet sidecars and JSON output all go through here. A reader sees
 the old file or the new one, never half of one; a failure leaves the old file as it was and no
-temporary file behind. Temporary files are created with ``open(..., "x")`` rather than
+temporary file behind. Temporary files are created with mode 0o666 before the umask rather than by
 :func:`tempfile.mkstemp`, so the result gets the mode the user's umask gives (0644 usually),
 not 0600: ratchet sidecars and reports are files users commit and share.
 """
@@ -19,9 +19,16 @@ __all__ = ["publish", "write_atomic", "write_temporary"]
 
 def write_temporary(directory: Path, payload: bytes, *, stem: str = "hevval") -> Path:
     """Write ``payload`` to a new hidden file in ``directory``, flushed to disk; its path."""
-    temp = directory / f".{stem}.{os.getpid()}.{secrets.token_hex(4)}.part"
+    temp = directory / f".tmp-{stem}.{os.getpid()}.{secrets.token_hex(4)}.part"
+    # 0o666 before the umask: the mode a plain open() would give, not mkstemp's 0600.
+    fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
-        with open(temp, "xb") as handle:
+        try:
+            handle = os.fdopen(fd, "wb")
+        except BaseException:
+            os.close(fd)
+            raise
+        with handle:
             handle.write(payload)
             handle.flush()
             os.fsync(handle.fileno())
