@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .local import GroupSums, group_lambdas
+from .local import CorrelationKind, GroupSums, group_lambdas
 
 __all__ = [
     "CONFIDENCE",
@@ -139,7 +139,7 @@ def replicate_lambdas(
     blocks: GroupSums, draws: IntArray, reference_range: float, correlation: str = "xcorr"
 ) -> dict[str, FloatArray]:
     """λ1–λ6 of every replicate, keyed by characteristic name."""
-    kind = "pearson" if correlation == "pearson" else "xcorr"
+    kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
     return group_lambdas(replicate_sums(blocks, draws), reference_range, kind)
 
 
