@@ -19,7 +19,7 @@ import os
 from array import array
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
@@ -139,7 +139,7 @@ def _raw_bits(payload: npt.NDArray[np.uint8], layout: SignalLayout) -> U64Array:
                 value |= _byte_column(payload, last) << np.uint64(64 - shift)
     if length < 64:
         value &= np.uint64((1 << length) - 1)
-    return value
+    return np.asarray(value, dtype=np.uint64)
 
 
 def decode_signal(payload: npt.NDArray[np.uint8], layout: SignalLayout) -> FloatArray:
@@ -153,7 +153,9 @@ def decode_signal(payload: npt.NDArray[np.uint8], layout: SignalLayout) -> Float
     if layout.is_float:
         float_type = {16: np.float16, 32: np.float32, 64: np.float64}[length]
         unsigned = {16: np.uint16, 32: np.uint32, 64: np.uint64}[length]
-        number = raw.astype(unsigned).view(float_type).astype(np.float64)
+        # Random or damaged payloads hold signalling NaNs, which warn when widened.
+        with np.errstate(invalid="ignore"):
+            number = raw.astype(unsigned).view(float_type).astype(np.float64)
     elif layout.signed:
         if length == 64:
             number = raw.view(np.int64)
@@ -271,6 +273,7 @@ def _read_frames(path: str) -> _Frames:
         return _mdf_frames(path)
     try:
         reader = _python_can_reader(path, kind)
+        _check_blf_size(path, reader)
         with reader:
             times, keys, lengths, data = _collect(reader)
     except DataError:
@@ -289,6 +292,19 @@ def _read_frames(path: str) -> _Frames:
         payload=_payload_matrix(np.frombuffer(data, dtype=np.uint8), length),
         absolute=first >= _EARLIEST_ABSOLUTE_S,
     )
+
+
+def _check_blf_size(path: str, reader: Any) -> None:
+    """Refuse a BLF file shorter than its header says: python-can would read part of it."""
+    declared = int(getattr(reader, "file_size", 0) or 0)
+    actual = os.path.getsize(path)
+    if declared > actual:
+        reader.stop()
+        raise DataError(
+            f"the BLF header declares {declared} bytes but the file has {actual} (file truncated?)",
+            file=path,
+            hint="copy the log again from the logger",
+        )
 
 
 def _mdf_frames(path: str) -> _Frames:
@@ -604,7 +620,7 @@ def _decode(
         meta["can"]["same_time_frames_dropped"] = dropped
     if frames.absolute:
         meta["start_epoch_s"] = origin
-        meta["absolute_start"] = datetime.fromtimestamp(origin, tz=UTC).isoformat()
+        meta["absolute_start"] = datetime.fromtimestamp(origin, tz=timezone.utc).isoformat()
     return Record(
         source=path,
         channels=channels,
