@@ -735,3 +735,47 @@ sets:
             "did you mean 'speed'?*"
         ]
     )
+
+
+@pytest.mark.parametrize("suffix", [".blf", ".asc", ".log"])
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_damaged_logs_read_or_raise_data_error(
+    tmp_path_factory: pytest.TempPathFactory,
+    database: Any,
+    database_file: Path,
+    suffix: str,
+    data: st.DataObject,
+) -> None:
+    """Bytes overwritten or the file cut anywhere: a record or a DataError, never a crash."""
+    folder = tmp_path_factory.mktemp("damaged")
+    original = _write_log(folder / f"good{suffix}", _frames(database)[:120]).read_bytes()
+    content = bytearray(original)
+    for _ in range(data.draw(st.integers(1, 4))):
+        # Positions modulo the size: an ASC header holds the writing time, so sizes vary.
+        at = data.draw(st.integers(0, 1 << 20)) % len(content)
+        content[at] = data.draw(st.integers(0, 255))
+    cut = 1 + data.draw(st.integers(0, 1 << 20)) % len(content)
+    path = folder / f"bad{suffix}"
+    path.write_bytes(bytes(content[:cut]))
+    problem = ""
+    try:
+        record = read_record(str(path), None, _options(database_file))
+    except DataError as exc:
+        problem = str(exc)
+    if problem:
+        assert problem.startswith(f"{path}: ")
+    else:
+        assert record.meta["can"]["frames"] > 0
+
+
+def test_kcd_database_decodes_as_dbc(tmp_path: Path, database: Any, database_file: Path) -> None:
+    kcd = tmp_path / "powertrain.kcd"
+    kcd.write_text(database.as_kcd_string())
+    path = _write_log(tmp_path / "trip.blf", _frames(database))
+    from_dbc = read_record(str(path), ["speed", "current", "b"], _options(database_file))
+    from_kcd = read_record(str(path), ["speed", "current", "b"], _options(kcd))
+    for name in ("speed", "current", "b"):
+        np.testing.assert_array_equal(
+            from_kcd.channels[name].values, from_dbc.channels[name].values
+        )

@@ -20,7 +20,7 @@ from array import array
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -231,14 +231,14 @@ def _collect(messages: Iterable[Any]) -> tuple[array[float], array[int], array[i
     return times, keys, lengths, data
 
 
-def _python_can_reader(path: str, kind: str) -> Any:
+def _python_can_reader(stream: IO[Any], kind: str) -> Any:
     can = _import("can", "reading CAN logs", "can")
     if kind == "blf":
-        return can.BLFReader(path)
+        return can.BLFReader(stream)
     if kind == "asc":
         # Absolute times come from the file's `date` line; without one they stay relative.
-        return can.ASCReader(path, relative_timestamp=False)
-    return can.CanutilsLogReader(path)
+        return can.ASCReader(stream, relative_timestamp=False)
+    return can.CanutilsLogReader(stream)
 
 
 def _log_kind(path: str) -> str:
@@ -271,10 +271,15 @@ def _read_frames(path: str) -> _Frames:
     kind = _log_kind(path)
     if kind == "mdf":
         return _mdf_frames(path)
+    # The file is opened here, not by python-can, so that it is closed even when a reader's
+    # constructor fails on a damaged header.
+    stream: IO[Any] = (
+        open(path, "rb") if kind == "blf" else open(path, encoding="latin-1", newline=None)  # noqa: SIM115
+    )
     try:
-        reader = _python_can_reader(path, kind)
-        _check_blf_size(path, reader)
-        with reader:
+        with stream:
+            reader = _python_can_reader(stream, kind)
+            _check_blf_size(path, reader)
             times, keys, lengths, data = _collect(reader)
     except DataError:
         raise
@@ -299,7 +304,6 @@ def _check_blf_size(path: str, reader: Any) -> None:
     declared = int(getattr(reader, "file_size", 0) or 0)
     actual = os.path.getsize(path)
     if declared > actual:
-        reader.stop()
         raise DataError(
             f"the BLF header declares {declared} bytes but the file has {actual} (file truncated?)",
             file=path,
