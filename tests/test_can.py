@@ -604,6 +604,8 @@ def test_message_absent_from_log(tmp_path: Path, database: Any, database_file: P
     record = read_record(str(path), None, _options(database_file))
     assert "soc" not in record.channels
     assert "speed" in record.channels
+    assert "soc" not in record.numeric
+    assert "soc" in record.available
 
 
 def test_multiplexed_signal_never_selected(
@@ -681,6 +683,20 @@ def test_spec_refuses_dbc_on_other_formats(tmp_path: Path) -> None:
     assert str(info.value) == (
         f"{tmp_path / 'a.hevval.yaml'}:1: reference.dbc: a signal database decodes CAN logs, "
         "not csv files; remove `dbc:`, or set `format: can` for a BLF, ASC, candump or MDF4 bus log"
+    )
+
+
+def test_spec_refuses_dbc_on_a_callable_model(tmp_path: Path) -> None:
+    with pytest.raises(SpecError) as info:
+        parse_spec_text(
+            "reference: trip.blf\n"
+            "model: {callable: 'pkg.mod:run', dbc: p.dbc}\n"
+            "sets: [{signal: speed}]\n",
+            tmp_path / "a.hevval.yaml",
+        )
+    assert str(info.value) == (
+        f"{tmp_path / 'a.hevval.yaml'}:2: model.dbc: a signal database decodes a CAN log "
+        "file, not a callable model; remove `dbc:`"
     )
 
 

@@ -629,7 +629,12 @@ def _decode(
         source=path,
         channels=channels,
         available=tuple(catalogue.columns),
-        numeric=tuple(catalogue.default_columns),
+        # Candidates for diagnosis: signals of the messages the log holds.
+        numeric=tuple(
+            name
+            for name in catalogue.default_columns
+            if _message_key(catalogue.resolve(path, name).message) in groups
+        ),
         meta=meta,
     )
 

@@ -321,6 +321,13 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
     fmt = context.get(mapping, "format", key, context.choice(_FORMATS), None)
     extra: dict[str, Any] = {}
     if "dbc" in mapping:
+        if kind != "path":
+            raise context.error(
+                mapping.line_of("dbc"),
+                _join(key, "dbc"),
+                f"a signal database decodes a CAN log file, not a {kind} model",
+                hint="remove `dbc:`",
+            )
         fmt = _can_format(context, mapping, key, fmt)
         where = _join(key, "dbc")
         database = context.text(mapping["dbc"], mapping.line_of("dbc"), where)
