@@ -2,6 +2,7 @@
 
     python benchmarks/bench_can.py                 # builds the log once, then times reading
     python benchmarks/bench_can.py --minutes 5     # a shorter log for a quick look
+    python benchmarks/bench_can.py --minutes 2 --text-logs --repeat 1   # BLF, ASC, candump
 
 The log is a Vector BLF file written by python-can: 20 messages at 100 Hz, each with 15
 signals (half Intel, half Motorola; signed and unsigned; lengths of 2 to 8 bits; scales and
@@ -188,11 +189,39 @@ def child(path: str, database_path: str, stages: bool) -> None:
     print(json.dumps(figures))
 
 
+def compare_text_logs(log: Path, database_path: Path) -> None:
+    """Write the log again as ASC and candump with python-can; time one read of each."""
+    import can
+
+    from pytest_hevval.data.formats import read_record
+    from pytest_hevval.data.record import SourceOptions
+
+    copies = {".asc": can.ASCWriter, ".log": can.CanutilsLogWriter}
+    for suffix, writer_class in copies.items():
+        target = log.with_suffix(suffix)
+        if not target.exists():
+            with can.BLFReader(str(log)) as reader, writer_class(str(target)) as writer:
+                for frame in reader:
+                    writer.on_message_received(frame)
+    options = SourceOptions(extra={"dbc": str(database_path)})
+    for suffix in (".blf", ".asc", ".log"):
+        start = time.perf_counter()
+        record = read_record(str(log.with_suffix(suffix)), None, options)
+        seconds = time.perf_counter() - start
+        frames = record.meta["can"]["frames"]
+        print(f"{suffix}: {frames} frames, {len(record.channels)} signals in {seconds:.2f} s")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0, help="log duration (60)")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--cache-dir", type=Path, default=DEFAULT_CACHE)
+    parser.add_argument(
+        "--text-logs",
+        action="store_true",
+        help="also write the log as ASC and candump and time one read of each, side by side",
+    )
     parser.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     parser.add_argument("--stages", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -208,6 +237,8 @@ def main() -> None:
         print(f"building {log} ...", flush=True)
         seconds = build_log(log, database, args.minutes)
         print(f"built in {seconds:.1f} s ({log.stat().st_size / 1e6:.0f} MB)", flush=True)
+    if args.text_logs:
+        compare_text_logs(log, database_path)
     duration = args.minutes * 60
     budget = duration / 100
     runs = []
