@@ -39,7 +39,8 @@ CAN_EXTENSIONS = (".blf", ".asc", ".log")
 DATABASE_KEY = "dbc"
 
 # Bit 31 marks an extended (29-bit) identifier in the frame keys; CAN identifiers use 29 bits.
-_EXTENDED = np.uint32(1 << 31)
+_EXTENDED_BIT = 1 << 31
+_EXTENDED = np.uint32(_EXTENDED_BIT)
 _ID_MASK = 0x1FFFFFFF
 
 # Epoch seconds before 1990 are a logger's relative clock, not a date.
@@ -217,7 +218,7 @@ def _collect(messages: Iterable[Any]) -> tuple[array[float], array[int], array[i
         lengths.append,
         data.extend,
     )
-    extended = 1 << 31
+    extended = _EXTENDED_BIT
     for message in messages:
         if message.is_error_frame or message.is_remote_frame:
             continue
@@ -379,7 +380,7 @@ def _mdf_frames(path: str) -> _Frames:
 
 
 def _id_text(key: int) -> str:
-    if key & (1 << 31):
+    if key & _EXTENDED_BIT:
         return f"0x{key & _ID_MASK:08X}"
     return f"0x{key:03X}"
 
@@ -442,8 +443,7 @@ class _Catalogue:
         self.qualified: dict[str, tuple[Any, Any]] = {}
         owners: dict[str, list[str]] = {}
         for message in database.messages:
-            key = int(message.frame_id) | (1 << 31 if message.is_extended_frame else 0)
-            self.by_key.setdefault(key, message)
+            self.by_key.setdefault(_message_key(message), message)
             for signal in message.signals:
                 qualified = f"{message.name}.{signal.name}"
                 self.qualified[qualified] = (message, signal)
@@ -640,7 +640,8 @@ def _decode(
 
 
 def _message_key(message: Any) -> int:
-    return int(message.frame_id) | (1 << 31 if message.is_extended_frame else 0)
+    """The frame key of a database message: its identifier, bit 31 set when extended."""
+    return int(message.frame_id) | (_EXTENDED_BIT if message.is_extended_frame else 0)
 
 
 def _signal_values(
