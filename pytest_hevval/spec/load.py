@@ -54,6 +54,7 @@ _SOURCE_KEYS = (
     "decimal",
     "group",
     "time_scale",
+    "dbc",
 )
 _MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
 _ALIGN_KEYS = ("rate_hz", "window", "max_lag_s", "offset_s", "offset_from", "max_offset_s", "nan")
@@ -75,7 +76,7 @@ _SIGNAL_KEYS = (
     "sim_offset",
     "children",
 )
-_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf")
+_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf", "can")
 
 T = TypeVar("T")
 
@@ -317,6 +318,19 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         raise context.error(mapping.line, key, "needs a path to the measured data file")
     kind = kinds[0]
     fmt = context.get(mapping, "format", key, context.choice(_FORMATS), None)
+    extra: dict[str, Any] = {}
+    if "dbc" in mapping:
+        if kind != "path":
+            raise context.error(
+                mapping.line_of("dbc"),
+                _join(key, "dbc"),
+                f"a signal database decodes a CAN log file, not a {kind} model",
+                hint="remove `dbc:`",
+            )
+        fmt = _can_format(context, mapping, key, fmt)
+        where = _join(key, "dbc")
+        database = context.text(mapping["dbc"], mapping.line_of("dbc"), where)
+        extra["dbc"] = _resolve(context, base, database, mapping.line_of("dbc"), where)
     options = SourceOptions(
         time=context.get(mapping, "time", key, context.text, None),
         format=fmt,
@@ -325,6 +339,7 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         decimal=context.get(mapping, "decimal", key, context.text, None),
         group=context.get(mapping, "group", key, context.text, None),
         time_scale=context.get(mapping, "time_scale", key, context.positive, 1.0),
+        extra=extra,
     )
     path: str | None = None
     if kind in ("path", "fmu"):
@@ -377,6 +392,18 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         fmu_inputs=fmu_inputs,
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
+    )
+
+
+def _can_format(context: _Context, mapping: LineDict, key: str, fmt: str | None) -> str:
+    """A source with a signal database is a CAN log, MDF4 bus logging included."""
+    if fmt in (None, "can", "mdf"):
+        return "can"
+    raise context.error(
+        mapping.line_of("dbc"),
+        _join(key, "dbc"),
+        f"a signal database decodes CAN logs, not {fmt} files",
+        hint="remove `dbc:`, or set `format: can` for a BLF, ASC, candump or MDF4 bus log",
     )
 
 
