@@ -1,9 +1,10 @@
 """One common time grid for the reference and the model output.
 
-The grid runs at ``rate_hz`` (default: the reference's own median rate) over the overlap of
-both records, or over a declared window. Each channel is interpolated onto it with a named
-method: ``linear`` for continuous signals, ``previous`` (zero-order hold) for discrete or
-slowly logged ones, which is how slow CAN signals are upsampled. A time offset between the two
+The grid runs at ``rate_hz`` (default: the reference's own nominal rate, see
+:func:`nominal_rate`) over the overlap of both records, or over a declared window. A channel
+sampled on the grid is used as it is; any other is interpolated onto it with a named method:
+``linear`` for continuous signals, ``previous`` (zero-order hold) for discrete or slowly logged
+ones, which is how slow CAN signals are upsampled. A time offset between the two
 records is either declared or found by cross-correlating one channel on both sides.
 """
 
@@ -21,7 +22,14 @@ from ..core.lag import search_lag
 from ..errors import DataError
 from .record import Channel, Record
 
-__all__ = ["AlignedData", "Grid", "align_records", "find_offset", "median_step"]
+__all__ = [
+    "AlignedData",
+    "Grid",
+    "align_records",
+    "find_offset",
+    "median_step",
+    "nominal_rate",
+]
 
 FloatArray = npt.NDArray[np.float64]
 Method = Literal["linear", "previous"]
@@ -58,6 +66,9 @@ class AlignedData:
     _cache: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
     _times: FloatArray | None = None
     _on_grid: dict[tuple[int, float], bool] = field(default_factory=dict)
+    _plans: dict[tuple[int, float, Method], _Plan] = field(default_factory=dict)
+    #: Columns interpolated so far (those on the grid are used as they are).
+    interpolated: list[tuple[str, str]] = field(default_factory=list)
     #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
     gap_mask: npt.NDArray[np.bool_] | None = None
 
@@ -82,6 +93,15 @@ class AlignedData:
         record = self.reference if side == "reference" else self.model
         channel = record.channel(name)
         shift = self.offset_s if side == "model" else 0.0
+        on_grid_channel = self._sampled_on_grid(channel.time, shift)
+        plan = None
+        if not on_grid_channel:
+            self.interpolated.append((side, name))
+            plan_key = (id(channel.time), shift, method)
+            plan = self._plans.get(plan_key)
+            if plan is None:
+                # Channels that share a time array share one plan: the search is done once.
+                plan = self._plans[plan_key] = _Plan.build(channel.time, shift, self.time, method)
         values, gaps = _interpolate(
             channel,
             self.time,
@@ -90,7 +110,8 @@ class AlignedData:
             record.source,
             name,
             self.nan_policy,
-            on_grid=self._sampled_on_grid(channel.time, shift),
+            on_grid=on_grid_channel,
+            plan=plan,
         )
         if gaps is not None:
             self.gap_mask = gaps if self.gap_mask is None else (self.gap_mask | gaps)
@@ -127,6 +148,40 @@ def median_step(time: FloatArray) -> float:
     if time.shape[0] < 2:
         return math.nan
     return float(np.median(np.diff(time)))
+
+
+#: A rate (or step) that equals a number of at most this many significant digits to within
+#: NOMINAL_TOLERANCE is taken to be that number: decimal time stamps (0.1, 0.2, …) give a
+#: median step a few ulps off 0.1, and the grid must run at 10 Hz, not 9.999999999997726.
+NOMINAL_DIGITS = 6
+#: Relative difference below which a measured rate is its nominal value. Rounding of decimal
+#: time stamps is ~1e-13 relative; a real clock differs from its nominal rate by ~1e-5 or
+#: more only over days.
+NOMINAL_TOLERANCE = 1e-9
+
+
+def _nice(value: float) -> tuple[int, float] | None:
+    """(significant digits, value) of the shortest decimal within tolerance of ``value``."""
+    for digits in range(1, NOMINAL_DIGITS + 1):
+        candidate = float(f"{value:.{digits}g}")
+        if abs(candidate - value) <= NOMINAL_TOLERANCE * abs(value):
+            return digits, candidate
+    return None
+
+
+def nominal_rate(step: float) -> float:
+    """The sample rate a user would write for a median step of ``step`` seconds.
+
+    Whichever of the rate (10 Hz) or the step (3 s, i.e. 1/3 Hz) is the shorter decimal wins;
+    a step that is neither stays as measured.
+    """
+    rate = _nice(1.0 / step)
+    period = _nice(step)
+    if rate is not None and (period is None or rate[0] <= period[0]):
+        return rate[1]
+    if period is not None:
+        return 1.0 / period[1]
+    return 1.0 / step
 
 
 def _span(records: Iterable[tuple[Record, Iterable[str], float]]) -> tuple[float, float]:
@@ -189,9 +244,10 @@ def align_records(
         model.channel(name)
 
     if rate_hz is None:
-        steps = [median_step(reference.channel(n).time) for n in ref_names] or [
-            median_step(c.time) for c in reference.channels.values()
-        ]
+        channels = [reference.channel(n) for n in ref_names] or list(reference.channels.values())
+        # Table formats share one time array among channels: one median per time base.
+        bases = {id(c.time): c.time for c in channels}
+        steps = [median_step(time) for time in bases.values()]
         finite = [s for s in steps if math.isfinite(s) and s > 0]
         if not finite:
             raise DataError(
@@ -199,7 +255,7 @@ def align_records(
                 file=reference.source,
                 hint="declare alignment.rate_hz",
             )
-        rate_hz = 1.0 / min(finite)
+        rate_hz = nominal_rate(min(finite))
 
     found = False
     if offset_from is not None:
@@ -231,7 +287,9 @@ def align_records(
             file=model.source,
             hint="check both time columns, their units (time_scale) and alignment.offset_s",
         )
-    n = math.floor((stop - start) * rate_hz + 1e-9) + 1
+    # A stop that lies on a grid point to within the on-grid tolerance is the last point: the
+    # record's last sample is kept, not lost to rounding.
+    n = math.floor((stop - start) * rate_hz + ON_GRID_TOLERANCE) + 1
     if n < 3:
         raise DataError(
             f"the overlap [{start:g}, {stop:g}] s holds fewer than 3 samples at {rate_hz:g} Hz",
@@ -265,6 +323,7 @@ def _interpolate(
     nan_policy: Literal["raise", "omit"],
     *,
     on_grid: bool = False,
+    plan: _Plan | None = None,
 ) -> tuple[FloatArray, npt.NDArray[np.bool_] | None]:
     time = channel.time + shift if shift else channel.time
     values = np.asarray(channel.values, dtype=np.float64)
@@ -294,8 +353,58 @@ def _interpolate(
         gaps[inside] = grid[inside] < gap_stop[idx[inside]]
         time = time[keep]
         values = values[keep]
+    if plan is not None and gaps is None:
+        return plan.apply(values), None
     if method == "previous":
         index = np.searchsorted(time, grid, side="right") - 1
         np.clip(index, 0, time.shape[0] - 1, out=index)
         return values[index], gaps
     return np.interp(grid, time, values), gaps
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """Where each grid point falls in one time base, computed once for all its channels.
+
+    ``apply`` gives what ``np.interp`` (linear) or a zero-order hold (previous) would: the
+    search over the time stamps, the costly part, is not repeated per channel.
+    """
+
+    method: Method
+    #: Index of the sample at or before each grid point (clipped to the record).
+    index: npt.NDArray[np.intp]
+    #: Linear only: grid point minus that sample's time, and the step to the next sample.
+    offset: FloatArray | None = None
+    step: FloatArray | None = None
+    #: Linear only: grid points at or outside the first/last sample take that sample's value.
+    exact: npt.NDArray[np.bool_] | None = None
+
+    @classmethod
+    def build(cls, time: FloatArray, shift: float, grid: FloatArray, method: Method) -> _Plan:
+        t = time + shift if shift else time
+        last = t.shape[0] - 1
+        index = np.searchsorted(t, grid, side="right") - 1
+        if method == "previous" or last < 1:
+            return cls("previous", np.clip(index, 0, last))
+        below = index < 0
+        above = index >= last
+        index = np.clip(index, 0, last - 1)
+        offset = grid - t[index]
+        step = t[index + 1] - t[index]
+        exact = below | above | (offset == 0.0)
+        # Points beyond either end hold the end value, as np.interp does.
+        index = np.where(above, last, index)
+        return cls("linear", index, np.where(exact, 0.0, offset), step, exact)
+
+    def apply(self, values: FloatArray) -> FloatArray:
+        if self.method == "previous":
+            return values[self.index]
+        assert self.offset is not None
+        assert self.step is not None
+        assert self.exact is not None
+        left = values[self.index]
+        right = values[np.minimum(self.index + 1, values.shape[0] - 1)]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            slope = (right - left) / self.step
+            out = slope * self.offset + left
+        return np.where(self.exact, left, out)
