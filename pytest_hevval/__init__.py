@@ -17,12 +17,16 @@ from .core import (
     score_tree,
     signal_characteristics,
 )
-from .errors import DataError, ExpressionError, HevvalError, SpecError
+from .core.registry import Characteristic, CharacteristicValue, register_characteristic
+from .errors import CharacteristicError, DataError, ExpressionError, HevvalError, SpecError
 
 __version__ = "0.1.0"
 
 __all__ = [
     "CHARACTERISTICS",
+    "Characteristic",
+    "CharacteristicError",
+    "CharacteristicValue",
     "DataError",
     "ExpressionError",
     "HevvalError",
@@ -35,6 +39,7 @@ __all__ = [
     "error_origins",
     "global_metric",
     "normalised_error",
+    "register_characteristic",
     "score_tree",
     "signal_characteristics",
 ]

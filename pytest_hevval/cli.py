@@ -184,6 +184,13 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
+    from .core.registry import load_entry_points
+
+    try:
+        load_entry_points()
+    except HevvalError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     # Subcommands implemented in their own modules parse their own arguments.
     delegated = {
         "compare": ("pytest_hevval.history", "compare_main"),

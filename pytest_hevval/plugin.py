@@ -13,6 +13,9 @@ from typing import Any
 
 import pytest
 
+from .core.registry import load_entry_points
+from .errors import HevvalError
+
 from .options import add_options
 from .session import HevvalSession, session_key
 
@@ -26,6 +29,10 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[session_key] = state
     if state.enabled:
         state.validate_options()
+        try:
+            load_entry_points()
+        except HevvalError as exc:
+            raise pytest.UsageError(str(exc)) from None
         # The session object receives worker reports itself (pytest_runtest_logreport).
         config.pluginmanager.register(state, "hevval-session")
 

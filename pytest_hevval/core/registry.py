@@ -211,7 +211,8 @@ def register_characteristic(characteristic: Characteristic) -> Characteristic:
     """
     if not isinstance(characteristic, Characteristic):
         raise CharacteristicError(
-            f"register_characteristic() takes a Characteristic (got {type(characteristic).__name__})",
+            "register_characteristic() takes a Characteristic "
+            f"(got {type(characteristic).__name__})",
             hint="wrap it: register_characteristic(Characteristic(name=..., label=..., "
             "compute=...))",
         )
@@ -220,7 +221,7 @@ def register_characteristic(characteristic: Characteristic) -> Characteristic:
     with _lock:
         existing = _registry.get(name)
         if existing is not None:
-            if existing is characteristic or existing._definition() == characteristic._definition():
+            if _same_definition(existing, characteristic):
                 return existing
             what = "a built-in characteristic" if existing.builtin else "already registered"
             raise CharacteristicError(
@@ -232,6 +233,15 @@ def register_characteristic(characteristic: Characteristic) -> Characteristic:
             characteristic = _with_order(characteristic, _USER_ORDER + len(_registry))
         _registry[name] = characteristic
     return characteristic
+
+
+def _same_definition(existing: Characteristic, new: Characteristic) -> bool:
+    if existing is new:
+        return True
+    # A user characteristic registered without an order was given one on registration.
+    if new.order == _USER_ORDER:
+        existing = _with_order(existing, _USER_ORDER)
+    return existing._definition() == new._definition()
 
 
 def _with_order(characteristic: Characteristic, order: int) -> Characteristic:

@@ -14,13 +14,14 @@ from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
 from ..errors import HevvalError, did_you_mean
-from ._base import CHARACTERISTICS, HistoryError
+from ._base import HistoryError
 from .compare import Comparison, compare, parse_compare_fail, regressions, specs_of
 from .records import migrate_record
 from .render import FORMATS, render
 from .store import DEFAULT_HISTORY_DIR, HistoryStore
 from .trends import (
     HistoryRow,
+    characteristic_names,
     detect_steps,
     history_table,
     plot_history,
@@ -119,7 +120,7 @@ def _history(argv: list[str]) -> int:
 def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
     lines = []
     for (spec, signal), series in row_series(rows).items():
-        fields = ["phi"] if signal is None else ["phi", *CHARACTERISTICS]
+        fields = ["phi"] if signal is None else ["phi", *characteristic_names(series)]
         for field in fields:
             for step in detect_steps([r.value(field) for r in series], min_size=min_size):
                 if not step.regression:

@@ -26,8 +26,9 @@ from typing import Any
 
 import yaml
 
+from ..core.registry import is_registered, keyed_lambdas, order_names, registered_characteristics
 from ..errors import did_you_mean
-from ._base import CHARACTERISTICS, HistoryError
+from ._base import HistoryError
 from .records import format_utc
 
 __all__ = [
@@ -129,9 +130,7 @@ def ratchet_thresholds(
             continue
         lambdas = signal.get("lambdas")
         out = {}
-        for name in CHARACTERISTICS:
-            if name not in current:
-                continue
+        for name in order_names(current):
             achieved = _achieved(lambdas, name)
             value = current[name]
             if achieved is not None:
@@ -142,16 +141,10 @@ def ratchet_thresholds(
 
 
 def _achieved(lambdas: Any, name: str) -> float | None:
-    index = CHARACTERISTICS.index(name)
-    if isinstance(lambdas, (list, tuple)) and index < len(lambdas):
-        value = lambdas[index]
-    elif isinstance(lambdas, Mapping):
-        value = lambdas.get(name)
-    else:
+    try:
+        return keyed_lambdas(lambdas).get(name)
+    except ValueError:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None
 
 
 def sidecar_path(spec_path: Path | str) -> Path:
@@ -213,13 +206,14 @@ def load_sidecar(spec_path: Path | str) -> Thresholds:
         entry: dict[str, float] = {}
         for name, value in values.items():
             key = f"{signal}.{name}"
-            if name not in CHARACTERISTICS:
-                suggestion = did_you_mean(str(name), CHARACTERISTICS)
+            if not isinstance(name, str) or not is_registered(name):
+                known = [c.name for c in registered_characteristics()]
+                suggestion = did_you_mean(str(name), known)
                 raise HistoryError(
                     f"unknown characteristic {name!r}" + (f"; {suggestion}" if suggestion else ""),
                     file=str(path),
                     key=key,
-                    hint="valid: " + ", ".join(CHARACTERISTICS) + f"; {hint}",
+                    hint="valid: " + ", ".join(known) + f"; {hint}",
                 )
             if (
                 isinstance(value, bool)
@@ -240,7 +234,7 @@ def load_sidecar(spec_path: Path | str) -> Thresholds:
 def render_sidecar(
     thresholds: Thresholds, *, model_version: str, created_utc: datetime, margin: float
 ) -> str:
-    """The sidecar text: an explanatory header, then signals sorted, λ in paper order."""
+    """The sidecar text: an explanatory header, then signals sorted, λ in report order."""
     header = [
         "# λ thresholds ratcheted by pytest-hevval (--hevval-ratchet); review and commit.",
         f"# Produced from model version {model_version} on {format_utc(created_utc)}"
@@ -253,7 +247,7 @@ def render_sidecar(
     body: dict[str, dict[str, float]] = {}
     for path in sorted(thresholds):
         values = thresholds[path]
-        ordered = {name: float(values[name]) for name in CHARACTERISTICS if name in values}
+        ordered = {name: float(values[name]) for name in order_names(values)}
         if ordered:
             body[path] = ordered
     dumped = yaml.safe_dump(body, sort_keys=False, allow_unicode=True, default_flow_style=False)

@@ -1,0 +1,198 @@
+"""The characteristic registry: user characteristics end to end, errors, keyed Φ, old records."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_hevval import (
+    Characteristic,
+    CharacteristicError,
+    CharacteristicValue,
+    global_metric,
+    register_characteristic,
+)
+from pytest_hevval.core.registry import PAPER_CHARACTERISTICS, compute_characteristic
+from pytest_hevval.history import migrate_record
+from pytest_hevval.result import SpecResult
+from tests.test_plugin import write_data
+
+pytest_plugins = ["pytester"]
+
+DATA = Path(__file__).parent / "data" / "history"
+
+CONFTEST = """
+from pytest_hevval import Characteristic, CharacteristicValue, register_characteristic
+
+
+def peak_error(ref, sim, dt):
+    span = ref.max() - ref.min()
+    gap = abs(ref.max() - sim.max())
+    return CharacteristicValue(1.0 - gap / span, {"peak_gap": float(gap)})
+
+
+register_characteristic(
+    Characteristic(name="peak_error", label="peak error", compute=peak_error)
+)
+"""
+
+SPEC = """\
+name: pack
+reference: {path: data/ref.csv, time: t}
+model: {path: data/sim.csv, time: time}
+alignment: {max_lag_s: 2}
+thresholds: {mae: 0.5}
+weights: {peak_error: 2}
+sets:
+  - signal: P
+    ref: V * I
+    unit: W
+    children:
+      - {signal: V, unit: V}
+      - {signal: I, unit: A, thresholds: {peak_error: PEAK}}
+"""
+
+
+@pytest.mark.parametrize("xdist", [False, True], ids=["serial", "xdist"])
+def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bool) -> None:
+    pytester.makeconftest(CONFTEST)
+    pytester.makefile(".hevval.yaml", pack=SPEC.replace("PEAK", "0.5"))
+    write_data(pytester.path, fault="leaf")
+    extra = ["-p", "xdist", "-n", "2"] if xdist else []
+    loose = pytester.runpytest("--hevval", "--hevval-model-version=a", *extra)
+    loose.assert_outcomes(passed=4)
+
+    pytester.makefile(".hevval.yaml", pack=SPEC.replace("PEAK", "0.99"))
+    gated = pytester.runpytest(
+        "--hevval",
+        "--hevval-model-version=b",
+        "--hevval-report=html,json",
+        "--hevval-compare",
+        *extra,
+    )
+    gated.assert_outcomes(passed=3, failed=1)
+    gated.stdout.fnmatch_lines(["*peak error = 0.* < 0.99 (peak_gap *)*"])
+    gated.stdout.fnmatch_lines(["*peak_error*"])  # the comparison with run a
+
+    report = pytester.path / ".hevval" / "report"
+    document = json.loads((report / "report.json").read_text())
+    spec = (document["specs"] if isinstance(document, dict) else document)[0]
+    assert spec["schema_version"] == 2
+    assert spec["weights"]["peak_error"] == 2.0
+    current = next(s for s in spec["signals"] if s["path"] == "P/I")
+    assert list(current["lambdas"]) == [*PAPER_CHARACTERISTICS, "peak_error"]
+    assert current["lambdas"]["peak_error"] < 0.99
+    assert current["components"]["peak_error"]["peak_gap"] > 0
+    assert [f["characteristic"] for f in current["failures"]] == ["peak_error"]
+    assert "peak_error" in (report / "report.html").read_text()
+
+    # Φ weighs the new characteristic with β = 2 (eq. 14 by hand).
+    numerator = denominator = 0.0
+    for signal in spec["signals"]:
+        for name, value in signal["lambdas"].items():
+            beta = 2.0 if name == "peak_error" else 1.0
+            numerator += signal["alpha"] * beta * value
+            denominator += signal["alpha"] * beta
+    assert spec["phi"] == pytest.approx(numerator / denominator, rel=1e-12)
+
+    records = sorted((pytester.path / ".hevval" / "history").glob("*.json"))
+    stored = json.loads(records[-1].read_text())
+    assert stored["schema_version"] == 3
+    signal = next(s for s in stored["specs"][0]["signals"] if s["path"] == "P/I")
+    assert signal["lambdas"]["peak_error"] == current["lambdas"]["peak_error"]
+
+
+def test_unknown_metric_gets_did_you_mean(pytester: pytest.Pytester) -> None:
+    pytester.makefile(
+        ".hevval.yaml",
+        pack=SPEC.replace("PEAK", "0.5").replace("weights:", "metrics: [mea]\nweights:"),
+    )
+    write_data(pytester.path)
+    result = pytester.runpytest("--hevval")
+    result.stdout.fnmatch_lines(["*metrics[[]0]: unknown characteristic 'mea'*did you mean 'mae'*"])
+
+
+def test_builtin_name_clashes() -> None:
+    with pytest.raises(CharacteristicError, match="'mae' is a built-in characteristic"):
+        register_characteristic(Characteristic(name="mae", label="mine", compute=lambda r, s, d: 1))
+
+
+def test_registration_is_idempotent_but_redefinition_clashes() -> None:
+    def score(ref: object, sim: object, dt: float) -> float:
+        return 1.0
+
+    first = Characteristic(name="idempotent_probe", label="probe", compute=score)
+    assert register_characteristic(first) is register_characteristic(first)
+    again = Characteristic(name="idempotent_probe", label="probe", compute=score)
+    assert register_characteristic(again).name == "idempotent_probe"
+    with pytest.raises(CharacteristicError, match="'idempotent_probe' is already registered"):
+        register_characteristic(
+            Characteristic(name="idempotent_probe", label="other", compute=score)
+        )
+
+
+@pytest.mark.parametrize("bad", [1.5, -0.1, math.nan, "high"])
+def test_compute_outside_unit_interval_is_refused(bad: object) -> None:
+    characteristic = Characteristic(name="bad_probe", label="bad", compute=lambda r, s, d: bad)
+    ref = np.arange(4.0)
+    with pytest.raises(CharacteristicError, match="'bad_probe' returned"):
+        compute_characteristic(characteristic, ref, ref, 0.1)
+
+
+def test_compute_with_components() -> None:
+    characteristic = Characteristic(
+        name="parts_probe",
+        label="parts",
+        compute=lambda r, s, d: CharacteristicValue(0.25, {"a": 1.0}),
+    )
+    value = compute_characteristic(characteristic, np.zeros(3), np.zeros(3), 1.0)
+    assert value == CharacteristicValue(0.25, {"a": 1.0})
+
+
+@pytest.mark.parametrize("stored", ["schema1_camry_hwfet.json", "schema2_camry_hwfet.json"])
+def test_stored_old_records_migrate_to_keyed_lambdas(stored: str) -> None:
+    schema2 = json.loads((DATA / "schema2_camry_hwfet.json").read_text())
+    migrated = migrate_record(json.loads((DATA / stored).read_text()), file=stored)
+    assert migrated["schema_version"] == 3
+    assert migrated["model_version"] == "v1.0"
+    assert migrated["started_utc"] == schema2["started_utc"]
+    for old_spec, new_spec in zip(schema2["specs"], migrated["specs"], strict=True):
+        assert new_spec["weights"] == dict.fromkeys(PAPER_CHARACTERISTICS, 1.0)
+        assert new_spec["phi"] == old_spec["phi"]
+        for old, new in zip(old_spec["signals"], new_spec["signals"], strict=True):
+            assert new["lambdas"] == dict(zip(PAPER_CHARACTERISTICS, old["lambdas"], strict=True))
+        result = SpecResult.from_dict(new_spec)
+        assert result.signals[0].lambdas["emergent"] == old_spec["signals"][0]["lambdas"][6]
+        assert result.signals[0].mae == old_spec["signals"][0]["mae"]
+
+
+unit = st.floats(0.0, 1.0, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    rows=st.lists(
+        st.tuples(st.floats(0.0, 5.0, allow_nan=False), st.lists(unit, min_size=7, max_size=7)),
+        min_size=1,
+        max_size=6,
+    ),
+    beta=st.lists(st.floats(0.01, 3.0, allow_nan=False), min_size=7, max_size=7),
+)
+def test_keyed_phi_is_equation_14(rows: list[tuple[float, list[float]]], beta: list[float]) -> None:
+    if sum(alpha for alpha, _ in rows) == 0:
+        return
+    keyed_rows = [
+        (alpha, dict(zip(PAPER_CHARACTERISTICS, lam, strict=True))) for alpha, lam in rows
+    ]
+    keyed_beta = dict(zip(PAPER_CHARACTERISTICS, beta, strict=True))
+    numerator = sum(a * b * v for a, lam in rows for b, v in zip(beta, lam, strict=True))
+    denominator = sum(a * b for a, _ in rows for b in beta)
+    assert global_metric(keyed_rows, keyed_beta) == pytest.approx(
+        numerator / denominator, rel=1e-12
+    )
