@@ -15,7 +15,6 @@ import pytest
 
 from .core.registry import load_entry_points
 from .errors import HevvalError
-
 from .options import add_options
 from .session import HevvalSession, session_key
 
