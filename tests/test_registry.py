@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,33 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
     assert stored["schema_version"] == 3
     signal = next(s for s in stored["specs"][0]["signals"] if s["path"] == "P/I")
     assert signal["lambdas"]["peak_error"] == current["lambdas"]["peak_error"]
+
+    # The CLI reads no conftest: the names stored in the records are enough.
+    history = ["--dir", ".hevval/history"]
+    compared = pytester.run(
+        sys.executable,
+        "-m",
+        "pytest_hevval",
+        "compare",
+        "history:a",
+        "history:b",
+        *history,
+        "--format",
+        "json",
+        "--fail",
+        "lambda:0.001",
+    )
+    assert compared.ret == 0, compared.stderr.str()
+    document = json.loads(compared.stdout.str())
+    assert document["regressions"] == []
+    deltas = document["comparison"]["specs"][0]["signals"]
+    by_path = {s["path"]: s for s in deltas}
+    assert by_path["P/I"]["lambdas"]["peak_error"]["after"] == current["lambdas"]["peak_error"]
+    table = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "history", "--signal", "P/I", *history
+    )
+    assert table.ret == 0, table.stderr.str()
+    table.stdout.fnmatch_lines(["*λ1*λ7*peak_error*lag s*"])
 
 
 def test_unknown_metric_gets_did_you_mean(pytester: pytest.Pytester) -> None:
