@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +20,26 @@ from pytest_hevval import (
     global_metric,
     register_characteristic,
 )
-from pytest_hevval.core.registry import PAPER_CHARACTERISTICS, compute_characteristic
+from pytest_hevval.core.registry import (
+    PAPER_CHARACTERISTICS,
+    compute_characteristic,
+    registry_snapshot,
+    restore_registry,
+)
 from pytest_hevval.history import migrate_record
 from pytest_hevval.result import SpecResult
 from tests.test_plugin import write_data
 
 pytest_plugins = ["pytester"]
+
+
+@pytest.fixture(autouse=True)
+def _registry_isolation() -> Iterator[None]:
+    """Characteristics registered by a test (or an in-process conftest) end with it."""
+    saved = registry_snapshot()
+    yield
+    restore_registry(saved)
+
 
 DATA = Path(__file__).parent / "data" / "history"
 
@@ -224,3 +239,45 @@ def test_keyed_phi_is_equation_14(rows: list[tuple[float, list[float]]], beta: l
     assert global_metric(keyed_rows, keyed_beta) == pytest.approx(
         numerator / denominator, rel=1e-12
     )
+
+
+def _nan_score(ref: object, sim: object, dt: float) -> float:
+    return math.nan
+
+
+OFF_BY_DEFAULT = Characteristic(
+    name="nan_probe", label="nan probe", compute=_nan_score, enabled_by_default=False
+)
+
+
+def test_disabled_characteristic_is_scored_only_when_named_in_metrics(tmp_path: Path) -> None:
+    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.spec.load import parse_spec_text
+
+    register_characteristic(OFF_BY_DEFAULT)
+    write_data(tmp_path)
+    text = SPEC.replace("PEAK", "0.5").replace("weights: {peak_error: 2}\n", "")
+    text = text.replace("thresholds: {peak_error: 0.5}", "thresholds: {mae: 0.1}")
+    plain = evaluate_spec(parse_spec_text(text, tmp_path / "pack.hevval.yaml")).result
+    assert "nan_probe" not in plain.signals[0].lambdas
+    assert "nan_probe" not in plain.weights
+
+    with pytest.raises(CharacteristicError) as info:
+        evaluate_spec(
+            parse_spec_text("metrics: [nan_probe]\n" + text, tmp_path / "pack.hevval.yaml")
+        )
+    message = str(info.value)
+    assert "pack.hevval.yaml" in message
+    assert "'nan_probe' returned nan, outside [0, 1] for signal 'P'" in message
+
+
+def test_threshold_on_an_unscored_characteristic_is_a_spec_error(tmp_path: Path) -> None:
+    from pytest_hevval.errors import SpecError
+    from pytest_hevval.spec.load import parse_spec_text
+
+    register_characteristic(OFF_BY_DEFAULT)
+    text = SPEC.replace("PEAK", "0.5").replace("weights: {peak_error: 2}\n", "")
+    text = text.replace("thresholds: {peak_error: 0.5}", "thresholds: {nan_probe: 0.5}")
+    with pytest.raises(SpecError, match="'nan_probe' is not scored by this spec") as info:
+        parse_spec_text(text, tmp_path / "pack.hevval.yaml")
+    assert "metrics: [nan_probe]" in str(info.value)
