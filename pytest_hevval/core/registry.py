@@ -26,6 +26,7 @@ __all__ = [
     "CHARACTERISTIC_LABELS",
     "ENTRY_POINT_GROUP",
     "FUSED_CHARACTERISTICS",
+    "LAMBDA_ALIASES",
     "PAPER_CHARACTERISTICS",
     "Characteristic",
     "CharacteristicKind",
@@ -193,6 +194,8 @@ PAPER_CHARACTERISTICS: tuple[str, ...] = tuple(c.name for c in _BUILTINS)
 #: λ1–λ6, in the order the fused pass returns them (``SignalCharacteristics.lambdas``); λ7's
 #: eq. 13 averages exactly these.
 FUSED_CHARACTERISTICS: tuple[str, ...] = PAPER_CHARACTERISTICS[:6]
+#: ``lambda1`` … ``lambda7``: the paper's positions, accepted wherever a name is expected.
+LAMBDA_ALIASES: dict[str, str] = {f"lambda{c.symbol[1:]}": c.name for c in _BUILTINS}
 #: ``λ3 MAE`` etc. for the paper's seven.
 CHARACTERISTIC_LABELS: dict[str, str] = {c.name: c.title for c in _BUILTINS}
 

@@ -21,8 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from ..core.characteristics import CHARACTERISTICS
-from ..core.registry import describe, is_registered, keyed_lambdas, order_names
+from ..core.registry import (
+    LAMBDA_ALIASES,
+    PAPER_CHARACTERISTICS,
+    describe,
+    is_registered,
+    keyed_lambdas,
+    order_names,
+)
 from ..errors import did_you_mean
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
@@ -48,10 +54,10 @@ RULE_FIELDS: dict[str, str] = {
     "phi": "Φ of each spec",
     "lambda": "every λ1–λ7 of every signal",
     "lag": "|lag| of every signal, in seconds (a growth is a regression)",
-    **{name: f"λ{i} of every signal" for i, name in enumerate(CHARACTERISTICS, start=1)},
-    **{f"lambda{i}": f"λ{i} ({name})" for i, name in enumerate(CHARACTERISTICS, start=1)},
+    **{name: f"{describe(name).symbol} of every signal" for name in PAPER_CHARACTERISTICS},
+    **{alias: f"{describe(name).symbol} ({name})" for alias, name in LAMBDA_ALIASES.items()},
 }
-_ALIASES = {f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)}
+_ALIASES = LAMBDA_ALIASES
 _AMOUNT = re.compile(r"^(?P<number>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<percent>%?)$")
 _EXAMPLE = "phi:0.01,lambda:0.02 or mae:1%"
 # Float noise from re-running the same model must never count as a drop.

@@ -15,7 +15,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..core.characteristics import CHARACTERISTICS, signal_characteristics
+from ..core.characteristics import signal_characteristics
+from ..core.registry import FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
+from ..result import RESULT_SCHEMA_VERSION
 from .figures import figure_data
 
 __all__ = ["demo_results"]
@@ -84,11 +86,15 @@ def _traces(
     }
 
 
-def _emergent(own: list[float], children: list[list[float]]) -> float:
+def _mean_own(values: dict[str, float]) -> float:
+    return sum(values[name] for name in FUSED_CHARACTERISTICS) / 6.0
+
+
+def _emergent(own: dict[str, float], children: list[dict[str, float]]) -> float:
     if not children:
         return 1.0
-    child_mean = sum(sum(c[:6]) / 6.0 for c in children) / len(children)
-    return max(0.0, min(1.0, 1.0 - abs(sum(own[:6]) / 6.0 - child_mean)))
+    child_mean = sum(_mean_own(c) for c in children) / len(children)
+    return max(0.0, min(1.0, 1.0 - abs(_mean_own(own) - child_mean)))
 
 
 def demo_results(
@@ -117,13 +123,13 @@ def demo_results(
             traces = _traces(t, rng, 1.0 if spec_index % 2 == 0 else 0.35)
             prefix = "" if sets_per_spec == 1 else f"set{set_index}:"
             level_counts: dict[int, int] = {}
-            raw: dict[str, list[float]] = {}
+            raw: dict[str, dict[str, float]] = {}
             for path, unit, alpha, thresholds in _TREE:
                 ref, sim = traces[path]
                 level = path.count("/") + 1
                 level_counts[level] = level_counts.get(level, 0) + 1
                 chars = signal_characteristics(ref, sim, dt=dt, max_lag_s=5.0)
-                raw[path] = list(chars.lambdas)
+                raw[path] = chars.values
                 signals.append(
                     {
                         "path": prefix + path,
@@ -136,7 +142,6 @@ def demo_results(
                         "unit": unit,
                         "thresholds": dict(thresholds),
                         **{k: v for k, v in chars.as_dict().items() if k != "lambdas"},
-                        "_lambdas6": list(chars.lambdas),
                         "figures": figure_data(
                             ref, sim, dt=dt, start_s=0.0, max_lag=round(5.0 / dt)
                         ),
@@ -151,17 +156,16 @@ def demo_results(
                     if p.rsplit("/", 1)[0] == path and "/" in p
                 ]
                 own = raw[path]
-                by_path[prefix + path]["lambdas"] = [*own, _emergent(own, kids)]
+                by_path[prefix + path]["lambdas"] = {**own, "emergent": _emergent(own, kids)}
         for s in signals:
-            del s["_lambdas6"]
             s["failures"] = [
                 {
                     "characteristic": name,
-                    "value": s["lambdas"][i],
+                    "value": value,
                     "threshold": s["thresholds"][name],
                 }
-                for i, name in enumerate(CHARACTERISTICS)
-                if name in s["thresholds"] and s["lambdas"][i] < s["thresholds"][name]
+                for name, value in s["lambdas"].items()
+                if name in s["thresholds"] and value < s["thresholds"][name]
             ]
             s["passed"] = not s["failures"]
         for s in signals:
@@ -177,7 +181,7 @@ def demo_results(
             )
             s["diagnosis"] = None
             s["history"] = None
-        numerator = sum(s["alpha"] * sum(s["lambdas"]) for s in signals)
+        numerator = sum(s["alpha"] * sum(s["lambdas"].values()) for s in signals)
         denominator = sum(s["alpha"] * len(s["lambdas"]) for s in signals)
         phi = numerator / denominator
         min_phi = 0.95 if spec_index % 2 == 0 else 0.93
@@ -191,23 +195,23 @@ def demo_results(
                     {
                         "version": f"v{k + 1}",
                         "phi": round(phi - 0.02 * (4 - k) * rng.random(), 4),
-                        "lambdas": [
-                            round(max(0.0, v - 0.03 * (4 - k) * rng.random()), 4)
-                            for v in s["lambdas"]
-                        ],
+                        "lambdas": {
+                            name: round(max(0.0, v - 0.03 * (4 - k) * rng.random()), 4)
+                            for name, v in s["lambdas"].items()
+                        },
                     }
                     for k in range(5)
                 ]
         out.append(
             {
-                "schema_version": 1,
+                "schema_version": RESULT_SCHEMA_VERSION,
                 "name": f"demo trip {chr(ord('A') + spec_index % 26)}{spec_index // 26 + 1:02d}",
                 "spec": f"specs/demo_trip_{spec_index + 1:02d}.hevval.yaml",
                 "spec_hash": hashlib.sha256(f"demo {spec_index} {seed}".encode()).hexdigest(),
                 "phi": round(phi, 6),
                 "min_phi": min_phi,
                 "passed": phi >= min_phi and all(s["passed"] for s in signals),
-                "weights": [1.0] * 7,
+                "weights": dict.fromkeys(PAPER_CHARACTERISTICS, 1.0),
                 "alignment": {
                     "rate_hz": rate_hz,
                     "start_s": 0.0,

@@ -15,8 +15,12 @@ from typing import Any, TypeVar, cast
 
 import yaml
 
-from ..core.characteristics import CHARACTERISTICS
-from ..core.registry import is_registered, registered_characteristics, select_characteristics
+from ..core.registry import (
+    LAMBDA_ALIASES,
+    is_registered,
+    registered_characteristics,
+    select_characteristics,
+)
 from ..data.record import SourceOptions
 from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
@@ -27,9 +31,7 @@ from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 __all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
 
 #: ``lambda1`` … ``lambda7`` name the seven characteristics in paper order.
-THRESHOLD_ALIASES: dict[str, str] = {
-    f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)
-}
+THRESHOLD_ALIASES: dict[str, str] = LAMBDA_ALIASES
 
 _TOP_KEYS = (
     "name",
