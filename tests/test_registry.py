@@ -281,3 +281,37 @@ def test_threshold_on_an_unscored_characteristic_is_a_spec_error(tmp_path: Path)
     with pytest.raises(SpecError, match="'nan_probe' is not scored by this spec") as info:
         parse_spec_text(text, tmp_path / "pack.hevval.yaml")
     assert "metrics: [nan_probe]" in str(info.value)
+
+
+def test_entry_points_register_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.metadata
+
+    from pytest_hevval.core import registry
+
+    loads: list[str] = []
+
+    class FakeEntryPoint:
+        name = "probe"
+        value = "probe_pkg:CHARACTERISTIC"
+
+        def load(self) -> Characteristic:
+            loads.append(self.name)
+            return Characteristic(name="entry_probe", label="entry probe", compute=_nan_score)
+
+    def entry_points(*, group: str) -> list[FakeEntryPoint]:
+        assert group == "pytest_hevval.characteristics"
+        return [FakeEntryPoint()]
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    monkeypatch.setattr(registry, "_entry_points_loaded", False)
+    registry.load_entry_points()
+    registry.load_entry_points()
+    assert loads == ["probe"]
+    assert registry.get_characteristic("entry_probe").label == "entry probe"
+
+
+def test_unknown_characteristic_gets_did_you_mean() -> None:
+    from pytest_hevval.core.registry import get_characteristic
+
+    with pytest.raises(CharacteristicError, match="did you mean 'error_std'"):
+        get_characteristic("error_sd")
