@@ -13,7 +13,6 @@ from typing import Any
 
 import pytest
 
-from .core.registry import load_entry_points
 from .errors import HevvalError
 from .options import add_options
 from .session import HevvalSession, session_key
@@ -28,6 +27,8 @@ def pytest_configure(config: pytest.Config) -> None:
     config.stash[session_key] = state
     if state.enabled:
         state.validate_options()
+        from .core.registry import load_entry_points
+
         try:
             load_entry_points()
         except HevvalError as exc:
