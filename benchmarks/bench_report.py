@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -24,7 +25,9 @@ from typing import Any
 import numpy as np
 
 from pytest_hevval.report import figure_data, write_reports
-from pytest_hevval.report.demo import demo_results
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.demo_results import demo_results
 
 
 def _results(signals: int) -> list[dict[str, Any]]:

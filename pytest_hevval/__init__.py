@@ -3,24 +3,52 @@
 The public API, importable without pytest or matplotlib being loaded::
 
     from pytest_hevval import signal_characteristics, global_metric
+
+Names are resolved on first use (PEP 562), so ``import pytest_hevval`` — which pytest does
+for every run in an environment where the plugin is installed — loads no numpy, pandas or
+scipy.
 """
 
-from .core import (
-    CHARACTERISTICS,
-    ScoredNode,
-    SignalCharacteristics,
-    TreeNode,
-    emergent,
-    error_origins,
-    global_metric,
-    normalised_error,
-    score_tree,
-    signal_characteristics,
-)
-from .core.registry import Characteristic, CharacteristicValue, register_characteristic
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from .errors import CharacteristicError, DataError, ExpressionError, HevvalError, SpecError
 
+if TYPE_CHECKING:
+    from .core import (
+        CHARACTERISTICS,
+        ScoredNode,
+        SignalCharacteristics,
+        TreeNode,
+        emergent,
+        error_origins,
+        global_metric,
+        normalised_error,
+        score_tree,
+        signal_characteristics,
+    )
+    from .core.registry import Characteristic, CharacteristicValue, register_characteristic
+
 __version__ = "0.1.0"
+
+#: Public name → the module that defines it, imported when the name is first used.
+_LAZY: dict[str, str] = {
+    "CHARACTERISTICS": ".core",
+    "ScoredNode": ".core",
+    "SignalCharacteristics": ".core",
+    "TreeNode": ".core",
+    "emergent": ".core",
+    "error_origins": ".core",
+    "global_metric": ".core",
+    "normalised_error": ".core",
+    "score_tree": ".core",
+    "signal_characteristics": ".core",
+    "Characteristic": ".core.registry",
+    "CharacteristicValue": ".core.registry",
+    "register_characteristic": ".core.registry",
+}
 
 __all__ = [
     "CHARACTERISTICS",
@@ -43,3 +71,16 @@ __all__ = [
     "score_tree",
     "signal_characteristics",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

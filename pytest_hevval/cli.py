@@ -1,9 +1,14 @@
-"""``hevval``: the same engine without pytest.
+"""``hevval``: the same pipeline as ``pytest --hevval``, without pytest.
 
     hevval run SPEC... [--json PATH] [--details] [--report html,json,md] [--report-dir DIR]
     hevval diagnose SPEC [--signal PATH] [--json PATH]
-    hevval compare BEFORE AFTER [--format table|md|json]
+    hevval compare BEFORE AFTER [--format table|md|json] [--compare-fail EXPR]
     hevval history [--spec S] [--signal PATH] [--plot FILE]
+    hevval --version
+
+One argparse tree. An option that also exists as a pytest flag is spelled the same, without
+the ``--hevval-`` prefix, and takes its help text and default from the same table
+(:data:`pytest_hevval.options.OPTIONS`).
 
 Exit codes: 0 every spec passed, 1 a gate failed, 2 bad input or usage.
 """
@@ -12,13 +17,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
-from .data.remote import is_url
+from .defaults import SPEC_GLOBS
 from .errors import HevvalError
 
 __all__ = ["main"]
@@ -29,15 +33,9 @@ EXIT_USAGE = 2
 
 
 def _write_json(path: str, payload: Any) -> None:
-    """Write atomically: a reader never sees half a file, a failure leaves the old one."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
-    try:
-        temporary.write_text(json.dumps(payload, indent=2, sort_keys=True, allow_nan=False) + "\n")
-        os.replace(temporary, target)
-    finally:
-        temporary.unlink(missing_ok=True)
+    from .files import write_atomic
+
+    write_atomic(path, json.dumps(payload, indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
 def _expand(paths: Sequence[str]) -> list[Path]:
@@ -45,15 +43,16 @@ def _expand(paths: Sequence[str]) -> list[Path]:
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found.extend(sorted(path.rglob("*.hevval.yaml")))
-            found.extend(sorted(path.rglob("*.hevval.yml")))
+            for pattern in SPEC_GLOBS:
+                found.extend(sorted(path.rglob(pattern)))
         else:
             found.append(path)
     return found
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .engine import DataCache, evaluate_spec
+    from .engine import Evaluation
+    from .run import RunOptions, run_specs
     from .spec.load import load_spec
     from .terminal import tree_summary
 
@@ -61,43 +60,26 @@ def _run(args: argparse.Namespace) -> int:
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
         return EXIT_USAGE
-    cache = DataCache()
-    for spec in specs:
-        cache.declare(spec.reference, spec.reference_columns())
-        cache.declare(spec.model, spec.model_columns())
-    wants_figures = "html" in (args.report or "")
-    results = []
+    options = RunOptions(
+        rootdir=Path.cwd(),
+        figures="html" in (args.report or ""),
+        workers=args.workers,
+        dask=args.dask,
+    )
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
-    if args.dask:
-        from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
-        from .result import SpecResult
+    done = [0]
 
-        done = [0]
+    def advance(count: int) -> None:
+        progress.update(count - done[0])
+        done[0] = count
 
-        def advance(count: int) -> None:
-            progress.update(count - done[0])
-            done[0] = count
-
-        payloads = evaluate_on_dask(
-            [s.path for s in specs],
-            args.dask,
-            rootdir=Path.cwd(),
-            figures=wants_figures,
-            progress=advance,
-        )
-        for payload in payloads:
-            if is_error_payload(payload):
-                raise error_from_payload(payload)
-            results.append(SpecResult.from_dict(payload))
-    else:
-        for spec in specs:
-            evaluation = evaluate_spec(spec, cache=cache, rootdir=Path.cwd(), figures=wants_figures)
-            results.append(evaluation.result)
-            progress.update(1)
+    outcomes = run_specs(specs, options, progress=advance)
     progress.close()
-    for result in results:
-        if not is_url(result.spec):
-            result.spec = os.path.relpath(result.spec)
+    results = []
+    for outcome in outcomes:
+        if not isinstance(outcome, Evaluation):
+            raise outcome
+        results.append(outcome.result)
     for line in tree_summary(results, details=args.details):
         print(line)
     passed = all(r.passed for r in results)
@@ -130,6 +112,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _record_history(args: argparse.Namespace, dicts: list[dict[str, Any]]) -> None:
+    import os
     from datetime import datetime, timezone
 
     from .history import HistoryStore, make_record, resolve_model_version
@@ -158,61 +141,168 @@ def _progress(total: int, *, enabled: bool) -> Any:
     return tqdm(total=total, unit="spec", file=sys.stderr)
 
 
+class _UsageError(HevvalError):
+    """A command line argparse could not make sense of; worded like every other error."""
+
+    def __init__(self, prog: str, message: str) -> None:
+        super().__init__(message, hint=f"see `{prog} --help`")
+        self.prog = prog
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors become exceptions, so every error leaves by one path with one wording."""
+
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(self.prog, message)
+
+
+def _shared(parser: argparse.ArgumentParser, name: str, **overrides: Any) -> None:
+    """Add the option that pytest spells ``--hevval-NAME``, as ``--NAME``, from its table."""
+    from .options import option_named
+
+    option = option_named(name)
+    kwargs: dict[str, Any] = {"help": option.help}
+    if option.kind == "bool":
+        kwargs["action"] = "store_true"
+    else:
+        kwargs["default"] = option.default
+    kwargs.update(overrides)
+    parser.add_argument(f"--{name}", **kwargs)
+
+
+def _workers(text: str) -> int:
+    try:
+        count = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a whole number (got {text!r})") from None
+    if count < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1 (got {count})")
+    return count
+
+
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    from . import __version__
+
+    parser = _Parser(
         prog="hevval",
         description="Multi-fidelity validation of simulation models against measured data.",
+        epilog="Each command has its own --help. The same checks run as tests: pytest --hevval.",
     )
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser.add_argument("--version", action="version", version=_version_text(__version__))
+    commands = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=_Parser
+    )
+
     run = commands.add_parser("run", help="score specs and print the signal trees")
     run.add_argument("specs", nargs="+", help="spec files or folders holding *.hevval.yaml")
-    run.add_argument("--json", help="write the results as JSON to this path")
-    run.add_argument("--details", action="store_true", help="show every node")
-    run.add_argument("--report", default="", help="write reports: html,json,md")
-    run.add_argument("--report-dir", default=".hevval/report", help="folder for reports")
+    run.add_argument("--json", metavar="PATH", help="write the results as JSON to this path")
+    _shared(run, "details")
+    _shared(run, "report")
+    _shared(run, "report-dir")
+    _shared(run, "no-history")
+    _shared(run, "history-dir")
+    _shared(run, "model-version")
+    _shared(run, "dask", metavar="ADDRESS")
+    _shared(run, "workers", type=_workers)
     run.add_argument("--quiet", action="store_true", help="no progress bar")
-    run.add_argument("--no-history", action="store_true", help="do not record this run")
-    run.add_argument("--history-dir", default=".hevval/history", help="folder of run records")
-    run.add_argument("--model-version", help="model version recorded in the history")
-    run.add_argument(
-        "--dask",
-        metavar="ADDRESS",
-        help="evaluate specs on this dask.distributed scheduler ('local' starts one here)",
+
+    diagnose = commands.add_parser(
+        "diagnose", help="trace the residual of a signal to the effect the model lacks"
+    )
+    diagnose.add_argument("spec", help="a *.hevval.yaml spec")
+    diagnose.add_argument(
+        "--signal",
+        action="append",
+        help="signal path (repeatable); default: every signal where an error appears",
+    )
+    diagnose.add_argument("--json", metavar="PATH", help="write the findings as JSON to this path")
+    diagnose.add_argument(
+        "--no-channels",
+        action="store_true",
+        help="only the spec's declared candidates, not every unused measured channel",
+    )
+
+    compare = commands.add_parser(
+        "compare",
+        help="compare two runs signal by signal",
+        description="Compare two runs signal by signal: each λ, the physical errors and the "
+        "lag, before → after, then Φ per spec.",
+    )
+    compare.add_argument(
+        "before",
+        help="run JSON, history record, history:latest, history:previous or history:<version>",
+    )
+    compare.add_argument("after", help="same forms as BEFORE")
+    _shared(compare, "history-dir")
+    compare.add_argument("--format", choices=("table", "md", "json"), default="table")
+    compare.add_argument("--output", metavar="PATH", help="write here instead of stdout")
+    _shared(
+        compare,
+        "compare-fail",
+        metavar="EXPR",
+        help="exit 1 on regressions, e.g. phi:0.01,lambda:0.02 or mae:1%% (see docs/history.md)",
+    )
+
+    history = commands.add_parser(
+        "history",
+        help="Φ and λ over the recorded model versions, with lasting drops",
+        description="Show Φ (and the characteristics of a signal) over the recorded model "
+        "versions, and flag lasting drops.",
+    )
+    _shared(history, "history-dir")
+    history.add_argument("--spec", help="spec path or name (shell glob allowed)")
+    history.add_argument("--signal", help="signal path or name (shell glob allowed)")
+    history.add_argument("--plot", metavar="FILE", help="write a PNG or SVG plot")
+    history.add_argument("--json", metavar="PATH", help="write the rows as JSON ('-' = stdout)")
+    history.add_argument(
+        "--min-step",
+        type=float,
+        default=0.01,
+        help="smallest change of Φ or λ reported as a step (default 0.01)",
     )
     return parser
 
 
+def _version_text(version: str) -> str:
+    return f"pytest-hevval {version}"
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    if args.command == "run":
+        return _run(args)
+    if args.command == "diagnose":
+        from .diagnose import run_diagnose
+
+        return run_diagnose(args)
+    from .history.cli import run_compare, run_history
+
+    return run_compare(args) if args.command == "compare" else run_history(args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
-    from .core.registry import load_entry_points
-
     try:
+        args, unknown = _parser().parse_known_args(arguments)
+        if unknown:
+            # Named after the subcommand, whose --help lists what it takes.
+            raise _UsageError(
+                f"hevval {args.command}", f"unrecognized arguments: {' '.join(unknown)}"
+            )
+    except _UsageError as exc:
+        print(f"{exc.prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help and --version print and exit
+        return exc.code if isinstance(exc.code, int) else EXIT_OK
+    try:
+        from .core.registry import load_entry_points
+
         load_entry_points()
+        return _dispatch(args)
     except HevvalError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    # Subcommands implemented in their own modules parse their own arguments.
-    delegated = {
-        "compare": ("pytest_hevval.history", "compare_main"),
-        "history": ("pytest_hevval.history", "history_main"),
-        "diagnose": ("pytest_hevval.diagnose", "diagnose_main"),
-    }
-    try:
-        if arguments and arguments[0] in delegated:
-            import importlib
-
-            module_name, function = delegated[arguments[0]]
-            handler = getattr(importlib.import_module(module_name), function)
-            return int(handler(arguments[1:]))
-        args = _parser().parse_args(arguments)
-        if args.command == "run":
-            return _run(args)
-    except HevvalError as exc:
-        print(f"hevval: error: {exc}", file=sys.stderr)
+        print(f"hevval {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130
-    return EXIT_USAGE
 
 
 if __name__ == "__main__":

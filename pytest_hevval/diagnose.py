@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,7 +20,7 @@ import numpy.typing as npt
 from .core.diagnosis import Candidate, diagnose_residual
 from .core.registry import FUSED_CHARACTERISTICS
 from .data.record import Record
-from .engine import DataCache, Evaluation, evaluate_spec
+from .engine import Evaluation
 from .errors import DataError, HevvalError
 
 __all__ = ["candidates_for", "diagnose_main", "diagnose_origin", "diagnose_signal"]
@@ -219,28 +218,22 @@ def _describe(found: dict[str, Any]) -> list[str]:
 
 
 def diagnose_main(argv: Sequence[str]) -> int:
-    """``hevval diagnose SPEC [--signal PATH] [--json PATH] [--no-channels]``."""
+    """``hevval diagnose ...``: kept for callers of the old entry point."""
+    from .cli import main
+
+    return main(["diagnose", *argv])
+
+
+def run_diagnose(args: argparse.Namespace) -> int:
+    """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
+    from .run import RunOptions, run_specs
     from .spec.load import load_spec
 
-    parser = argparse.ArgumentParser(
-        prog="hevval diagnose",
-        description="Trace the residual of a signal to the effect the model lacks.",
-    )
-    parser.add_argument("spec", help="a *.hevval.yaml spec")
-    parser.add_argument(
-        "--signal",
-        action="append",
-        help="signal path (repeatable); default: every signal where an error appears",
-    )
-    parser.add_argument("--json", help="write the findings as JSON to this path")
-    parser.add_argument(
-        "--no-channels",
-        action="store_true",
-        help="only the spec's declared candidates, not every unused measured channel",
-    )
-    args = parser.parse_args(list(argv))
     spec = load_spec(args.spec)
-    evaluation = evaluate_spec(spec, cache=DataCache(), rootdir=Path.cwd(), keep_arrays=True)
+    (outcome,) = run_specs([spec], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
+    if isinstance(outcome, HevvalError):
+        raise outcome
+    evaluation = outcome
     paths = args.signal or [s.path for s in evaluation.result.signals if s.origin]
     if not paths:
         print(f"{spec.name}: every signal passes; pass --signal PATH to diagnose one anyway")
@@ -257,7 +250,3 @@ def diagnose_main(argv: Sequence[str]) -> int:
             payload.update(findings[0])
         _write_json(args.json, payload)
     return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(diagnose_main(sys.argv[1:]))

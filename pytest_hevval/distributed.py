@@ -114,7 +114,7 @@ def evaluate_spec_file(
     Anything else (a bug) propagates, so that the client shows its traceback.
     """
     from .core.registry import load_entry_points
-    from .engine import evaluate_spec
+    from .run import RunOptions, evaluate_here
     from .spec.load import load_spec
 
     try:
@@ -122,12 +122,13 @@ def evaluate_spec_file(
         load_entry_points()
         with _PARSE_LOCK:
             spec = load_spec(spec_path)
-        evaluation = evaluate_spec(
-            spec, rootdir=Path(rootdir), figures=figures, workers=threads_per_spec
-        )
     except HevvalError as exc:
         return error_payload(spec_path, exc)
-    return evaluation.result.to_dict()
+    options = RunOptions(rootdir=Path(rootdir), figures=figures, workers=threads_per_spec)
+    outcome = evaluate_here(spec, options)
+    if isinstance(outcome, HevvalError):
+        return error_payload(spec_path, outcome)
+    return outcome.result.to_dict()
 
 
 def _distributed() -> Any:

@@ -507,7 +507,7 @@ def _gate(
 def _figures(
     ref: FloatArray, sim: FloatArray, chars: SignalCharacteristics, aligned: AlignedData
 ) -> dict[str, Any]:
-    from .report.figures import figure_data
+    from .core.figures import figure_data
 
     return figure_data(
         ref,

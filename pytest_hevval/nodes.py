@@ -18,9 +18,10 @@ from .core.registry import describe
 from .engine import Evaluation
 from .errors import HevvalError
 from .result import SignalResult, SpecResult
-from .session import HevvalSession, session_key
+from .session import HevvalSession
 from .spec.load import load_spec
 from .spec.model import Spec
+from .stash import session_key
 from .terminal import phi_report, signal_failure_report
 
 __all__ = ["PhiItem", "SignalItem", "SpecFile"]

@@ -11,7 +11,9 @@ from typing import Any, Literal
 
 import pytest
 
-__all__ = ["OPTIONS", "Option", "add_options", "get_option"]
+from .defaults import HISTORY_DIR, REPORT_DIR, SPEC_GLOBS
+
+__all__ = ["OPTIONS", "Option", "add_options", "get_option", "option_named"]
 
 Kind = Literal["bool", "string", "linelist", "choice"]
 
@@ -45,7 +47,7 @@ OPTIONS: tuple[Option, ...] = (
         "files",
         "linelist",
         "glob patterns of spec files (ini only)",
-        ["*.hevval.yaml", "*.hevval.yml"],
+        list(SPEC_GLOBS),
     ),
     Option("details", "bool", "show every node of every tree in the summary", False),
     Option(
@@ -56,9 +58,9 @@ OPTIONS: tuple[Option, ...] = (
         ("off", "failed", "all"),
     ),
     Option("report", "string", "write reports: comma-separated html,json,md", ""),
-    Option("report-dir", "string", "folder for reports", ".hevval/report"),
+    Option("report-dir", "string", "folder for reports", REPORT_DIR),
     Option("no-history", "bool", "do not record this run in the history", False),
-    Option("history-dir", "string", "folder of run records", ".hevval/history"),
+    Option("history-dir", "string", "folder of run records", HISTORY_DIR),
     Option("model-version", "string", "model version recorded in the history", None),
     Option(
         "compare",
@@ -86,6 +88,11 @@ OPTIONS: tuple[Option, ...] = (
 )
 
 _BY_NAME = {o.name: o for o in OPTIONS}
+
+
+def option_named(name: str) -> Option:
+    """The option pytest spells ``--hevval-NAME`` (the command line reuses its help/default)."""
+    return _BY_NAME[name]
 
 
 def add_options(parser: pytest.Parser) -> None:

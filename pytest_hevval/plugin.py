@@ -1,7 +1,9 @@
 """pytest hooks. Each is a few lines that delegate; nothing here computes.
 
 Registered through the ``pytest11`` entry point; inert unless ``--hevval`` (or ini
-``hevval = true``) is given.
+``hevval = true``) is given. Until then it imports nothing but pytest and the option table, so
+installing the plugin costs other test runs in the environment nothing (see
+``benchmarks/bench_startup.py``).
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from typing import Any
 import pytest
 
 from .errors import HevvalError
-from .options import add_options
-from .session import HevvalSession, session_key
+from .options import add_options, get_option
+from .stash import session_key, state_of
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -23,23 +25,26 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    if not get_option(config, ""):
+        return
+    from .session import HevvalSession
+
     state = HevvalSession(config)
     config.stash[session_key] = state
-    if state.enabled:
-        state.validate_options()
-        from .core.registry import load_entry_points
+    state.validate_options()
+    from .core.registry import load_entry_points
 
-        try:
-            load_entry_points()
-        except HevvalError as exc:
-            raise pytest.UsageError(str(exc)) from None
-        # The session object receives worker reports itself (pytest_runtest_logreport).
-        config.pluginmanager.register(state, "hevval-session")
+    try:
+        load_entry_points()
+    except HevvalError as exc:
+        raise pytest.UsageError(str(exc)) from None
+    # The session object receives worker reports itself (pytest_runtest_logreport).
+    config.pluginmanager.register(state, "hevval-session")
 
 
 def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> pytest.Collector | None:
-    state = parent.config.stash[session_key]
-    if not state.enabled:
+    state = state_of(parent.config)
+    if state is None:
         return None
     patterns = state.option("files")
     if any(fnmatch.fnmatch(file_path.name, pattern) for pattern in patterns):
@@ -66,28 +71,27 @@ def pytest_runtest_makereport(
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
-    state = session.config.stash[session_key]
-    if state.enabled:
+    state = state_of(session.config)
+    if state is not None:
         state.start()
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    state = session.config.stash[session_key]
-    if state.enabled and state.is_controller:
+    state = state_of(session.config)
+    if state is not None and state.is_controller:
         state.finish(session)
 
 
 def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
-    state = config.stash[session_key]
-    if state.enabled and state.is_controller:
+    state = state_of(config)
+    if state is not None and state.is_controller:
         state.summarise(terminalreporter)
 
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     """Keep every item of one spec on one worker, so each spec's data is read once."""
-    state = config.stash[session_key]
-    if not state.enabled or config.getoption("dist", "load") != "load":
+    if state_of(config) is None or config.getoption("dist", "load") != "load":
         return None
     from xdist.scheduler import LoadFileScheduling
 

@@ -15,15 +15,15 @@ from typing import Any
 
 import pytest
 
-from .data.remote import is_url
-from .engine import DataCache, Evaluation, evaluate_spec
+from .engine import DataCache, Evaluation
 from .errors import HevvalError
 from .options import get_option
 from .result import SignalResult, SpecResult
+from .run import RunOptions, relative_to, run_specs
 from .spec.model import Spec
 from .terminal import tree_summary
 
-__all__ = ["HevvalSession", "session_key"]
+__all__ = ["HevvalSession"]
 
 
 @dataclass
@@ -47,6 +47,7 @@ class HevvalSession:
     baseline: dict[str, Any] | None = None
     model_version: str = "unknown"
     started: datetime = field(default_factory=lambda: datetime.now(timezone.utc))
+    _run_options: RunOptions | None = None
 
     # -- options ----------------------------------------------------------------------------
     @property
@@ -149,64 +150,43 @@ class HevvalSession:
         self.cache.declare(spec.reference, spec.reference_columns())
         self.cache.declare(spec.model, spec.model_columns())
 
-    def prefetch_on_dask(self) -> None:
-        """Score every collected spec on the Dask cluster at once, before the items run."""
-        address = self.option("dask")
-        if not address or not self.specs:
-            return
-        from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
-
-        specs = list(self.specs.values())
-        try:
-            payloads = evaluate_on_dask(
-                [s.path for s in specs],
-                str(address),
+    def run_options(self) -> RunOptions:
+        """The scoring settings of this run, read from the options once."""
+        if self._run_options is None:
+            self._run_options = RunOptions(
                 rootdir=self.rootdir,
                 figures=self.wants_figures(),
+                keep_arrays=self.option("diagnose") != "off",
+                workers=self.workers(),
+                dask=str(self.option("dask")) if self.option("dask") else None,
             )
+        return self._run_options
+
+    def prefetch_on_dask(self) -> None:
+        """Score every collected spec on the Dask cluster at once, before the items run."""
+        options = self.run_options()
+        if not options.dask or not self.specs:
+            return
+        specs = list(self.specs.values())
+        try:
+            outcomes = run_specs(specs, options)
         except HevvalError as exc:
-            raise pytest.UsageError(f"--hevval-dask={address}: {exc}") from None
-        for spec, payload in zip(specs, payloads, strict=True):
-            key = str(spec.path)
-            if is_error_payload(payload):
-                self.evaluations[key] = error_from_payload(payload)
-            else:
-                evaluation = Evaluation(spec, SpecResult.from_dict(payload), None)
-                self._make_relative(evaluation)
-                self.evaluations[key] = evaluation
+            raise pytest.UsageError(f"--hevval-dask={options.dask}: {exc}") from None
+        for spec, outcome in zip(specs, outcomes, strict=True):
+            self.evaluations[str(spec.path)] = outcome
 
     def evaluate(self, spec: Spec) -> Evaluation:
         """Evaluate a spec once per process; later items of the same spec reuse it."""
         key = str(spec.path)
-        if key not in self.evaluations and self.option("dask"):
+        options = self.run_options()
+        if key not in self.evaluations and options.dask:
             self.prefetch_on_dask()
         if key not in self.evaluations:
-            try:
-                self.evaluations[key] = evaluate_spec(
-                    spec,
-                    cache=self.cache,
-                    rootdir=self.rootdir,
-                    figures=self.wants_figures(),
-                    keep_arrays=self.option("diagnose") != "off",
-                    workers=self.workers(),
-                )
-                self._make_relative(self.evaluations[key])
-            except HevvalError as exc:
-                self.evaluations[key] = exc
+            (self.evaluations[key],) = run_specs([spec], options, cache=self.cache)
         outcome = self.evaluations[key]
         if isinstance(outcome, HevvalError):
             raise outcome
         return outcome
-
-    def _make_relative(self, outcome: Evaluation | HevvalError) -> None:
-        """Results name files relative to the rootdir, so records move between machines."""
-        if isinstance(outcome, HevvalError):
-            return
-        result = outcome.result
-        result.spec = self.relative(result.spec)
-        for side in result.data.values():
-            if isinstance(side, dict) and side.get("path") and not is_url(str(side["path"])):
-                side["path"] = self.relative(str(side["path"]))
 
     def diagnosis_for(
         self, evaluation: Evaluation | None, signal: SignalResult
@@ -268,12 +248,7 @@ class HevvalSession:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
 
     def relative(self, path: str) -> str:
-        if is_url(path):
-            return path
-        try:
-            return os.path.relpath(path, self.rootdir)
-        except ValueError:
-            return path
+        return relative_to(self.rootdir, path)
 
     # -- session end: controller only -------------------------------------------------------
     def finish(self, session: pytest.Session) -> None:
@@ -425,6 +400,3 @@ class HevvalSession:
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)
-
-
-session_key = pytest.StashKey[HevvalSession]()

@@ -23,6 +23,7 @@ from pytest_hevval import (
 from pytest_hevval.core.lag import search_lag
 from pytest_hevval.core.tree import iter_nodes
 from pytest_hevval.errors import DegenerateSignalError
+from tests.strategies import finite, signal_pairs
 
 # Table 4 of the paper: α and λ1..λ7 of every signal (λ7 = 1 placeholders for leaves and v).
 TABLE4 = {
@@ -277,17 +278,6 @@ def test_constant_offset_gives_the_paper_synthetic_values() -> None:
 
 
 # --- Properties --------------------------------------------------------------------------------
-
-finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
-
-
-@st.composite
-def signal_pairs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
-    n = draw(st.integers(3, 300))
-    reference = draw(hnp.arrays(np.float64, n, elements=finite))
-    assume(np.ptp(reference) > 1e-6 * (np.abs(reference).max() + 1))
-    simulated = draw(hnp.arrays(np.float64, n, elements=finite))
-    return reference, simulated
 
 
 @given(signal_pairs())

@@ -19,6 +19,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pytest_hevval import history as h
+from pytest_hevval.errors import SpecError
 from pytest_hevval.result import SpecResult
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
@@ -633,7 +634,7 @@ def test_merge_thresholds_sidecar_only_tightens() -> None:
 def test_load_sidecar_errors(tmp_path: Path, text: str, fragments: list[str]) -> None:
     spec_path = tmp_path / "t.hevval.yaml"
     h.sidecar_path(spec_path).write_text(text)
-    with pytest.raises(h.HistoryError) as info:
+    with pytest.raises(SpecError) as info:
         h.load_sidecar(spec_path)
     message = str(info.value)
     assert "t.hevval.thresholds.yaml" in message
@@ -756,7 +757,7 @@ def test_history_main_table_steps_json_and_plot(
 ) -> None:
     out_json = tmp_path / "rows.json"
     plot = tmp_path / "p.png"
-    argv = ["--dir", str(history_dir), "--signal", "E_batt/P_batt", "--json", str(out_json)]
+    argv = ["--history-dir", str(history_dir), "--signal", "E_batt/P_batt", "--json", str(out_json)]
     assert h.history_main([*argv, "--plot", str(plot)]) == 0
     out = capsys.readouterr().out
     assert "v1" in out
@@ -770,7 +771,7 @@ def test_history_main_reports_drops(tmp_path: Path, capsys: pytest.CaptureFixtur
     store = h.HistoryStore(tmp_path)
     for i, phi in enumerate([0.95, 0.95, 0.95, 0.90, 0.90, 0.90]):
         store.append(record(f"v{i}", T0 + timedelta(days=i), [spec(phi=phi)]))
-    assert h.history_main(["--dir", str(tmp_path)]) == 0
+    assert h.history_main(["--history-dir", str(tmp_path)]) == 0
     assert "drop: specs/trip_a01.hevval.yaml Φ 0.9500 → 0.9000 from model version v3" in (
         capsys.readouterr().out
     )
@@ -779,7 +780,7 @@ def test_history_main_reports_drops(tmp_path: Path, capsys: pytest.CaptureFixtur
 def test_history_main_empty_and_bad_args(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.history_main(["--dir", str(tmp_path)]) == 1
+    assert h.history_main(["--history-dir", str(tmp_path)]) == 1
     assert "no readable records" in capsys.readouterr().err
     assert h.history_main(["--bogus"]) == 2
     assert "unrecognized arguments" in capsys.readouterr().err
@@ -790,7 +791,7 @@ def test_compare_main_formats(
 ) -> None:
     run = tmp_path / "run.json"
     run.write_text(json.dumps({"specs": [spec(phi=0.97)]}))
-    base = ["history:v1", str(run), "--dir", str(history_dir)]
+    base = ["history:v1", str(run), "--history-dir", str(history_dir)]
     assert h.compare_main(base) == 0
     table = capsys.readouterr().out
     assert "v1 → run.json" in table
@@ -815,10 +816,10 @@ def test_compare_main_formats(
 def test_compare_main_fail_rules_and_latest(
     history_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["history:v1", "history:latest", "--dir", str(history_dir)]
-    assert h.compare_main([*argv, "--fail", "phi:0.1"]) == 0
+    argv = ["history:v1", "history:latest", "--history-dir", str(history_dir)]
+    assert h.compare_main([*argv, "--compare-fail", "phi:0.1"]) == 0
     assert "no regressions" in capsys.readouterr().out
-    assert h.compare_main([*argv, "--fail", "phi:0.01,mae:0.1"]) == 1
+    assert h.compare_main([*argv, "--compare-fail", "phi:0.01,mae:0.1"]) == 1
     out = capsys.readouterr().out
     assert "2 regression(s)" in out
     assert "mae dropped 0.93 → 0.5" in out
@@ -827,11 +828,14 @@ def test_compare_main_fail_rules_and_latest(
 def test_compare_main_previous(
     history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.compare_main(["history:previous", "history:latest", "--dir", str(history_dir)]) == 0
+    assert (
+        h.compare_main(["history:previous", "history:latest", "--history-dir", str(history_dir)])
+        == 0
+    )
     assert "compare v2 → v3" in capsys.readouterr().out
     single = tmp_path / "single"
     h.HistoryStore(single).append(record("v1", T0))
-    assert h.compare_main(["history:previous", "history:latest", "--dir", str(single)]) == 2
+    assert h.compare_main(["history:previous", "history:latest", "--history-dir", str(single)]) == 2
     assert "only one readable record" in capsys.readouterr().err
 
 
@@ -849,14 +853,14 @@ def test_compare_main_reads_record_files(
     [
         (["history:v9", "history:latest"], ["no record of model version 'v9'", "v1, v2, v3"]),
         (["missing.json", "history:latest"], ["missing.json: no such file"]),
-        (["history:latest", "history:latest", "--fail", "phy:1"], ["did you mean 'phi'"]),
+        (["history:latest", "history:latest", "--compare-fail", "phy:1"], ["did you mean 'phi'"]),
         (["history:latest", "history:latest", "--format", "xml"], ["invalid choice"]),
     ],
 )
 def test_compare_main_errors(
     history_dir: Path, argv: list[str], fragments: list[str], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.compare_main([*argv, "--dir", str(history_dir)]) == 2
+    assert h.compare_main([*argv, "--history-dir", str(history_dir)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("hevval compare: error: ")
     for fragment in fragments:

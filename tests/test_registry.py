@@ -124,7 +124,7 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
     assert signal["lambdas"]["peak_error"] == current["lambdas"]["peak_error"]
 
     # The CLI reads no conftest: the names stored in the records are enough.
-    history = ["--dir", ".hevval/history"]
+    history = ["--history-dir", ".hevval/history"]
     compared = pytester.run(
         sys.executable,
         "-m",
@@ -135,7 +135,7 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
         *history,
         "--format",
         "json",
-        "--fail",
+        "--compare-fail",
         "lambda:0.001",
     )
     assert compared.ret == 0, compared.stderr.str()

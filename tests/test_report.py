@@ -574,13 +574,13 @@ def test_write_reports_writes_each_format_atomically(
 def test_write_reports_leaves_no_temporary_file_when_rendering_fails(
     results: list[dict[str, Any]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from pytest_hevval.report import writer
+    from pytest_hevval import files
 
     def broken(path: Path, text: str) -> None:
         raise OSError("disk full")
 
     (tmp_path / "report.json").write_text("previous", "utf-8")
-    monkeypatch.setattr(writer.os, "replace", lambda *a: broken(Path(), ""))
+    monkeypatch.setattr(files.os, "replace", lambda *a: broken(Path(), ""))
     with pytest.raises(OSError, match="disk full"):
         write_reports(results, {"json"}, tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["report.json"]

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from pytest_hevval.report import render_html
-from pytest_hevval.report.demo import demo_results
+from tests.demo_results import demo_results
 
 pytestmark = pytest.mark.browser
 

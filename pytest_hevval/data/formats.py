@@ -1916,3 +1916,10 @@ register_reader("parquet", _read_parquet)
 register_reader("mat", _read_mat)
 register_reader("hdf5", _read_hdf5)
 register_reader("mdf", _read_mdf)
+register_reader(
+    "can",
+    lambda path, columns, options: importlib.import_module(".can", __package__).read_can(
+        path, columns, options
+    ),
+    (".blf", ".asc", ".log"),
+)

@@ -9,16 +9,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, NoReturn, TextIO
+from typing import Any
 
-from ..errors import HevvalError, did_you_mean
+from ..errors import did_you_mean
+from ..files import write_atomic
 from ._base import HistoryError
 from .compare import Comparison, compare, parse_compare_fail, regressions, specs_of
 from .records import migrate_record
-from .render import FORMATS, render
-from .store import DEFAULT_HISTORY_DIR, HistoryStore
+from .render import render
+from .store import HistoryStore
 from .trends import (
     HistoryRow,
     characteristic_names,
@@ -29,27 +30,9 @@ from .trends import (
     row_series,
 )
 
-__all__ = ["compare_main", "history_main", "load_side"]
+__all__ = ["compare_main", "history_main", "load_side", "run_compare", "run_history"]
 
 _HISTORY_PREFIX = "history:"
-
-
-class _Parser(argparse.ArgumentParser):
-    """An ArgumentParser that reports errors by exception instead of exiting the process."""
-
-    def error(self, message: str) -> NoReturn:
-        raise HistoryError(message, hint=f"see `{self.prog} --help`")
-
-
-def _run(main: Callable[[list[str]], int], argv: Sequence[str], prog: str, stderr: TextIO) -> int:
-    try:
-        code = main(list(argv))
-    except HevvalError as exc:
-        print(f"{prog}: error: {exc}", file=stderr)
-        return 2
-    except SystemExit as exc:  # --help
-        return exc.code if isinstance(exc.code, int) else 0
-    return code
 
 
 def _write(text: str, output: str | None) -> None:
@@ -57,7 +40,7 @@ def _write(text: str, output: str | None) -> None:
         sys.stdout.write(text)
         return
     try:
-        Path(output).write_text(text, encoding="utf-8")
+        write_atomic(output, text)
     except OSError as exc:
         raise HistoryError(
             f"cannot write: {exc.strerror or exc}", file=output, hint="choose another --output"
@@ -73,35 +56,21 @@ def _report_problems(store: HistoryStore) -> None:
 
 
 def history_main(argv: Sequence[str]) -> int:
-    """``hevval history [--dir D] [--spec S] [--signal PATH] [--plot FILE] [--json PATH]``."""
-    return _run(_history, argv, "hevval history", sys.stderr)
+    """``hevval history ...``: kept for callers of the old entry point."""
+    from ..cli import main
+
+    return main(["history", *argv])
 
 
-def _history(argv: list[str]) -> int:
-    parser = _Parser(
-        prog="hevval history",
-        description="Show Φ (and λ1–λ7 of a signal) over the recorded model versions, "
-        "and flag lasting drops.",
-    )
-    parser.add_argument("--dir", default=DEFAULT_HISTORY_DIR, help="history folder")
-    parser.add_argument("--spec", help="spec path or name (shell glob allowed)")
-    parser.add_argument("--signal", help="signal path or name (shell glob allowed)")
-    parser.add_argument("--plot", metavar="FILE", help="write a PNG or SVG plot")
-    parser.add_argument("--json", metavar="PATH", help="write the rows as JSON ('-' = stdout)")
-    parser.add_argument(
-        "--min-step",
-        type=float,
-        default=0.01,
-        help="smallest change of Φ or λ reported as a step (default 0.01)",
-    )
-    args = parser.parse_args(argv)
-    store = HistoryStore(Path(args.dir))
+def run_history(args: argparse.Namespace) -> int:
+    """``hevval history``: Φ and the characteristics over the recorded model versions."""
+    store = HistoryStore(Path(args.history_dir))
     records = store.records()
     _report_problems(store)
     rows = history_table(records, spec=args.spec, signal=args.signal)
     if not rows:
         what = "no readable records" if not records else "no recorded runs match"
-        print(f"hevval history: {what} in {args.dir}", file=sys.stderr)
+        print(f"hevval history: {what} in {args.history_dir}", file=sys.stderr)
         return 1
     if args.json is not None:
         document = {"rows": [row.to_dict() for row in rows]}
@@ -212,32 +181,20 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
 
 
 def compare_main(argv: Sequence[str]) -> int:
-    """``hevval compare BEFORE AFTER [--format table|md|json] [--output PATH] [--fail EXPR]``."""
-    return _run(_compare, argv, "hevval compare", sys.stderr)
+    """``hevval compare ...``: kept for callers of the old entry point."""
+    from ..cli import main
+
+    return main(["compare", *argv])
 
 
-def _compare(argv: list[str]) -> int:
-    parser = _Parser(
-        prog="hevval compare",
-        description="Compare two runs signal by signal: each λ, the physical errors and the "
-        "lag, before → after, then Φ per spec.",
+def run_compare(args: argparse.Namespace) -> int:
+    """``hevval compare``: two runs signal by signal, then Φ per spec."""
+    rules = (
+        parse_compare_fail(args.compare_fail, option="--compare-fail")
+        if args.compare_fail is not None
+        else None
     )
-    parser.add_argument(
-        "before",
-        help="run JSON, history record, history:latest, history:previous or history:<version>",
-    )
-    parser.add_argument("after", help="same forms as BEFORE")
-    parser.add_argument("--dir", default=DEFAULT_HISTORY_DIR, help="history folder")
-    parser.add_argument("--format", choices=FORMATS, default="table")
-    parser.add_argument("--output", metavar="PATH", help="write here instead of stdout")
-    parser.add_argument(
-        "--fail",
-        metavar="EXPR",
-        help="exit 1 on regressions, e.g. phi:0.01,lambda:0.02 or mae:1%% (see docs/history.md)",
-    )
-    args = parser.parse_args(argv)
-    rules = parse_compare_fail(args.fail, option="--fail") if args.fail is not None else None
-    directory = Path(args.dir)
+    directory = Path(args.history_dir)
     before, before_label = load_side(args.before, directory)
     after, after_label = load_side(args.after, directory)
     if before_label == after_label:

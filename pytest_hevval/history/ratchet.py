@@ -14,10 +14,7 @@ never loosen it. To loosen a threshold, lower it in the spec *and* delete the si
 
 from __future__ import annotations
 
-import contextlib
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
@@ -26,8 +23,9 @@ from typing import Any
 
 import yaml
 
-from ..core.registry import is_registered, keyed_lambdas, order_names, registered_characteristics
-from ..errors import did_you_mean
+from ..core.registry import keyed_lambdas, order_names
+from ..files import write_atomic
+from ..spec.sidecar import Thresholds, load_sidecar, sidecar_path
 from ._base import HistoryError
 from .records import format_utc
 
@@ -44,9 +42,6 @@ __all__ = [
     "sidecar_path",
     "write_sidecar",
 ]
-
-#: Signal path → characteristic name → minimum λ.
-Thresholds = dict[str, dict[str, float]]
 
 DEFAULT_MARGIN = 0.01
 # Thresholds are stored with four decimals, rounded down so that a proposed threshold never
@@ -147,90 +142,6 @@ def _achieved(lambdas: Any, name: str) -> float | None:
         return None
 
 
-def sidecar_path(spec_path: Path | str) -> Path:
-    """``x.hevval.yaml`` → ``x.hevval.thresholds.yaml`` (also for ``.yml``), beside the spec.
-
-    The name does not match the ``*.hevval.yaml`` collection glob, so the sidecar is never
-    collected as a spec.
-    """
-    spec_path = Path(spec_path)
-    stem = spec_path.name
-    for suffix in (".yaml", ".yml"):
-        if stem.endswith(suffix):
-            stem = stem[: -len(suffix)]
-            break
-    return spec_path.with_name(f"{stem}.thresholds.yaml")
-
-
-def load_sidecar(spec_path: Path | str) -> Thresholds:
-    """Read the threshold sidecar of ``spec_path``; ``{}`` when there is none."""
-    path = sidecar_path(spec_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        return {}
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HistoryError(
-            f"cannot read the threshold sidecar: {exc}",
-            file=str(path),
-            hint="fix its permissions or delete it",
-        ) from None
-    hint = "fix or delete the file; regenerate it with --hevval-ratchet"
-    try:
-        document = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise HistoryError(
-            f"not valid YAML: {getattr(exc, 'problem', None) or exc}",
-            file=str(path),
-            line=None if mark is None else mark.line + 1,
-            hint=hint,
-        ) from None
-    if document is None:
-        return {}
-    if not isinstance(document, dict):
-        raise HistoryError(
-            f"expected a mapping of signal path to thresholds (got {type(document).__name__})",
-            file=str(path),
-            hint=hint,
-        )
-    result: Thresholds = {}
-    for signal, values in document.items():
-        if not isinstance(signal, str) or not isinstance(values, dict):
-            raise HistoryError(
-                "expected 'signal/path: {characteristic: value}'",
-                file=str(path),
-                key=str(signal),
-                hint=hint,
-            )
-        entry: dict[str, float] = {}
-        for name, value in values.items():
-            key = f"{signal}.{name}"
-            if not isinstance(name, str) or not is_registered(name):
-                known = [c.name for c in registered_characteristics()]
-                suggestion = did_you_mean(str(name), known)
-                raise HistoryError(
-                    f"unknown characteristic {name!r}" + (f"; {suggestion}" if suggestion else ""),
-                    file=str(path),
-                    key=key,
-                    hint="valid: " + ", ".join(known) + f"; {hint}",
-                )
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or not 0.0 <= float(value) <= 1.0
-            ):
-                raise HistoryError(
-                    f"a λ threshold must be a number in [0, 1] (got {value!r})",
-                    file=str(path),
-                    key=key,
-                    hint=hint,
-                )
-            entry[name] = float(value)
-        result[signal] = entry
-    return result
-
-
 def render_sidecar(
     thresholds: Thresholds, *, model_version: str, created_utc: datetime, margin: float
 ) -> str:
@@ -262,22 +173,12 @@ def write_sidecar(
     created_utc: datetime,
     margin: float,
 ) -> Path:
-    """Write the sidecar atomically (temporary file + ``os.replace``); return its path."""
+    """Write the sidecar atomically, with the usual file mode (it is committed); its path."""
     path = sidecar_path(spec_path)
     text = render_sidecar(
         thresholds, model_version=model_version, created_utc=created_utc, margin=margin
     )
-    fd, temp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".part")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(temp)
-        raise
+    write_atomic(path, text)
     return path
 
 

@@ -14,9 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import re
-import tempfile
 import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -24,12 +22,14 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from ..defaults import HISTORY_DIR
+from ..files import fsync_directory, publish, write_temporary
 from ._base import HistoryError
 from .records import migrate_record, parse_utc, validate_record
 
 __all__ = ["DEFAULT_HISTORY_DIR", "HistoryStore", "StoreProblem", "StoredRecord", "slugify"]
 
-DEFAULT_HISTORY_DIR = ".hevval/history"
+DEFAULT_HISTORY_DIR = HISTORY_DIR
 _SLUG_MAX = 40
 _NAME_ATTEMPTS = 20
 
@@ -94,8 +94,8 @@ class HistoryStore:
         try:
             for _ in range(_NAME_ATTEMPTS):
                 final = self.directory / f"{stem}_{uuid.uuid4().hex[:8]}.json"
-                if self._publish(temp, final):
-                    _fsync_directory(self.directory)
+                if publish(temp, final, replace=False):
+                    fsync_directory(self.directory)
                     return final
         except OSError as exc:
             raise _write_error(self.directory, exc) from None
@@ -109,50 +109,13 @@ class HistoryStore:
 
     def _write_temp(self, payload: bytes) -> Path:
         try:
-            fd, name = tempfile.mkstemp(dir=self.directory, prefix=".tmp-", suffix=".part")
+            return write_temporary(self.directory, payload, stem="record")
         except OSError as exc:
             raise HistoryError(
                 f"cannot write to the history folder: {exc.strerror or exc}",
                 file=str(self.directory),
                 hint="choose a writable folder with --hevval-history-dir",
             ) from None
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(payload)
-                handle.flush()
-                os.fsync(handle.fileno())
-        except BaseException as exc:
-            with contextlib.suppress(OSError):
-                os.unlink(name)
-            if isinstance(exc, OSError):
-                raise _write_error(self.directory, exc) from None
-            raise
-        return Path(name)
-
-    @staticmethod
-    def _publish(temp: Path, final: Path) -> bool:
-        """Give ``temp`` the name ``final`` unless that name exists; False when it does."""
-        try:
-            os.link(temp, final)
-            return True
-        except FileExistsError:
-            return False
-        except OSError:
-            pass  # a filesystem without hard links; reserve the name exclusively instead
-        try:
-            fd = os.open(final, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            return False
-        os.close(fd)
-        # The empty placeholder is ours alone; replacing it swaps in the full content at once.
-        try:
-            os.replace(temp, final)
-        except OSError:
-            # Left behind, the empty placeholder would be listed as a problem on every read.
-            with contextlib.suppress(OSError):
-                os.unlink(final)
-            raise
-        return True
 
     # -- reading ---------------------------------------------------------------------------
 
@@ -223,17 +186,3 @@ def _write_error(directory: Path, exc: OSError) -> HistoryError:
         hint="free disk space or choose another folder with --hevval-history-dir; "
         "the records already there are unchanged",
     )
-
-
-def _fsync_directory(directory: Path) -> None:
-    # Makes the new name durable across a power cut on POSIX; Windows cannot open folders.
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)

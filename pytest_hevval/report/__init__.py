@@ -6,7 +6,7 @@ rendered, and scipy only when :func:`figure_data` first runs.
 
 from __future__ import annotations
 
-from .figures import figure_data
+from ..core.figures import figure_data
 from .html import render_html
 from .text import github_annotations, render_json, render_markdown
 from .writer import ReportOptionError, parse_formats, write_reports

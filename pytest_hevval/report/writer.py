@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import secrets
 from collections.abc import Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 from ..errors import HevvalError, did_you_mean
+from ..files import write_atomic
 
 __all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
 
@@ -52,23 +50,6 @@ def parse_formats(value: str) -> set[str]:
     return set(names)
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Readers see the old file or the new one, never half of one.
-
-    The temporary file is opened with mode "x" rather than by :func:`tempfile.mkstemp`, so it
-    gets the usual permissions (umask applied) instead of 0600.
-    """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        with open(tmp, "x", encoding="utf-8", newline="\n") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
 def write_reports(
     spec_results: Sequence[Mapping[str, Any]],
     formats: set[str],
@@ -108,6 +89,6 @@ def write_reports(
 
             text = render_markdown(spec_results)
         path = directory / FILE_NAMES[name]
-        _write_atomic(path, text)
+        write_atomic(path, text)
         written.append(path)
     return written

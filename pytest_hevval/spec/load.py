@@ -26,6 +26,7 @@ from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
 from .model import AlignmentSpec, Interpolation, SignalSpec, SourceSpec, Spec
+from .sidecar import load_sidecar
 from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 
 __all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
@@ -57,6 +58,7 @@ _SOURCE_KEYS = (
     "decimal",
     "group",
     "time_scale",
+    "dbc",
 )
 _MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
 _ALIGN_KEYS = ("rate_hz", "window", "max_lag_s", "offset_s", "offset_from", "max_offset_s", "nan")
@@ -78,7 +80,7 @@ _SIGNAL_KEYS = (
     "sim_offset",
     "children",
 )
-_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf")
+_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf", "can")
 
 T = TypeVar("T")
 
@@ -219,8 +221,6 @@ def load_spec(path: str | Path) -> Spec:
             hint="save it as UTF-8",
         ) from None
     spec = parse_spec_text(text, spec_path, hashlib.sha256(raw).hexdigest())
-    from ..history.ratchet import load_sidecar
-
     # Thresholds tightened by --hevval-ratchet live beside the spec; only stricter ones apply.
     sidecar = load_sidecar(spec_path)
     return dataclasses.replace(spec, ratchet=sidecar) if sidecar else spec
@@ -340,6 +340,19 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         raise context.error(mapping.line, key, "needs a path to the measured data file")
     kind = kinds[0]
     fmt = context.get(mapping, "format", key, context.choice(_FORMATS), None)
+    extra: dict[str, Any] = {}
+    if "dbc" in mapping:
+        if kind != "path":
+            raise context.error(
+                mapping.line_of("dbc"),
+                _join(key, "dbc"),
+                f"a signal database decodes a CAN log file, not a {kind} model",
+                hint="remove `dbc:`",
+            )
+        fmt = _can_format(context, mapping, key, fmt)
+        where = _join(key, "dbc")
+        database = context.text(mapping["dbc"], mapping.line_of("dbc"), where)
+        extra["dbc"] = _resolve(context, base, database, mapping.line_of("dbc"), where)
     options = SourceOptions(
         time=context.get(mapping, "time", key, context.text, None),
         format=fmt,
@@ -348,6 +361,7 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         decimal=context.get(mapping, "decimal", key, context.text, None),
         group=context.get(mapping, "group", key, context.text, None),
         time_scale=context.get(mapping, "time_scale", key, context.positive, 1.0),
+        extra=extra,
     )
     path: str | None = None
     if kind in ("path", "fmu"):
@@ -400,6 +414,18 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         fmu_inputs=fmu_inputs,
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
+    )
+
+
+def _can_format(context: _Context, mapping: LineDict, key: str, fmt: str | None) -> str:
+    """A source with a signal database is a CAN log, MDF4 bus logging included."""
+    if fmt in (None, "can", "mdf"):
+        return "can"
+    raise context.error(
+        mapping.line_of("dbc"),
+        _join(key, "dbc"),
+        f"a signal database decodes CAN logs, not {fmt} files",
+        hint="remove `dbc:`, or set `format: can` for a BLF, ASC, candump or MDF4 bus log",
     )
 
 

@@ -1,0 +1,372 @@
+"""Where and when the model is wrong: λ1–λ6 over time windows and over operating regions.
+
+Pure numpy. The whole-record characteristics are ratios of a few sums (Σe, Σ|e|, Σe², Σref,
+Σsim, Σref², Σsim², Σref·sim, the count of matching derivative signs); the same sums taken over
+a group of samples — a time window, a segment where a condition holds, or the cell of an
+operating-region grid — give that group's characteristics. So one pass over the record yields
+every group at once, and a group that covers the whole record gives the global values exactly
+(``tests/test_local.py`` checks both).
+
+Conventions, chosen so that groups are comparable with each other and with the whole record:
+
+* λ3–λ6 of every group are normalised by the **whole record's** reference range R. A window in
+  which the reference barely moves would otherwise blow a tiny error up to a failing λ.
+* λ1 is the zero-lag correlation of the group's samples in the spec's form (``xcorr`` or
+  ``pearson``); the lag itself is a whole-record property and is not searched per group.
+* λ2 uses the derivative signs of the whole record (central differences), counted per group.
+* A group with fewer than :data:`MIN_GROUP_SAMPLES` samples gets NaN characteristics: too few
+  samples to say anything.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import DegenerateSignalError
+
+__all__ = [
+    "HOT_FACTOR",
+    "LOCAL_CHARACTERISTICS",
+    "MIN_GROUP_SAMPLES",
+    "PHASES",
+    "Concentration",
+    "GroupSums",
+    "RegionGrid",
+    "concentration",
+    "derivative_signs",
+    "driving_phases",
+    "fixed_windows",
+    "group_lambdas",
+    "region_grid",
+    "region_sums",
+    "runs",
+    "segment_sums",
+]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+#: The characteristics that have a meaning over part of a record, in paper order.
+LOCAL_CHARACTERISTICS: tuple[str, ...] = (
+    "lag_correlation",
+    "derivative_match",
+    "mae",
+    "rms",
+    "anomaly",
+    "error_std",
+)
+#: Fewer samples than this in a window or cell: its characteristics are NaN (not judged).
+MIN_GROUP_SAMPLES = 3
+#: A window whose mean squared error exceeds this many times the record's is "hot": the
+#: error concentrates there.
+HOT_FACTOR = 2.0
+
+CorrelationKind = Literal["xcorr", "pearson"]
+
+
+@dataclass(frozen=True)
+class GroupSums:
+    """The sums behind λ1–λ6, one entry per group (window, segment or region cell)."""
+
+    n: IntArray
+    error_sum: FloatArray
+    abs_error: FloatArray
+    sq_error: FloatArray
+    #: Σ (e − ē_group)², kept apart from Σe² so that a large bias does not cancel the spread.
+    error_m2: FloatArray
+    ref_sum: FloatArray
+    sim_sum: FloatArray
+    ref_sq: FloatArray
+    sim_sq: FloatArray
+    cross: FloatArray
+    sign_matches: IntArray
+
+
+def derivative_signs(y: FloatArray) -> npt.NDArray[np.int8]:
+    """sign(y[i+1] − y[i−1]) per sample, 0 at both ends: the core's λ2 convention."""
+    out = np.zeros(y.shape[0], dtype=np.int8)
+    if y.shape[0] > 2:
+        out[1:-1] = np.sign(y[2:] - y[:-2]).astype(np.int8)
+    return out
+
+
+def _check_pair(ref: FloatArray, sim: FloatArray) -> tuple[FloatArray, FloatArray]:
+    r = np.asarray(ref, dtype=np.float64)
+    s = np.asarray(sim, dtype=np.float64)
+    if r.ndim != 1 or r.shape != s.shape:
+        raise DegenerateSignalError(
+            f"reference and simulated must be 1-D and of one length (got {r.shape}, {s.shape})"
+        )
+    return r, s
+
+
+def segment_sums(ref: FloatArray, sim: FloatArray, starts: IntArray, stops: IntArray) -> GroupSums:
+    """Sums over the contiguous sample ranges [starts[k], stops[k]) (non-empty, in order)."""
+    r, s = _check_pair(ref, sim)
+    starts = np.asarray(starts, dtype=np.int64)
+    stops = np.asarray(stops, dtype=np.int64)
+    labels = np.full(r.shape[0], -1, dtype=np.int64)
+    for k, (a, b) in enumerate(zip(starts.tolist(), stops.tolist(), strict=True)):
+        labels[a:b] = k
+    return _group_sums(r, s, labels, starts.shape[0])
+
+
+def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> GroupSums:
+    """Sums per label in [0, groups); samples labelled −1 belong to no group."""
+    keep = labels >= 0
+    if not keep.all():
+        signs_match = derivative_signs(r)[keep] == derivative_signs(s)[keep]
+        r, s, labels = r[keep], s[keep], labels[keep]
+    else:
+        signs_match = derivative_signs(r) == derivative_signs(s)
+    e = r - s
+
+    def total(weights: FloatArray | None) -> FloatArray:
+        return np.bincount(labels, weights=weights, minlength=groups).astype(np.float64)
+
+    n = np.bincount(labels, minlength=groups).astype(np.int64)
+    error_sum = total(e)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(n > 0, error_sum / np.maximum(n, 1), 0.0)
+    centred = e - mean[labels]
+    return GroupSums(
+        n=n,
+        error_sum=error_sum,
+        abs_error=total(np.abs(e)),
+        sq_error=total(e * e),
+        error_m2=total(centred * centred),
+        ref_sum=total(r),
+        sim_sum=total(s),
+        ref_sq=total(r * r),
+        sim_sq=total(s * s),
+        cross=total(r * s),
+        sign_matches=np.bincount(labels, weights=signs_match, minlength=groups).astype(np.int64),
+    )
+
+
+def _coefficient(cross: FloatArray, power_a: FloatArray, power_b: FloatArray) -> FloatArray:
+    """The core's λ1 coefficient, elementwise: 1 for two powerless groups, 0 for one."""
+    tiny = 1e-300
+    a_empty = power_a <= tiny
+    b_empty = power_b <= tiny
+    with np.errstate(invalid="ignore", divide="ignore"):
+        value = (
+            cross
+            / np.sqrt(np.where(a_empty, 1.0, power_a))
+            / np.sqrt(np.where(b_empty, 1.0, power_b))
+        )
+    value = np.clip(value, 0.0, 1.0)
+    value = np.where(a_empty | b_empty, 0.0, value)
+    return np.where(a_empty & b_empty, 1.0, value)
+
+
+def group_lambdas(
+    sums: GroupSums, reference_range: float, correlation: CorrelationKind = "xcorr"
+) -> dict[str, FloatArray]:
+    """λ1–λ6 per group, keyed by characteristic name; NaN for groups too small to judge."""
+    if not (math.isfinite(reference_range) and reference_range > 0):
+        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
+    n = sums.n.astype(np.float64)
+    small = sums.n < MIN_GROUP_SAMPLES
+    safe_n = np.where(small, 1.0, n)
+    mae = sums.abs_error / safe_n
+    rms = np.maximum(np.sqrt(sums.sq_error / safe_n), mae)
+    error_std = np.sqrt(sums.error_m2 / np.where(small, 1.0, n - 1.0))
+    if correlation == "pearson":
+        cov = sums.cross - sums.ref_sum * sums.sim_sum / safe_n
+        var_r = sums.ref_sq - sums.ref_sum**2 / safe_n
+        var_s = sums.sim_sq - sums.sim_sum**2 / safe_n
+        lag_correlation = _coefficient(cov, var_r, var_s)
+    else:
+        lag_correlation = _coefficient(sums.cross, sums.ref_sq, sums.sim_sq)
+
+    def normalised(error: FloatArray) -> FloatArray:
+        return np.clip(1.0 - error / reference_range, 0.0, 1.0)
+
+    values = {
+        "lag_correlation": lag_correlation,
+        "derivative_match": sums.sign_matches / safe_n,
+        "mae": normalised(mae),
+        "rms": normalised(rms),
+        "anomaly": normalised(rms - mae),
+        "error_std": normalised(error_std),
+    }
+    return {name: np.where(small, np.nan, value) for name, value in values.items()}
+
+
+# -- how a record is cut into groups -------------------------------------------------------
+
+
+def fixed_windows(n: int, dt: float, window_s: float) -> tuple[IntArray, IntArray]:
+    """Consecutive windows of ``window_s`` seconds; the last one holds what is left over."""
+    if not (math.isfinite(window_s) and window_s > 0):
+        raise DegenerateSignalError(f"window_s must be a positive number (got {window_s!r})")
+    size = max(1, round(window_s / dt))
+    starts = np.arange(0, n, size, dtype=np.int64)
+    stops = np.minimum(starts + size, n)
+    return starts, stops
+
+
+def runs(mask: npt.NDArray[np.bool_], min_samples: int = 1) -> tuple[IntArray, IntArray]:
+    """Start and stop indices of the runs of True in ``mask`` at least ``min_samples`` long."""
+    m = np.asarray(mask, dtype=bool)
+    edges = np.diff(np.concatenate(([0], m.view(np.int8), [0])))
+    starts = np.flatnonzero(edges == 1).astype(np.int64)
+    stops = np.flatnonzero(edges == -1).astype(np.int64)
+    long_enough = (stops - starts) >= min_samples
+    return starts[long_enough], stops[long_enough]
+
+
+#: Driving phases, in the order of :func:`driving_phases`' labels.
+PHASES: tuple[str, ...] = ("stop", "accelerate", "cruise", "brake")
+#: Below this speed the vehicle stands still.
+STOP_BELOW_KMH = 2.0
+#: Acceleration beyond ± this is accelerating or braking; between, cruising.
+ACCELERATION_MS2 = 0.15
+#: Speed is smoothed over this long before it is differentiated (logger noise).
+PHASE_SMOOTHING_S = 1.0
+#: A phase shorter than this is absorbed into the phase before it.
+MIN_PHASE_S = 2.0
+
+
+def driving_phases(speed_kmh: FloatArray, dt: float) -> npt.NDArray[np.int8]:
+    """Label every sample stop (0), accelerate (1), cruise (2) or brake (3) from the speed."""
+    v = np.asarray(speed_kmh, dtype=np.float64)
+    width = max(1, round(PHASE_SMOOTHING_S / dt))
+    kernel = np.ones(width) / width
+    smooth = np.convolve(np.pad(v, width, mode="edge"), kernel, mode="same")[width:-width]
+    acceleration = np.gradient(smooth / 3.6, dt) if v.shape[0] > 1 else np.zeros_like(v)
+    labels = np.full(v.shape[0], 2, dtype=np.int8)
+    labels[acceleration > ACCELERATION_MS2] = 1
+    labels[acceleration < -ACCELERATION_MS2] = 3
+    labels[smooth < STOP_BELOW_KMH] = 0
+    # Absorb short phases into the one before, so a phase is a manoeuvre, not a wobble.
+    shortest = max(1, round(MIN_PHASE_S / dt))
+    change = np.flatnonzero(np.diff(labels)) + 1
+    bounds = np.concatenate(([0], change, [labels.shape[0]]))
+    for a, b in zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True):
+        if b - a < shortest and a > 0:
+            labels[a:b] = labels[a - 1]
+    return labels
+
+
+# -- where the error concentrates ----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Concentration:
+    """How much of the squared error lies in how little of the time."""
+
+    #: Share of Σe² in the hot windows, and share of the samples they hold.
+    error_share: float
+    time_share: float
+    #: The hot windows merged into contiguous spans, in seconds, worst first.
+    spans_s: tuple[tuple[float, float], ...]
+    #: Number of hot windows.
+    windows: int
+
+    def sentence(self) -> str:
+        if not self.windows:
+            return f"the error is spread out: no window above {HOT_FACTOR:g}× the mean square"
+        spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in self.spans_s[:3])
+        more = f" (+{len(self.spans_s) - 3} more)" if len(self.spans_s) > 3 else ""
+        return (
+            f"{self.error_share:.0%} of the squared error lies in {self.time_share:.0%} of the "
+            f"time, in {self.windows} window{'s' if self.windows != 1 else ''}: {spans}{more}"
+        )
+
+
+def concentration(
+    sums: GroupSums, starts: IntArray, stops: IntArray, dt: float, start_s: float = 0.0
+) -> Concentration:
+    """The windows whose mean squared error is over :data:`HOT_FACTOR` times the record's."""
+    n = sums.n.astype(np.float64)
+    total_sq = float(sums.sq_error.sum())
+    total_n = float(n.sum())
+    if total_sq <= 0.0 or total_n == 0.0:
+        return Concentration(0.0, 0.0, (), 0)
+    density = sums.sq_error / np.maximum(n, 1.0)
+    hot = density > HOT_FACTOR * total_sq / total_n
+    if not hot.any():
+        return Concentration(0.0, 0.0, (), 0)
+    spans: list[tuple[float, float, float]] = []
+    for k in np.flatnonzero(hot).tolist():
+        a = start_s + float(starts[k]) * dt
+        b = start_s + float(stops[k]) * dt
+        if spans and abs(spans[-1][1] - a) < 0.5 * dt:
+            spans[-1] = (spans[-1][0], b, spans[-1][2] + float(sums.sq_error[k]))
+        else:
+            spans.append((a, b, float(sums.sq_error[k])))
+    spans.sort(key=lambda span: -span[2])
+    return Concentration(
+        error_share=float(sums.sq_error[hot].sum()) / total_sq,
+        time_share=float(n[hot].sum()) / total_n,
+        spans_s=tuple((a, b) for a, b, _ in spans),
+        windows=int(hot.sum()),
+    )
+
+
+# -- operating regions ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RegionGrid:
+    """Samples binned by one or two operating variables."""
+
+    edges: tuple[FloatArray, ...]
+    #: Cell of every sample as a flat index into the grid, −1 outside it (or NaN).
+    cell: IntArray
+    #: Samples per cell, in the grid's shape.
+    counts: IntArray
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(e.shape[0] - 1 for e in self.edges)
+
+    def unvisited(self) -> list[tuple[int, ...]]:
+        """Cells of the declared operating space that the measurement never visits."""
+        return [tuple(int(i) for i in index) for index in np.argwhere(self.counts == 0)]
+
+
+def region_grid(values: Sequence[FloatArray], edges: Sequence[FloatArray]) -> RegionGrid:
+    """Bin every sample by one or two variables; bins are [edge_k, edge_k+1), the last closed."""
+    if not 1 <= len(values) == len(edges) <= 2:
+        raise DegenerateSignalError("regions are binned by one or two variables")
+    cell: IntArray | None = None
+    clean_edges = []
+    for x, raw_edges in zip(values, edges, strict=True):
+        e = np.asarray(raw_edges, dtype=np.float64)
+        if e.ndim != 1 or e.shape[0] < 2 or not np.all(np.diff(e) > 0):
+            raise DegenerateSignalError(
+                f"bin edges must be at least two increasing numbers (got {raw_edges!r})"
+            )
+        clean_edges.append(e)
+        v = np.asarray(x, dtype=np.float64)
+        index = np.searchsorted(e, v, side="right") - 1
+        index[v == e[-1]] = e.shape[0] - 2  # the last bin includes its upper edge
+        outside = (index < 0) | (index >= e.shape[0] - 1) | ~np.isfinite(v)
+        index = np.where(outside, -1, index).astype(np.int64)
+        if cell is None:
+            cell = index
+        else:
+            cell = np.where((cell < 0) | (index < 0), -1, cell * (e.shape[0] - 1) + index)
+    assert cell is not None
+    shape = tuple(e.shape[0] - 1 for e in clean_edges)
+    counts = np.bincount(cell[cell >= 0], minlength=int(np.prod(shape))).reshape(shape)
+    return RegionGrid(edges=tuple(clean_edges), cell=cell, counts=counts.astype(np.int64))
+
+
+def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums:
+    """The sums of every cell of ``grid`` (flat, in the grid's C order)."""
+    r, s = _check_pair(ref, sim)
+    if grid.cell.shape[0] != r.shape[0]:
+        raise DegenerateSignalError(
+            f"the region grid has {grid.cell.shape[0]} samples, the signal {r.shape[0]}"
+        )
+    return _group_sums(r, s, grid.cell, int(np.prod(grid.shape)))

@@ -1,0 +1,130 @@
+"""The one pipeline: specs in, evaluations out.
+
+``pytest --hevval`` (one spec per item file, on each xdist worker), ``hevval run``,
+``hevval diagnose`` and the Dask path all score specs through :func:`run_specs`, with the
+settings of one :class:`RunOptions`. So a spec scored from the command line and from pytest
+gives the same result and the same history record, apart from the run's own metadata.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from .data.remote import is_url
+from .engine import DataCache, Evaluation, evaluate_spec
+from .errors import HevvalError
+from .result import SpecResult
+from .spec.model import Spec
+
+__all__ = ["RunOptions", "relative_to", "run_specs"]
+
+Outcome = Evaluation | HevvalError
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How specs are scored; parsed once from pytest's options or the command line."""
+
+    #: The project root: model callables import from here; result paths are relative to it.
+    rootdir: Path
+    #: Keep figure data in the results (the HTML report needs it).
+    figures: bool = False
+    #: Keep the aligned arrays of every signal (diagnosis needs them).
+    keep_arrays: bool = False
+    #: Threads that score one spec's signals; None is the engine's default.
+    workers: int | None = None
+    #: A dask.distributed scheduler address (or "local"): score the specs there.
+    dask: str | None = None
+
+
+def relative_to(rootdir: Path, path: str) -> str:
+    """``path`` relative to ``rootdir`` (URLs and paths on another drive unchanged)."""
+    if is_url(path):
+        return path
+    try:
+        return os.path.relpath(path, rootdir)
+    except ValueError:
+        return path
+
+
+def _relative_result(result: SpecResult, rootdir: Path) -> None:
+    """Results name files relative to the root, so records move between machines."""
+    result.spec = relative_to(rootdir, result.spec)
+    for side in result.data.values():
+        if isinstance(side, dict) and side.get("path"):
+            side["path"] = relative_to(rootdir, str(side["path"]))
+
+
+def run_specs(
+    specs: Sequence[Spec],
+    options: RunOptions,
+    *,
+    cache: DataCache | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[Outcome]:
+    """Score every spec; one outcome per spec, in order.
+
+    An outcome is an :class:`Evaluation` or the :class:`HevvalError` a user can fix (a bad
+    spec or unreadable data), so one bad spec never hides the others' results. ``progress``
+    is called with the number of specs done so far.
+    """
+    if options.dask:
+        outcomes = _on_dask(specs, options, progress)
+    else:
+        shared = cache if cache is not None else DataCache()
+        for spec in specs:
+            shared.declare(spec.reference, spec.reference_columns())
+            shared.declare(spec.model, spec.model_columns())
+        outcomes = []
+        for done, spec in enumerate(specs, start=1):
+            outcomes.append(_evaluate(spec, options, shared))
+            if progress is not None:
+                progress(done)
+    for outcome in outcomes:
+        if isinstance(outcome, Evaluation):
+            _relative_result(outcome.result, options.rootdir)
+    return outcomes
+
+
+def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
+    try:
+        return evaluate_spec(
+            spec,
+            cache=cache,
+            rootdir=options.rootdir,
+            figures=options.figures,
+            keep_arrays=options.keep_arrays,
+            workers=options.workers,
+        )
+    except HevvalError as exc:
+        return exc
+
+
+def evaluate_here(spec: Spec, options: RunOptions) -> Outcome:
+    """Score one spec in this process with a cache of its own (the Dask task body)."""
+    return _evaluate(spec, options, DataCache())
+
+
+def _on_dask(
+    specs: Sequence[Spec], options: RunOptions, progress: Callable[[int], None] | None
+) -> list[Outcome]:
+    from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
+
+    assert options.dask is not None
+    payloads = evaluate_on_dask(
+        [s.path for s in specs],
+        options.dask,
+        rootdir=options.rootdir,
+        figures=options.figures,
+        progress=progress,
+        threads_per_spec=options.workers,
+    )
+    return [
+        error_from_payload(payload)
+        if is_error_payload(payload)
+        else Evaluation(spec, SpecResult.from_dict(payload), None)
+        for spec, payload in zip(specs, payloads, strict=True)
+    ]

@@ -1,0 +1,156 @@
+"""One pipeline, one command line, one way to write a file."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+from pathlib import Path
+
+import pytest
+
+from pytest_hevval import cli
+from pytest_hevval.files import write_atomic
+from pytest_hevval.options import OPTIONS
+from tests.test_plugin import TREE_SPEC, write_data
+
+pytest_plugins = ["pytester"]
+
+# What a history record holds about the run itself rather than about the specs scored.
+RUN_METADATA = ("started_utc", "tool_versions")
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> pytest.Pytester:
+    monkeypatch.delenv("CI", raising=False)
+    monkeypatch.delenv("GITHUB_ACTIONS", raising=False)
+    monkeypatch.delenv("HEVVAL_MODEL_VERSION", raising=False)
+    pytester.makefile(".hevval.yaml", pack=TREE_SPEC)
+    write_data(pytester.path)
+    return pytester
+
+
+def _only_record(folder: Path) -> dict:
+    (path,) = sorted(folder.glob("*.json"))
+    record = json.loads(path.read_text())
+    for key in RUN_METADATA:
+        record.pop(key)
+    return record
+
+
+def test_cli_and_pytest_write_the_same_history_record(project: pytest.Pytester) -> None:
+    """The spec scored by `hevval run` and by `pytest --hevval` gives one and the same record."""
+    project.runpytest(
+        "--hevval", "--hevval-model-version=v1", "--hevval-history-dir=from-pytest"
+    ).assert_outcomes(passed=6)
+    code = cli.main(
+        [
+            "run",
+            "pack.hevval.yaml",
+            "--model-version=v1",
+            "--history-dir=from-cli",
+            "--quiet",
+        ]
+    )
+    assert code == 0
+    from_pytest = _only_record(project.path / "from-pytest")
+    from_cli = _only_record(project.path / "from-cli")
+    assert from_cli == from_pytest
+    # Paths are relative to the project root on both sides, data files included.
+    spec = from_cli["specs"][0]
+    assert spec["spec"] == "pack.hevval.yaml"
+    assert not os.path.isabs(spec["data"]["reference"]["path"])
+
+
+def test_help_lists_every_subcommand(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for command in ("run", "diagnose", "compare", "history"):
+        assert f"    {command}  " in out, out
+
+
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
+    import pytest_hevval
+
+    assert cli.main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"pytest-hevval {pytest_hevval.__version__}"
+
+
+@pytest.mark.parametrize("command", ["run", "diagnose", "compare", "history"])
+def test_options_are_spelled_as_the_pytest_flags(
+    command: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An option a subcommand shares with pytest has the pytest flag's name, minus the prefix."""
+    assert cli.main([command, "--help"]) == 0
+    flags = {word.strip("[],") for word in capsys.readouterr().out.split() if word[:2] == "--"}
+    pytest_names = {o.name for o in OPTIONS if o.name}
+    for flag in flags - {"--help"}:
+        name = flag[2:].split("=")[0]
+        spelled_differently = {f"{n}" for n in pytest_names if n.replace("-", "") == name}
+        assert not spelled_differently - {name}, f"{command} {flag} vs --hevval-{name}"
+    # The two names that differed before are now the pytest ones.
+    if command in ("compare", "history"):
+        assert "--history-dir" in flags
+        assert "--dir" not in flags
+    if command == "compare":
+        assert "--compare-fail" in flags
+
+
+def test_usage_errors_name_the_command(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["history", "--bogus"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("hevval history: error: unrecognized arguments: --bogus")
+    assert "hevval history --help" in err
+    assert cli.main(["frobnicate"]) == 2
+    assert "invalid choice: 'frobnicate'" in capsys.readouterr().err
+
+
+def test_run_refuses_a_bad_worker_count(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["run", "x.hevval.yaml", "--workers", "0"]) == 2
+    assert "must be ≥ 1 (got 0)" in capsys.readouterr().err
+
+
+def _umask() -> int:
+    current = os.umask(0)
+    os.umask(current)
+    return current
+
+
+def test_written_files_get_the_usual_mode_and_no_temporary_stays(tmp_path: Path) -> None:
+    target = tmp_path / "deep" / "x.hevval.thresholds.yaml"
+    assert write_atomic(target, "a: {mae: 0.9}\n")
+    assert target.read_text() == "a: {mae: 0.9}\n"
+    mode = stat.S_IMODE(target.stat().st_mode)
+    assert mode == 0o666 & ~_umask()
+    assert sorted(p.name for p in target.parent.iterdir()) == [target.name]
+
+
+def test_replace_false_leaves_an_existing_file_alone(tmp_path: Path) -> None:
+    target = tmp_path / "record.json"
+    target.write_text("old")
+    assert not write_atomic(target, "new", replace=False)
+    assert target.read_text() == "old"
+    assert write_atomic(target, "new")
+    assert target.read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["record.json"]
+
+
+def test_a_failed_write_keeps_the_old_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    target = tmp_path / "report.json"
+    target.write_text("old")
+
+    def full_disk(*args: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        write_atomic(target, "new")
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.json"]
+
+
+def test_ratchet_sidecar_is_created_with_the_usual_mode(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-ratchet").assert_outcomes(passed=6)
+    sidecar = project.path / "pack.hevval.thresholds.yaml"
+    assert sidecar.exists()
+    assert stat.S_IMODE(sidecar.stat().st_mode) == 0o666 & ~_umask()
