@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -88,7 +89,8 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
     gated = pytester.runpytest(
         "--hevval",
         "--hevval-model-version=b",
-        "--hevval-report=html,json",
+        "--hevval-report=html,json,md",
+        "--junitxml=junit.xml",
         "--hevval-compare",
         *extra,
     )
@@ -107,6 +109,16 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
     assert current["components"]["peak_error"]["peak_gap"] > 0
     assert [f["characteristic"] for f in current["failures"]] == ["peak_error"]
     assert "peak_error" in (report / "report.html").read_text()
+    assert "peak error" in (report / "report.md").read_text()
+    junit = ET.parse(pytester.path / "junit.xml")
+    properties = {
+        (p.get("name"), p.get("value"))
+        for case in junit.iter("testcase")
+        if case.get("name") == "P/I"
+        for p in case.iter("property")
+    }
+    assert ("peak_error", f"{current['lambdas']['peak_error']:.6f}") in properties
+    assert ("lambda3_mae", f"{current['lambdas']['mae']:.6f}") in properties
 
     # Φ weighs the new characteristic with β = 2 (eq. 14 by hand).
     numerator = denominator = 0.0
