@@ -17,7 +17,7 @@ import math
 import re
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from ..errors import CharacteristicError, did_you_mean
@@ -226,9 +226,13 @@ def register_characteristic(characteristic: Characteristic) -> Characteristic:
         if existing is not None:
             if _same_definition(existing, characteristic):
                 return existing
-            what = "a built-in characteristic" if existing.builtin else "already registered"
+            what = (
+                "is a built-in characteristic"
+                if existing.builtin
+                else "is already registered with a different definition"
+            )
             raise CharacteristicError(
-                f"characteristic {name!r} is {what} with a different definition",
+                f"characteristic {name!r} {what}",
                 key=name,
                 hint="choose another name (names are the keys in specs, results and history)",
             )
@@ -248,8 +252,6 @@ def _same_definition(existing: Characteristic, new: Characteristic) -> bool:
 
 
 def _with_order(characteristic: Characteristic, order: int) -> Characteristic:
-    from dataclasses import replace
-
     return replace(characteristic, order=order)
 
 
@@ -278,8 +280,15 @@ def _check_definition(c: Characteristic) -> None:
 
 
 def get_characteristic(name: str) -> Characteristic:
-    """The registered characteristic called ``name``; unknown names get a did-you-mean."""
+    """The registered characteristic called ``name``; unknown names get a did-you-mean.
+
+    A name not registered yet may come from an entry point that nothing has loaded (a script
+    calling ``load_spec`` directly): the entry points are loaded before giving up.
+    """
     found = _registry.get(name)
+    if found is None and not _entry_points_loaded:
+        load_entry_points()
+        found = _registry.get(name)
     if found is None:
         raise CharacteristicError(
             f"unknown characteristic {name!r}",
@@ -290,6 +299,9 @@ def get_characteristic(name: str) -> Characteristic:
 
 
 def is_registered(name: str) -> bool:
+    """Whether ``name`` is registered (loading the entry points first if it is not)."""
+    if name not in _registry and not _entry_points_loaded:
+        load_entry_points()
     return name in _registry
 
 
