@@ -327,3 +327,26 @@ def test_unknown_characteristic_gets_did_you_mean() -> None:
 
     with pytest.raises(CharacteristicError, match="did you mean 'error_std'"):
         get_characteristic("error_sd")
+
+
+def test_compare_reads_stored_schema_1_against_schema_2(tmp_path: Path) -> None:
+    from pytest_hevval.cli import main
+
+    output = tmp_path / "compare.json"
+    code = main(
+        [
+            "compare",
+            str(DATA / "schema1_camry_hwfet.json"),
+            str(DATA / "schema2_camry_hwfet.json"),
+            "--format",
+            "json",
+            "--output",
+            str(output),
+        ]
+    )
+    assert code == 0
+    signals = json.loads(output.read_text())["comparison"]["specs"][0]["signals"]
+    assert [s["path"] for s in signals] == ["FC_cum", "FC_cum/FC_rate", "v"]
+    for signal in signals:
+        assert list(signal["lambdas"]) == list(PAPER_CHARACTERISTICS)
+        assert all(d["delta"] == 0 for d in signal["lambdas"].values())
