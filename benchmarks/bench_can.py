@@ -160,8 +160,8 @@ def _check_decode(record: Any, path: Path, database: Any) -> dict[str, float]:
 
 
 def child(path: str, database_path: str, stages: bool) -> None:
-    from pytest_hevval.data import can as can_reader
-    from pytest_hevval.data.formats import read_record
+    from pytest_hevval.data.readers import can as can_reader
+    from pytest_hevval.data.readers import read_record
     from pytest_hevval.data.record import SourceOptions
 
     options = SourceOptions(extra={"dbc": database_path})
@@ -193,7 +193,7 @@ def compare_text_logs(log: Path, database_path: Path) -> None:
     """Write the log again as ASC and candump with python-can; time one read of each."""
     import can
 
-    from pytest_hevval.data.formats import read_record
+    from pytest_hevval.data.readers import read_record
     from pytest_hevval.data.record import SourceOptions
 
     copies = {".asc": can.ASCWriter, ".log": can.CanutilsLogWriter}

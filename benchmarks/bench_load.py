@@ -30,7 +30,7 @@ def _vm_hwm_kib() -> int:
 
 def child(path: str, columns: int, fmt: str | None) -> None:
     """Read ``columns`` channels of ``path`` once; print one JSON line of figures."""
-    from pytest_hevval.data.formats import read_record
+    from pytest_hevval.data.readers import read_record
     from pytest_hevval.data.record import SourceOptions
 
     options = SourceOptions(time="time", format=fmt)

@@ -50,7 +50,7 @@ def _full_reference(evaluation: Evaluation) -> Record:
     assert evaluation.aligned is not None
     record = evaluation.aligned.reference
     if spec.reference.kind == "file" and spec.reference.path:
-        from .data.formats import read_record
+        from .data.readers import read_record
 
         # If the whole file cannot be read, diagnose with the channels already read.
         with contextlib.suppress(DataError):

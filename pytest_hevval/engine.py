@@ -40,7 +40,7 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
-    from .data.formats import read_record
+    from .data.readers import read_record
 
     return read_record
 

@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 can = pytest.importorskip("can")
 cantools = pytest.importorskip("cantools")
 
-from pytest_hevval.data.can import SignalLayout, decode_signal  # noqa: E402
-from pytest_hevval.data.formats import detect_format, read_record  # noqa: E402
+from pytest_hevval.data.readers import detect_format, read_record  # noqa: E402
+from pytest_hevval.data.readers.can import SignalLayout, decode_signal  # noqa: E402
 from pytest_hevval.data.record import SourceOptions  # noqa: E402
 from pytest_hevval.errors import DataError, SpecError  # noqa: E402
 from pytest_hevval.spec.load import parse_spec_text  # noqa: E402

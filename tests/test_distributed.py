@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pytest_hevval.data.formats import read_record
+from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import SourceOptions
 from pytest_hevval.data.remote import is_url, local_copy, parquet_source
 from pytest_hevval.distributed import (

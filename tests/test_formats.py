@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pytest_hevval.data.formats import FORMATS, detect_format, read_record
+from pytest_hevval.data.readers import FORMATS, detect_format, read_record
 from pytest_hevval.data.record import SourceOptions
 from pytest_hevval.errors import DataError, HevvalError, MissingExtraError
 
@@ -283,9 +283,9 @@ def test_parquet_read_a_few_columns_at_a_time(
     # order asked, the time column included when a spec asks for it as a signal.
     import pyarrow as pa
 
-    from pytest_hevval.data import formats
+    from pytest_hevval.data.readers import parquet
 
-    monkeypatch.setattr(formats, "_PARQUET_BATCH_BYTES", batch_bytes)
+    monkeypatch.setattr(parquet, "_PARQUET_BATCH_BYTES", batch_bytes)
     path = _write_parquet(tmp_path / "run.parquet", n=40)
     pool_before = pa.default_memory_pool().backend_name
     record = read_record(path, ["soc", "time", "gear", "speed", "flag"], OPTS)
@@ -561,7 +561,7 @@ def _select_all(path: str) -> dict[str, tuple[np.ndarray, np.ndarray, str]]:
 def _mdf_plans(path: str) -> list[object]:
     from asammdf import MDF
 
-    from pytest_hevval.data.formats import _plain_mdf_plan
+    from pytest_hevval.data.readers.mdf import _plain_mdf_plan
 
     with MDF(path) as mdf:
         return [
@@ -583,7 +583,7 @@ def test_mdf_records_streamed_equal_asammdf_select(
     # the result must be asammdf's own, value for value, dtype for dtype.
     from asammdf import MDF, Signal
 
-    from pytest_hevval.data import formats
+    from pytest_hevval.data.readers import mdf as formats
 
     monkeypatch.setattr(formats, "_MDF_STREAM_BYTES", stream_bytes)
     t = np.arange(0, 30, 0.01)
@@ -647,7 +647,7 @@ def test_mdf_groups_that_are_not_plain_go_through_asammdf(tmp_path: Path) -> Non
 def test_mdf_data_block_cut_short_is_a_data_error(tmp_path: Path) -> None:
     from asammdf import MDF, Signal
 
-    from pytest_hevval.data import formats
+    from pytest_hevval.data.readers import mdf as formats
 
     t = np.arange(0, 30, 0.01)
     path = tmp_path / "log.mf4"

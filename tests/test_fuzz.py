@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
-from pytest_hevval.data.formats import read_record
+from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import Record, SourceOptions
 from pytest_hevval.errors import DataError, ExpressionError, SpecError
 from pytest_hevval.spec.expressions import FUNCTIONS, parse_signal
@@ -772,7 +772,7 @@ CRASH_SEED = os.environ.get("HEVVAL_CRASH_SEED", "20240501")
 HUNTER = """
 import json, random, re, resource, signal, sys, warnings
 from pathlib import Path
-from pytest_hevval.data.formats import read_record
+from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import SourceOptions
 from pytest_hevval.errors import DataError
 

@@ -161,7 +161,7 @@ def read_url(
     fmt: str,
     reader: Reader,
 ) -> Record:
-    """What :func:`~pytest_hevval.data.formats.read_record` does for a URL.
+    """What :func:`~pytest_hevval.data.readers.read_record` does for a URL.
 
     Streamed formats get the URL; others a local copy. Either way, errors and the record name
     the URL, never a temporary file.

@@ -58,6 +58,7 @@ _SOURCE_KEYS = (
     "decimal",
     "group",
     "time_scale",
+    "check_time_unit",
     "dbc",
 )
 _MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
@@ -80,7 +81,6 @@ _SIGNAL_KEYS = (
     "sim_offset",
     "children",
 )
-_FORMATS = ("csv", "tsv", "parquet", "mat", "hdf5", "mdf", "can")
 
 T = TypeVar("T")
 
@@ -171,6 +171,11 @@ class _Context:
         if not 0.0 <= number <= 1.0:
             raise self.error(line, key, "must lie between 0 and 1", got=value)
         return number
+
+    def flag(self, value: Any, line: int, key: str) -> bool:
+        if not isinstance(value, bool):
+            raise self.error(line, key, "must be true or false", got=value)
+        return value
 
     def choice(self, options: tuple[str, ...]) -> Callable[[Any, int, str], str]:
         def convert(value: Any, line: int, key: str) -> str:
@@ -322,6 +327,13 @@ def _default_name(path: Path) -> str:
     return name
 
 
+def _formats() -> tuple[str, ...]:
+    """Every format `format:` accepts: each registered reader and its usual spellings."""
+    from ..data.readers import format_names
+
+    return format_names()
+
+
 def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> SourceSpec:
     if isinstance(value, str):
         # Shorthand: `reference: data/trip.csv`.
@@ -339,8 +351,13 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
     if key == "reference" and not kinds:
         raise context.error(mapping.line, key, "needs a path to the measured data file")
     kind = kinds[0]
-    fmt = context.get(mapping, "format", key, context.choice(_FORMATS), None)
+    fmt = context.get(mapping, "format", key, context.choice(_formats()), None)
     extra: dict[str, Any] = {}
+    if "check_time_unit" in mapping:
+        where = _join(key, "check_time_unit")
+        extra["check_time_unit"] = context.flag(
+            mapping["check_time_unit"], mapping.line_of("check_time_unit"), where
+        )
     if "dbc" in mapping:
         if kind != "path":
             raise context.error(

@@ -25,9 +25,10 @@ from typing import IO, Any
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import DataError, did_you_mean
-from .formats import _corrupt, _import, _open_mdf
-from .record import Channel, Record, SourceOptions
+from ...errors import DataError, did_you_mean
+from ..record import Channel, Record, SourceOptions
+from ._common import _corrupt, _import
+from .mdf import _open_mdf
 
 __all__ = ["CAN_EXTENSIONS", "DATABASE_KEY", "SignalLayout", "decode_signal", "read_can"]
 

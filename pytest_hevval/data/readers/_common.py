@@ -1,0 +1,300 @@
+"""Checks and building blocks every reader shares: the time base, numeric columns, errors."""
+
+from __future__ import annotations
+
+import importlib
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from types import ModuleType
+from typing import IO, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ...errors import DataError, MissingExtraError, did_you_mean
+from ..record import Channel, Record, SourceOptions, missing_column
+
+FloatArray = npt.NDArray[np.float64]
+
+
+ValueArray = npt.NDArray[np.floating]
+
+
+# Names that mark the time column when `time:` is not given (compared after dropping a
+# bracketed unit and lower-casing).
+_TIME_NAMES = ("time", "t", "timestamp", "timestamps", "zeit", "time_s", "seconds", "sec")
+
+
+_ONE_DAY = 86400.0
+
+
+def _import(module: str, feature: str, extra: str) -> ModuleType:
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise MissingExtraError.for_extra(feature, extra, module.split(".")[0]) from None
+
+
+def _check_time(
+    source: str,
+    column: str,
+    raw: npt.NDArray[Any],
+    options: SourceOptions,
+    *,
+    first_line: int | None = None,
+) -> FloatArray:
+    """Return ``raw`` as float64 seconds, or raise if it is not a usable time base.
+
+    ``first_line`` is the file line of index 0 (text formats), so errors can point at a line.
+    """
+
+    def line(index: int) -> int | None:
+        return None if first_line is None else first_line + index
+
+    time = np.asarray(raw, dtype=np.float64)
+    if time.ndim != 1:
+        raise DataError(
+            f"the time column has shape {time.shape}, expected one dimension",
+            file=source,
+            column=column,
+            hint="store time as a 1-D array",
+        )
+    bad = np.flatnonzero(~np.isfinite(time))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(
+            f"time is missing or not finite at index {i} (value {time[i]})",
+            file=source,
+            line=line(i),
+            column=column,
+            hint="remove that row or fill in its time",
+        )
+    step = np.diff(time)
+    bad = np.flatnonzero(step <= 0)
+    if bad.size:
+        i = int(bad[0])
+        if step[i] == 0:
+            problem = f"duplicate timestamp t={time[i]:g} at index {i} and {i + 1}"
+        else:
+            problem = (
+                f"time is not increasing: t={time[i + 1]:g} at index {i + 1} "
+                f"follows t={time[i]:g} at index {i}"
+            )
+        raise DataError(
+            problem,
+            file=source,
+            line=line(i + 1),
+            column=column,
+            hint="sort the data by time and drop repeated rows",
+        )
+    if options.time_scale == 1.0 and options.extra.get("check_time_unit", True):
+        _check_time_unit(source, column, time)
+    if options.time_scale != 1.0:
+        time = time * float(options.time_scale)
+    return time
+
+
+def _check_time_unit(source: str, column: str, time: FloatArray) -> None:
+    """Reject a time column that is evidently milliseconds read as seconds.
+
+    Whole-number times whose median step is at least 1 and whose span exceeds a day are what
+    a logger writing integer milliseconds produces; a vehicle test in seconds at that
+    resolution would have to last over a day, which the spec can still allow explicitly.
+    """
+    if time.size < 3:
+        return
+    span = float(time[-1] - time[0])
+    median_step = float(np.median(np.diff(time)))
+    if span <= _ONE_DAY or median_step < 1.0 or not np.all(time == np.round(time)):
+        return
+    raise DataError(
+        f"time looks like milliseconds, not seconds: whole numbers with a median step of "
+        f"{median_step:g} and a span of {span:g} s ({span / _ONE_DAY:.1f} days)",
+        file=source,
+        column=column,
+        hint="set `time_scale: 0.001` (or `check_time_unit: false` if the data really are seconds)",
+    )
+
+
+def _as_values(
+    source: str, column: str, raw: npt.NDArray[Any], *, line_of: int | None = None
+) -> ValueArray:
+    """Return channel values: float32 stays float32, other numbers become float64."""
+    arr = np.asarray(raw)
+    if arr.dtype == np.float32 or arr.dtype == np.float64:
+        return arr
+    if arr.dtype.kind in "biuf":
+        return arr.astype(np.float64)
+    raise _not_numbers(source, column, _kind_name(arr.dtype), line=line_of)
+
+
+def _not_numbers(
+    source: str, column: str, holds: str, *, line: int | None = None, noun: str = "column"
+) -> DataError:
+    return DataError(
+        f"holds {holds}, not numbers",
+        file=source,
+        line=line,
+        column=column,
+        hint=f"choose a numeric {noun}",
+    )
+
+
+def _kind_name(dtype: np.dtype[Any]) -> str:
+    return {
+        "U": "text",
+        "S": "bytes",
+        "O": "objects (text or mixed)",
+        "M": "dates",
+        "m": "durations",
+        "V": "records",
+        "c": "complex numbers",
+    }.get(dtype.kind, f"values of type {dtype}")
+
+
+def _is_numeric_dtype(dtype: np.dtype[Any]) -> bool:
+    return dtype.kind in "biuf"
+
+
+def _pick_time(
+    source: str,
+    names: Sequence[str],
+    options: SourceOptions,
+    fallback: Sequence[str] | None = None,
+) -> str:
+    """The time column: ``options.time`` when given, else a time-like name, else the first.
+
+    ``fallback`` narrows "the first" to columns that can be a time base at all.
+    """
+    if options.time is not None:
+        if options.time in names:
+            return options.time
+        suggestion = did_you_mean(options.time, names)
+        raise DataError(
+            "no time column with this name",
+            file=source,
+            column=options.time,
+            hint=(suggestion + " " if suggestion else "")
+            + "set `time:` to the name of the time column",
+        )
+    for name in names:
+        bare = re.sub(r"\s*[\[(].*$", "", name).strip().lower()
+        if bare in _TIME_NAMES or bare.startswith("time"):
+            return name
+    candidates = list(fallback) if fallback else list(names)
+    if not candidates:
+        raise DataError("the file has no columns", file=source, hint="check the file's content")
+    return candidates[0]
+
+
+def _vector_plan(
+    source: str,
+    lengths: Mapping[str, int],
+    numeric: Sequence[str],
+    columns: Iterable[str] | None,
+    options: SourceOptions,
+) -> tuple[str, list[str], list[str]]:
+    """Time column, channels to read and numeric channels for a file of named vectors.
+
+    Such files (MAT, HDF5) also hold scalars and vectors of other lengths (parameters,
+    other rates); only numeric vectors as long as the time vector count as its channels.
+    """
+    names = list(lengths)
+    series = [n for n in numeric if lengths[n] >= 2]
+    time_name = _pick_time(source, names, options, fallback=series)
+    same = [n for n in numeric if lengths[n] == lengths[time_name] and n != time_name]
+    return time_name, _channel_list(source, columns, names, same), same
+
+
+def _as_list(columns: Iterable[str] | None) -> list[str] | None:
+    return None if columns is None else list(dict.fromkeys(columns))
+
+
+def _channel_list(
+    source: str,
+    wanted: Iterable[str] | None,
+    available: Sequence[str],
+    numeric: Sequence[str],
+) -> list[str]:
+    """The channels to read: ``wanted`` (checked against ``available``) or all numeric ones."""
+    if wanted is None:
+        return list(numeric)
+    names = list(dict.fromkeys(wanted))
+    for name in names:
+        if name not in available:
+            raise missing_column(source, name, available)
+    return names
+
+
+def _unit_from_name(name: str) -> str | None:
+    """``'Velocity [km/h]'`` → ``'km/h'``: a unit written in brackets at the end of a header."""
+    match = re.search(r"\[([^\[\]]+)\]\s*$", name)
+    return match.group(1).strip() if match else None
+
+
+def _table_record(
+    source: str,
+    time_name: str,
+    time: FloatArray,
+    values: Mapping[str, ValueArray],
+    *,
+    available: Sequence[str],
+    numeric: Sequence[str],
+    units: Mapping[str, str | None] | None = None,
+    meta: dict[str, Any] | None = None,
+) -> Record:
+    """A record whose channels all share one time array."""
+    units = units or {}
+    channels = {}
+    for name, vals in values.items():
+        if vals.shape[0] != time.shape[0]:
+            raise DataError(
+                f"has {vals.shape[0]} samples but the time column {time_name!r} has "
+                f"{time.shape[0]}",
+                file=source,
+                column=name,
+                hint="channels of a table must share its time column; store channels with "
+                "other rates in a group of their own",
+            )
+        channels[name] = Channel(time=time, values=vals, unit=units.get(name))
+    full_meta = {"time_column": time_name}
+    full_meta.update(meta or {})
+    return Record(
+        source=source,
+        channels=channels,
+        available=tuple(available),
+        numeric=tuple(n for n in numeric if n != time_name),
+        meta=full_meta,
+    )
+
+
+def _no_rows(source: str) -> DataError:
+    return DataError(
+        "the file has a header but no data rows",
+        file=source,
+        hint="check that the export finished",
+    )
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    if isinstance(exc, LookupError) and text:
+        # A bare "0" or "'cn'" says nothing without the kind of lookup that failed.
+        return f"{type(exc).__name__}: {text[0]}"
+    return text[0] if text else type(exc).__name__
+
+
+def _corrupt(path: str, kind: str, exc: BaseException) -> DataError:
+    return DataError(
+        f"cannot read this {kind} file (file truncated or corrupt?)",
+        file=path,
+        hint=f"write the file again; the reader said: {_first_line(exc)}",
+    )
+
+
+_SECONDS_PER = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+
+
+def _read_at(stream: IO[bytes], position: int, count: int) -> bytes:
+    stream.seek(position)
+    return bytes(stream.read(count))
