@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-from .errors import DataError, ExpressionError, HevvalError, SpecError
+from .errors import CharacteristicError, DataError, ExpressionError, HevvalError, SpecError
 
 if TYPE_CHECKING:
     from .core import (
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
         score_tree,
         signal_characteristics,
     )
+    from .core.registry import Characteristic, CharacteristicValue, register_characteristic
 
 __version__ = "0.1.0"
 
@@ -44,10 +45,16 @@ _LAZY: dict[str, str] = {
     "normalised_error": ".core",
     "score_tree": ".core",
     "signal_characteristics": ".core",
+    "Characteristic": ".core.registry",
+    "CharacteristicValue": ".core.registry",
+    "register_characteristic": ".core.registry",
 }
 
 __all__ = [
     "CHARACTERISTICS",
+    "Characteristic",
+    "CharacteristicError",
+    "CharacteristicValue",
     "DataError",
     "ExpressionError",
     "HevvalError",
@@ -60,6 +67,7 @@ __all__ = [
     "error_origins",
     "global_metric",
     "normalised_error",
+    "register_characteristic",
     "score_tree",
     "signal_characteristics",
 ]

@@ -294,6 +294,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # --help and --version print and exit
         return exc.code if isinstance(exc.code, int) else EXIT_OK
     try:
+        from .core.registry import load_entry_points
+
+        load_entry_points()
         return _dispatch(args)
     except HevvalError as exc:
         print(f"hevval {args.command}: error: {exc}", file=sys.stderr)

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .core.diagnosis import Candidate, diagnose_residual
+from .core.registry import FUSED_CHARACTERISTICS
 from .data.record import Record
 from .engine import Evaluation
 from .errors import DataError, HevvalError
@@ -167,7 +168,7 @@ def diagnose_origin(evaluation: Evaluation, path: str) -> dict[str, Any]:
     if node.children:
         weakest = min(
             (result.signal(child) for child in node.children),
-            key=lambda s: sum(s.lambdas[:6]),
+            key=lambda s: sum(s.lambdas[name] for name in FUSED_CHARACTERISTICS),
         )
         below = diagnose_signal(evaluation, weakest.path)
         if _strongest_finding(below) > _strongest_finding(found):

@@ -113,10 +113,13 @@ def evaluate_spec_file(
     Returns ``SpecResult.to_dict()`` or, for an error the user can fix, :func:`error_payload`.
     Anything else (a bug) propagates, so that the client shows its traceback.
     """
+    from .core.registry import load_entry_points
     from .run import RunOptions, evaluate_here
     from .spec.load import load_spec
 
     try:
+        # A Dask worker is its own process: it learns registered characteristics here.
+        load_entry_points()
         with _PARSE_LOCK:
             spec = load_spec(spec_path)
     except HevvalError as exc:

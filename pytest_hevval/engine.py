@@ -18,11 +18,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.characteristics import CHARACTERISTICS, SignalCharacteristics, signal_characteristics
+from .core.characteristics import SignalCharacteristics, signal_characteristics
+from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
 from .data.align import AlignedData, align_records
 from .data.record import Record, SourceOptions
-from .errors import DataError, DegenerateSignalError, ExpressionError, HevvalError
+from .errors import (
+    CharacteristicError,
+    DataError,
+    DegenerateSignalError,
+    ExpressionError,
+    HevvalError,
+)
 from .result import Failure, SignalResult, SpecResult
 from .spec.expressions import Expression
 from .spec.model import SignalSpec, SourceSpec, Spec
@@ -281,6 +288,10 @@ def evaluate_spec(
         raise exc.with_context(file=str(spec.path)) from None
 
 
+Signature = tuple[Any, ...]
+NodePath = tuple[str, ...]
+
+
 def _evaluate(
     spec: Spec,
     cache: DataCache,
@@ -292,15 +303,61 @@ def _evaluate(
     folders = [spec.path.parent] + ([rootdir] if rootdir else [])
     reference = cache.read(spec.reference, spec.reference_columns())
     model_record, model_info = _load_model(spec, reference, cache, folders)
-
     nodes = list(spec.walk())
+    aligned = _align(spec, nodes, reference, model_record)
+    unique, values = _signal_arrays(nodes, aligned, reference)
+    dt = aligned.grid.dt
+    fused = _fused_characteristics(spec, unique, values, dt, workers)
+    registered = _registered_characteristics(spec, unique, values, dt)
+    node_specs = {path: node for _, path, node in nodes}
+    roots = _score_trees(spec, node_specs, fused, registered)
+    failures = _gate(spec, roots, node_specs)
+    signals: list[SignalResult] = []
+    arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
+    characteristics: dict[str, SignalCharacteristics] = {}
+    for scored_node in iter_nodes(roots):
+        node = node_specs[scored_node.path]
+        signature = _signature(node)
+        chars = fused[signature]
+        ref, sim = values[signature]
+        signals.append(
+            _signal_result(
+                spec,
+                node,
+                scored_node,
+                chars,
+                {name: parts for name, (_, parts) in registered[signature].items() if parts},
+                failures,
+                _figures(ref, sim, chars, aligned) if figures else None,
+            )
+        )
+        characteristics[signals[-1].path] = chars
+        if keep_arrays:
+            arrays[signals[-1].path] = (ref, sim)
+    result = _spec_result(spec, signals, aligned, model_info, cache)
+    return Evaluation(
+        spec=spec,
+        result=result,
+        aligned=aligned,
+        arrays=arrays,
+        characteristics=characteristics,
+    )
+
+
+def _align(
+    spec: Spec,
+    nodes: list[tuple[int, NodePath, SignalSpec]],
+    reference: Record,
+    model_record: Record,
+) -> AlignedData:
+    """Both records on one time grid, with the columns every signal reads."""
     ref_columns: set[str] = set()
     model_columns: set[str] = set()
     for _, _, node in nodes:
         ref_columns.update(_columns_of(node.ref, reference))
         model_columns.update(_columns_of(node.sim, model_record))
     alignment = spec.alignment
-    aligned = align_records(
+    return align_records(
         reference,
         model_record,
         reference_columns=sorted(ref_columns),
@@ -313,11 +370,16 @@ def _evaluate(
         nan_policy=alignment.nan,
     )
 
+
+def _signal_arrays(
+    nodes: list[tuple[int, NodePath, SignalSpec]], aligned: AlignedData, reference: Record
+) -> tuple[dict[Signature, SignalSpec], dict[Signature, tuple[FloatArray, FloatArray]]]:
+    """The aligned (reference, simulated) arrays of each distinct signal, gaps removed."""
     # Evaluate each distinct signal once, even when it appears in several sets.
-    unique: dict[tuple[Any, ...], SignalSpec] = {}
+    unique: dict[Signature, SignalSpec] = {}
     for _, _, node in nodes:
         unique.setdefault(_signature(node), node)
-    values: dict[tuple[Any, ...], tuple[FloatArray, FloatArray]] = {}
+    values: dict[Signature, tuple[FloatArray, FloatArray]] = {}
     for signature, node in unique.items():
         try:
             values[signature] = (
@@ -330,12 +392,20 @@ def _evaluate(
     if aligned.gap_mask is not None and aligned.gap_mask.any():
         keep = ~aligned.gap_mask
         values = {k: (r[keep], s[keep]) for k, (r, s) in values.items()}
+    return unique, values
 
-    dt = aligned.grid.dt
-    max_lag_s = alignment.max_lag_s
+
+def _fused_characteristics(
+    spec: Spec,
+    unique: dict[Signature, SignalSpec],
+    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    dt: float,
+    workers: int | None,
+) -> dict[Signature, SignalCharacteristics]:
+    """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass."""
     n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
 
-    def score(item: tuple[tuple[Any, ...], SignalSpec]) -> tuple[tuple[Any, ...], Any]:
+    def score(item: tuple[Signature, SignalSpec]) -> tuple[Signature, Any]:
         signature, node = item
         ref, sim = values[signature]
         try:
@@ -343,7 +413,7 @@ def _evaluate(
                 ref,
                 sim,
                 dt=dt,
-                max_lag_s=max_lag_s,
+                max_lag_s=spec.alignment.max_lag_s,
                 correlation=spec.correlation,
                 reference_range=node.reference_range,
                 workers=1 if len(unique) > 1 else n_workers,
@@ -362,100 +432,148 @@ def _evaluate(
     for outcome in scored.values():
         if isinstance(outcome, HevvalError):
             raise outcome
+    return scored
 
-    by_path: dict[tuple[str, ...], SignalCharacteristics] = {
-        path: scored[_signature(node)] for _, path, node in nodes
-    }
-    roots: list[ScoredNode] = []
-    for index, root in enumerate(spec.sets, start=1):
-        tree = _tree_of(root)
-        roots.append(
-            score_tree(
-                tree,
-                lambda path: by_path[path].lambdas,
-                set_index=index,
-                variant=spec.emergent,
-            )
-        )
 
-    node_specs = {path: node for _, path, node in nodes}
-    failures: dict[tuple[str, ...], list[Failure]] = {}
+def _registered_characteristics(
+    spec: Spec,
+    unique: dict[Signature, SignalSpec],
+    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    dt: float,
+) -> dict[Signature, dict[str, tuple[float, dict[str, float]]]]:
+    """Each distinct signal's registered (non-built-in) characteristics: value and components."""
+    extra = [c for c in spec.characteristics() if c.compute is not None]
+    out: dict[Signature, dict[str, tuple[float, dict[str, float]]]] = {}
+    for signature, node in unique.items():
+        ref, sim = values[signature]
+        out[signature] = {}
+        for characteristic in extra:
+            try:
+                scored = compute_characteristic(characteristic, ref, sim, dt)
+            except CharacteristicError as exc:
+                raise CharacteristicError(
+                    f"{exc.problem} for signal {node.name!r}",
+                    line=node.line,
+                    key=node.key,
+                    hint=exc.hint,
+                ) from None
+            except Exception as exc:
+                raise CharacteristicError(
+                    f"characteristic {characteristic.name!r} failed on signal {node.name!r}: "
+                    f"{type(exc).__name__}: {exc}",
+                    line=node.line,
+                    key=node.key,
+                    hint="fix its compute(ref, sim, dt) function",
+                ) from exc
+            out[signature][characteristic.name] = (scored.value, dict(scored.components))
+    return out
+
+
+def _score_trees(
+    spec: Spec,
+    node_specs: Mapping[NodePath, SignalSpec],
+    fused: Mapping[Signature, SignalCharacteristics],
+    registered: Mapping[Signature, Mapping[str, tuple[float, dict[str, float]]]],
+) -> list[ScoredNode]:
+    """Every set scored: each node's characteristics keyed by name, λ7 added on the tree."""
+
+    def base(path: NodePath) -> dict[str, float]:
+        signature = _signature(node_specs[path])
+        own = fused[signature].values
+        own.update((name, value) for name, (value, _) in registered[signature].items())
+        return own
+
+    return [
+        score_tree(_tree_of(root), base, set_index=index, variant=spec.emergent)
+        for index, root in enumerate(spec.sets, start=1)
+    ]
+
+
+def _gate(
+    spec: Spec, roots: list[ScoredNode], node_specs: Mapping[NodePath, SignalSpec]
+) -> dict[NodePath, list[Failure]]:
+    """Each node's characteristics below their thresholds."""
+    failures: dict[NodePath, list[Failure]] = {}
     for scored_node in iter_nodes(roots):
         thresholds = spec.thresholds_for(scored_node.path, node_specs[scored_node.path])
         failures[scored_node.path] = [
-            Failure(name, scored_node.lambdas[CHARACTERISTICS.index(name)], limit)
+            Failure(name, scored_node.lambdas[name], limit)
             for name, limit in thresholds.items()
-            if scored_node.lambdas[CHARACTERISTICS.index(name)] < limit
+            if scored_node.lambdas[name] < limit
         ]
+    return failures
 
-    def failed(node: ScoredNode) -> bool:
-        return bool(failures[node.path])
 
-    signals: list[SignalResult] = []
-    arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
-    characteristics: dict[str, SignalCharacteristics] = {}
-    for scored_node in iter_nodes(roots):
-        path = scored_node.path
-        node = node_specs[path]
-        chars = by_path[path]
-        origins = error_origins(scored_node, failed)
-        path_str = "/".join(path)
-        ref, sim = values[_signature(node)]
-        figure_payload = None
-        if figures:
-            from .core.figures import figure_data
+def _figures(
+    ref: FloatArray, sim: FloatArray, chars: SignalCharacteristics, aligned: AlignedData
+) -> dict[str, Any]:
+    from .core.figures import figure_data
 
-            figure_payload = figure_data(
-                ref,
-                sim,
-                dt=dt,
-                start_s=aligned.grid.start_s,
-                max_lag=chars.lag_search.max_lag if chars.lag_search else 0,
-                # About one point per pixel of the page's plots; the JSON stays half the size.
-                points=1000,
-            )
-        signals.append(
-            SignalResult(
-                path=path_str,
-                name=node.name,
-                set=scored_node.set_index,
-                level=scored_node.level,
-                position=scored_node.position,
-                alpha=scored_node.alpha,
-                line=node.line,
-                lambdas=scored_node.lambdas,
-                lag_s=chars.lag_s,
-                peak_correlation=chars.peak_correlation,
-                mae=chars.mae,
-                rms=chars.rms,
-                delta_e=chars.delta_e,
-                error_std=chars.error_std,
-                mean_error=chars.mean_error,
-                reference_range=chars.reference_range,
-                n_samples=chars.n_samples,
-                thresholds=spec.thresholds_for(path, node),
-                failures=failures[path],
-                unit=node.unit,
-                description=node.description,
-                origin=bool(failures[path]) and origins == (scored_node,),
-                origins=["/".join(o.path) for o in origins],
-                children=["/".join(c.path) for c in scored_node.children],
-                figures=figure_payload,
-            )
-        )
-        characteristics[path_str] = chars
-        if keep_arrays:
-            arrays[path_str] = (ref, sim)
+    return figure_data(
+        ref,
+        sim,
+        dt=aligned.grid.dt,
+        start_s=aligned.grid.start_s,
+        max_lag=chars.lag_search.max_lag if chars.lag_search else 0,
+        # About one point per pixel of the page's plots; the JSON stays half the size.
+        points=1000,
+    )
 
-    phi = global_metric(((s.alpha, s.lambdas) for s in signals), spec.weights)
-    result = SpecResult(
+
+def _signal_result(
+    spec: Spec,
+    node: SignalSpec,
+    scored_node: ScoredNode,
+    chars: SignalCharacteristics,
+    components: dict[str, dict[str, float]],
+    failures: Mapping[NodePath, list[Failure]],
+    figures: dict[str, Any] | None,
+) -> SignalResult:
+    path = scored_node.path
+
+    def failed(candidate: ScoredNode) -> bool:
+        return bool(failures[candidate.path])
+
+    origins = error_origins(scored_node, failed)
+    return SignalResult(
+        path="/".join(path),
+        name=node.name,
+        set=scored_node.set_index,
+        level=scored_node.level,
+        position=scored_node.position,
+        alpha=scored_node.alpha,
+        line=node.line,
+        lambdas=dict(scored_node.lambdas),
+        characteristics=chars,
+        components=components,
+        thresholds=spec.thresholds_for(path, node),
+        failures=failures[path],
+        unit=node.unit,
+        description=node.description,
+        origin=bool(failures[path]) and origins == (scored_node,),
+        origins=["/".join(o.path) for o in origins],
+        children=["/".join(c.path) for c in scored_node.children],
+        figures=figures,
+    )
+
+
+def _spec_result(
+    spec: Spec,
+    signals: list[SignalResult],
+    aligned: AlignedData,
+    model_info: dict[str, Any],
+    cache: DataCache,
+) -> SpecResult:
+    weights = spec.beta()
+    phi = global_metric(((s.alpha, s.lambdas) for s in signals), weights)
+    return SpecResult(
         name=spec.name,
         spec=str(spec.path),
         spec_hash=spec.text_hash,
         phi=phi,
         min_phi=spec.min_phi,
         min_phi_line=spec.min_phi_line,
-        weights=spec.weights,
+        weights=weights,
         signals=signals,
         data={
             "reference": {
@@ -473,13 +591,6 @@ def _evaluate(
             "offset_found": aligned.offset_found,
             "coverage": aligned.coverage,
         },
-    )
-    return Evaluation(
-        spec=spec,
-        result=result,
-        aligned=aligned,
-        arrays=arrays,
-        characteristics=characteristics,
     )
 
 

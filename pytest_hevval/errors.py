@@ -13,6 +13,7 @@ from collections.abc import Iterable
 from typing import Any
 
 __all__ = [
+    "CharacteristicError",
     "DataError",
     "DegenerateSignalError",
     "ExpressionError",
@@ -119,6 +120,10 @@ class ExpressionError(HevvalError, ValueError):
 
 class DegenerateSignalError(HevvalError, ValueError):
     """A signal pair on which the characteristics are undefined (constant reference, NaN…)."""
+
+
+class CharacteristicError(HevvalError, ValueError):
+    """A characteristic is defined badly (name clash, bad field) or computed a bad value."""
 
 
 class MissingExtraError(HevvalError, ImportError):

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 from _pytest._code.code import TerminalRepr
 
-from .core.characteristics import CHARACTERISTICS
+from .core.registry import describe
 from .engine import Evaluation
 from .errors import HevvalError
 from .result import SignalResult, SpecResult
@@ -25,6 +25,12 @@ from .stash import session_key
 from .terminal import phi_report, signal_failure_report
 
 __all__ = ["PhiItem", "SignalItem", "SpecFile"]
+
+
+def junit_property(name: str) -> str:
+    """``lambda3_mae`` for the paper's λ values, the bare name for any other characteristic."""
+    symbol = describe(name).symbol
+    return f"lambda{symbol[1:]}_{name}" if describe(name).builtin else name
 
 
 class ThresholdMissed(Exception):
@@ -87,10 +93,8 @@ class _SpecItem(pytest.Item):
         result = self.result
         self.user_properties.append(("phi", f"{result.phi:.6f}"))
         if signal is not None:
-            for index, name in enumerate(CHARACTERISTICS, start=1):
-                self.user_properties.append(
-                    (f"lambda{index}_{name}", f"{signal.lambdas[index - 1]:.6f}")
-                )
+            for name, value in signal.lambdas.items():
+                self.user_properties.append((junit_property(name), f"{value:.6f}"))
             self.user_properties.append(("lag_s", f"{signal.lag_s:.6g}"))
         payload = self.state.ship(result)
         self.hevval_payload = payload

@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from .errors import HevvalError
 from .options import add_options, get_option
 from .stash import session_key, state_of
 
@@ -31,6 +32,12 @@ def pytest_configure(config: pytest.Config) -> None:
     state = HevvalSession(config)
     config.stash[session_key] = state
     state.validate_options()
+    from .core.registry import load_entry_points
+
+    try:
+        load_entry_points()
+    except HevvalError as exc:
+        raise pytest.UsageError(str(exc)) from None
     # The session object receives worker reports itself (pytest_runtest_logreport).
     config.pluginmanager.register(state, "hevval-session")
 

@@ -1,6 +1,8 @@
-"""Results as plain, JSON-safe data: what crosses process boundaries, reports and history.
+"""Results as typed objects, converted to and from plain JSON-safe data at process boundaries.
 
-``SpecResult.to_dict()`` is the documented run-result format (``schema_version`` 1).
+``SpecResult.to_dict()`` is the documented run-result format (``schema_version`` 2: λ values
+and β weights keyed by characteristic name). ``from_dict`` also reads schema 1, whose λ values
+and weights were lists in paper order.
 """
 
 from __future__ import annotations
@@ -10,11 +12,27 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from .core.characteristics import CHARACTERISTIC_LABELS, CHARACTERISTICS
+from .core.characteristics import SignalCharacteristics
+from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
 
 __all__ = ["RESULT_SCHEMA_VERSION", "Failure", "SignalResult", "SpecResult"]
 
-RESULT_SCHEMA_VERSION = 1
+RESULT_SCHEMA_VERSION = 2
+
+# The physical errors of a signal, flat in its JSON form beside ``lambdas``.
+_ERROR_KEYS = (
+    "lag_s",
+    "peak_correlation",
+    "mae",
+    "rms",
+    "delta_e",
+    "error_std",
+    "mean_error",
+    "reference_range",
+    "n_samples",
+    "dt",
+    "correlation",
+)
 
 
 def _clean(value: float) -> float | None:
@@ -37,7 +55,12 @@ class Failure:
 
 @dataclass
 class SignalResult:
-    """One signal node of one set, scored."""
+    """One signal node of one set, scored.
+
+    ``lambdas`` holds every characteristic the spec scores, keyed by name in report order;
+    ``characteristics`` the fused pass's physical errors (lag, MAE, …) the λ values explain;
+    ``components`` the named parts a registered characteristic reported, by characteristic.
+    """
 
     path: str
     name: str
@@ -46,18 +69,11 @@ class SignalResult:
     position: int
     alpha: float
     line: int
-    lambdas: tuple[float, ...]
-    lag_s: float
-    peak_correlation: float
-    mae: float
-    rms: float
-    delta_e: float
-    error_std: float
-    mean_error: float
-    reference_range: float
-    n_samples: int
+    lambdas: dict[str, float]
+    characteristics: SignalCharacteristics
     thresholds: dict[str, float]
     failures: list[Failure]
+    components: dict[str, dict[str, float]] = field(default_factory=dict)
     unit: str | None = None
     description: str | None = None
     origin: bool = False
@@ -71,9 +87,46 @@ class SignalResult:
         return not self.failures
 
     def lambda_of(self, characteristic: str) -> float:
-        return self.lambdas[CHARACTERISTICS.index(characteristic)]
+        return self.lambdas[characteristic]
+
+    @property
+    def lag_s(self) -> float:
+        return self.characteristics.lag_s
+
+    @property
+    def peak_correlation(self) -> float:
+        return self.characteristics.peak_correlation
+
+    @property
+    def mae(self) -> float:
+        return self.characteristics.mae
+
+    @property
+    def rms(self) -> float:
+        return self.characteristics.rms
+
+    @property
+    def delta_e(self) -> float:
+        return self.characteristics.delta_e
+
+    @property
+    def error_std(self) -> float:
+        return self.characteristics.error_std
+
+    @property
+    def mean_error(self) -> float:
+        return self.characteristics.mean_error
+
+    @property
+    def reference_range(self) -> float:
+        return self.characteristics.reference_range
+
+    @property
+    def n_samples(self) -> int:
+        return self.characteristics.n_samples
 
     def to_dict(self) -> dict[str, Any]:
+        errors = self.characteristics.as_dict()
         out: dict[str, Any] = {
             "path": self.path,
             "name": self.name,
@@ -84,16 +137,8 @@ class SignalResult:
             "line": self.line,
             "unit": self.unit,
             "description": self.description,
-            "lambdas": [float(v) for v in self.lambdas],
-            "lag_s": self.lag_s,
-            "peak_correlation": self.peak_correlation,
-            "mae": self.mae,
-            "rms": self.rms,
-            "delta_e": self.delta_e,
-            "error_std": self.error_std,
-            "mean_error": self.mean_error,
-            "reference_range": self.reference_range,
-            "n_samples": self.n_samples,
+            "lambdas": {name: float(v) for name, v in self.lambdas.items()},
+            **{key: errors[key] for key in _ERROR_KEYS},
             "thresholds": dict(self.thresholds),
             "failures": [f.to_dict() for f in self.failures],
             "passed": self.passed,
@@ -101,6 +146,8 @@ class SignalResult:
             "origins": list(self.origins),
             "children": list(self.children),
         }
+        if self.components:
+            out["components"] = {k: dict(v) for k, v in self.components.items()}
         if self.figures is not None:
             out["figures"] = self.figures
         if self.diagnosis is not None:
@@ -109,6 +156,12 @@ class SignalResult:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> SignalResult:
+        keyed = keyed_lambdas(data["lambdas"])
+        lambdas = {name: float(math.nan if v is None else v) for name, v in keyed.items()}
+        fused = {
+            **data,
+            "lambdas": [lambdas.get(name, math.nan) for name in FUSED_CHARACTERISTICS],
+        }
         return cls(
             path=data["path"],
             name=data.get("name", data["path"].rsplit("/", 1)[-1]),
@@ -117,16 +170,12 @@ class SignalResult:
             position=int(data.get("position", 1)),
             alpha=float(data["alpha"]),
             line=int(data.get("line", 0)),
-            lambdas=tuple(float(v) for v in data["lambdas"]),
-            lag_s=float(data["lag_s"]),
-            peak_correlation=float(data["peak_correlation"]),
-            mae=float(data["mae"]),
-            rms=float(data["rms"]),
-            delta_e=float(data.get("delta_e", data["rms"] - data["mae"])),
-            error_std=float(data.get("error_std", 0.0)),
-            mean_error=float(data.get("mean_error", 0.0)),
-            reference_range=float(data.get("reference_range", 0.0)),
-            n_samples=int(data.get("n_samples", 0)),
+            lambdas={name: lambdas[name] for name in order_names(lambdas)},
+            characteristics=SignalCharacteristics.from_dict(fused),
+            components={
+                str(k): {str(c): float(v) for c, v in parts.items()}
+                for k, parts in dict(data.get("components") or {}).items()
+            },
             thresholds=dict(data.get("thresholds", {})),
             failures=[Failure(**f) for f in data.get("failures", [])],
             unit=data.get("unit"),
@@ -140,24 +189,19 @@ class SignalResult:
 
     def failure_lines(self) -> list[str]:
         """Each characteristic below its threshold, with the physical error behind it."""
-        unit = f" {self.unit}" if self.unit else ""
-        span = f"over a {self.reference_range:.4g}{unit} range"
-        physical = {
-            "mae": f"MAE {self.mae:.4g}{unit} {span}",
-            "rms": f"RMS {self.rms:.4g}{unit} {span}",
-            "anomaly": f"RMS−MAE {self.delta_e:.4g}{unit} {span}",
-            "error_std": f"σ {self.error_std:.4g}{unit} {span}",
-            "lag_correlation": (
-                f"zero-lag correlation; peak {self.peak_correlation:.4f} at {self.lag_s:+.3g} s"
-            ),
-            "derivative_match": "fraction of samples whose derivative signs agree",
-            "emergent": "mean λ1–λ6 differs from that of the signals below it",
-        }
-        return [
-            f"{CHARACTERISTIC_LABELS[f.characteristic]} = {f.value:.4f} < {f.threshold:.4g} "
-            f"({physical[f.characteristic]})"
-            for f in self.failures
-        ]
+        errors = self.characteristics.as_dict()
+        lines = []
+        for failure in self.failures:
+            characteristic = describe(failure.characteristic)
+            meaning = characteristic.explain(errors, self.unit)
+            parts = self.components.get(failure.characteristic)
+            if not meaning and parts:
+                meaning = ", ".join(f"{k} {v:.4g}" for k, v in parts.items())
+            lines.append(
+                f"{characteristic.title} = {failure.value:.4f} < {failure.threshold:.4g}"
+                + (f" ({meaning})" if meaning else "")
+            )
+        return lines
 
 
 @dataclass
@@ -170,7 +214,8 @@ class SpecResult:
     phi: float
     min_phi: float | None
     min_phi_line: int
-    weights: tuple[float, ...]
+    #: β of every characteristic the spec scores, keyed by name.
+    weights: dict[str, float]
     signals: list[SignalResult]
     data: dict[str, Any]
     alignment: dict[str, Any]
@@ -191,13 +236,15 @@ class SpecResult:
 
     def phi_contributions(self) -> list[tuple[str, float]]:
         """How much each signal pulls Φ below 1: Σ_q α·β_q·(1 − λ_q) / Σ α·β."""
-        total = sum(s.alpha * sum(self.weights) for s in self.signals) or 1.0
+
+        def beta(name: str) -> float:
+            return self.weights.get(name, describe(name).default_weight)
+
+        total = sum(s.alpha * sum(beta(n) for n in s.lambdas) for s in self.signals) or 1.0
         pulls = [
             (
                 s.path,
-                s.alpha
-                * sum(b * (1.0 - v) for b, v in zip(self.weights, s.lambdas, strict=True))
-                / total,
+                s.alpha * sum(beta(n) * (1.0 - v) for n, v in s.lambdas.items()) / total,
             )
             for s in self.signals
         ]
@@ -213,7 +260,7 @@ class SpecResult:
             "min_phi": self.min_phi,
             "min_phi_line": self.min_phi_line,
             "passed": self.passed,
-            "weights": list(self.weights),
+            "weights": dict(self.weights),
             "data": self.data,
             "alignment": self.alignment,
             "signals": [s.to_dict() for s in self.signals],
@@ -228,7 +275,11 @@ class SpecResult:
             phi=float(data["phi"]),
             min_phi=None if data.get("min_phi") is None else float(data["min_phi"]),
             min_phi_line=int(data.get("min_phi_line", 1)),
-            weights=tuple(float(w) for w in data.get("weights", [1.0] * 7)),
+            weights={
+                name: float(w)
+                for name, w in keyed_lambdas(data.get("weights", [1.0] * 7)).items()
+                if w is not None
+            },
             signals=[SignalResult.from_dict(s) for s in data["signals"]],
             data=dict(data.get("data", {})),
             alignment=dict(data.get("alignment", {})),
@@ -236,4 +287,4 @@ class SpecResult:
 
 
 def worst_first(signals: Sequence[SignalResult]) -> list[SignalResult]:
-    return sorted(signals, key=lambda s: (s.passed, min(s.lambdas)))
+    return sorted(signals, key=lambda s: (s.passed, min(s.lambdas.values())))

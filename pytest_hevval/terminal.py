@@ -8,12 +8,10 @@ from __future__ import annotations
 import shlex
 from collections.abc import Iterable
 
-from .core.characteristics import CHARACTERISTICS
+from .core.registry import describe
 from .result import SignalResult, SpecResult
 
 __all__ = ["phi_report", "signal_failure_report", "tree_summary"]
-
-_SHORT = ("λ1", "λ2", "λ3", "λ4", "λ5", "λ6", "λ7")
 
 
 def _location(spec: str, line: int) -> str:
@@ -35,7 +33,7 @@ def signal_failure_report(
     lines.extend(f"  {text}" for text in signal.failure_lines())
     lines.append(
         f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
-        f"(λ1 at zero lag {signal.lambdas[0]:.4f})"
+        f"(λ1 at zero lag {signal.lambdas['lag_correlation']:.4f})"
     )
     by_path = {s.path: s for s in result.signals}
     if signal.origins == [signal.path]:
@@ -78,9 +76,9 @@ def phi_report(result: SpecResult) -> str:
     deficit = max(1.0 - result.phi, 1e-12)
     for path, pull in result.phi_contributions()[:5]:
         signal = result.signal(path)
-        worst = min(range(7), key=lambda q: signal.lambdas[q])
+        worst = min(signal.lambdas, key=lambda name: signal.lambdas[name])
         lines.append(
-            f"    {path}: {100 * pull / deficit:.0f} % (weakest {CHARACTERISTICS[worst]} "
+            f"    {path}: {100 * pull / deficit:.0f} % (weakest {worst} "
             f"{signal.lambdas[worst]:.4f})"
         )
     lines.append("  next: improve the signals above, or run hevval diagnose on them")
@@ -94,8 +92,9 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
         verdict = "PASS" if result.passed else "FAIL"
         gate = "" if result.min_phi is None else f" (min {result.min_phi:g})"
         lines.append(f"{result.name}: Φ = {result.phi:.4f}{gate} {verdict}  [{result.spec}]")
+        names = list(result.signals[0].lambdas) if result.signals else []
         if details:
-            lines.append("    " + " " * 28 + "  ".join(f"{s:>6}" for s in _SHORT))
+            lines.append("    " + " " * 28 + "  ".join(f"{describe(n).symbol:>6}" for n in names))
         for signal in result.signals:
             if not details and signal.passed:
                 continue
@@ -104,7 +103,9 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
             origin = "  ← error appears here" if signal.origin else ""
             label = f"{indent}{mark} {signal.name}"
             if details:
-                values = "  ".join(f"{v:6.4f}" for v in signal.lambdas)
+                values = "  ".join(
+                    f"{signal.lambdas[n]:{max(6, len(describe(n).symbol))}.4f}" for n in names
+                )
                 lines.append(f"  {label:<30}{values}{origin}")
             else:
                 failed = ", ".join(

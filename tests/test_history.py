@@ -85,7 +85,7 @@ def test_make_record_carries_versions_hashes_and_values() -> None:
     rec = h.make_record(
         [spec()], model_version=" v1.2 ", tool_versions={"fmpy": "0.3"}, started_utc=T0
     )
-    assert rec["schema_version"] == h.SCHEMA_VERSION == 2
+    assert rec["schema_version"] == h.SCHEMA_VERSION == 3
     assert rec["model_version"] == "v1.2"
     assert rec["started_utc"] == "2024-05-01T12:00:00.000000Z"
     assert {"pytest-hevval", "numpy", "scipy", "python", "fmpy"} <= set(rec["tool_versions"])
@@ -94,7 +94,7 @@ def test_make_record_carries_versions_hashes_and_values() -> None:
     assert stored["data"]["reference"]["sha256"] == "r"
     assert stored["phi"] == pytest.approx(0.9412)
     sig = stored["signals"][0]
-    assert sig["lambdas"] == LAMBDAS
+    assert sig["lambdas"] == dict(zip(_names(), LAMBDAS, strict=True))
     assert (sig["lag_s"], sig["mae"], sig["passed"]) == (-0.2, 1.2, True)
     json.dumps(rec, allow_nan=False)
 
@@ -119,7 +119,7 @@ def test_make_record_converts_nan_and_numpy_scalars() -> None:
         started_utc=T0 + timedelta(hours=2),
     )
     sig = rec["specs"][0]["signals"][0]
-    assert sig["lambdas"][:2] == [0.5, None]
+    assert [sig["lambdas"][n] for n in _names()[:2]] == [0.5, None]
     assert sig["mae"] == 2.0
     assert rec["specs"][0]["phi"] == 0.8
     assert type(rec["specs"][0]["phi"]) is float
@@ -171,16 +171,18 @@ def _names() -> tuple[str, ...]:
     return CHARACTERISTICS
 
 
-def test_migrate_schema_1_to_2() -> None:
+def test_migrate_schema_1_to_3() -> None:
     migrated = h.migrate_record(v1_record())
-    assert migrated["schema_version"] == 2
+    assert migrated["schema_version"] == 3
     assert migrated["model_version"] == "v0.9"
     assert migrated["started_utc"] == "2024-04-30T12:00:00.000000Z"
     assert migrated["tool_versions"] == {"pytest-hevval": "0.0.9"}
-    assert migrated["specs"][0]["signals"][0]["lambdas"] == LAMBDAS
+    assert migrated["specs"][0]["signals"][0]["lambdas"] == dict(
+        zip(_names(), LAMBDAS, strict=True)
+    )
 
 
-def test_migrate_schema_2_is_identity_after_validation() -> None:
+def test_migrate_schema_3_is_identity_after_validation() -> None:
     rec = record("v1", T0)
     assert h.migrate_record(json.loads(json.dumps(rec))) == rec
 

@@ -29,7 +29,11 @@ import yaml
 
 import pytest_hevval
 from pytest_hevval import engine
-from pytest_hevval.core.characteristics import SignalCharacteristics, signal_characteristics
+from pytest_hevval.core.characteristics import (
+    CHARACTERISTICS,
+    SignalCharacteristics,
+    signal_characteristics,
+)
 from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import DataError, DegenerateSignalError, HevvalError, SpecError
 from pytest_hevval.history import HistoryError, HistoryStore, make_record
@@ -288,8 +292,8 @@ def test_engine_errors_on_degenerate_data(
     assert str(tmp_path) in str(caught.value)
 
 
-def _lambdas(result: Any) -> dict[str, list[float]]:
-    return {s.path: list(s.lambdas) for s in result.signals}
+def _lambdas(result: Any) -> dict[str, dict[str, float]]:
+    return {s.path: dict(s.lambdas) for s in result.signals}
 
 
 @pytest.mark.parametrize(
@@ -304,7 +308,7 @@ def test_engine_scores_constant_signals_with_a_declared_range(
 ) -> None:
     _write_pair(tmp_path, reference, simulated)
     result = evaluate_spec(_spec(tmp_path, "  - {signal: v, reference_range: 1}\n")).result
-    assert _lambdas(result) == {"v": [1.0] * 7}
+    assert _lambdas(result) == {"v": dict.fromkeys(CHARACTERISTICS, 1.0)}
     assert result.phi == 1.0
 
 
@@ -340,8 +344,9 @@ def test_engine_single_signal_set(tmp_path: Path) -> None:
     _write_pair(tmp_path, BASE, NEAR)
     result = evaluate_spec(_spec(tmp_path, ONE)).result
     (only,) = result.signals
-    assert only.lambdas[6] == 1.0  # a leaf has no children to disagree with
-    assert result.phi == pytest.approx(sum(only.lambdas) / 7)
+    assert list(only.lambdas) == list(CHARACTERISTICS)
+    assert only.lambdas["emergent"] == 1.0  # a leaf has no children to disagree with
+    assert result.phi == pytest.approx(sum(only.lambdas.values()) / 7)
 
 
 def test_engine_signal_shared_by_two_sets_is_scored_once(
@@ -362,7 +367,7 @@ def test_engine_signal_shared_by_two_sets_is_scored_once(
     )
     result = evaluate_spec(_spec(tmp_path, sets)).result
     assert [s.path for s in result.signals] == ["A", "A/v", "B", "B/v"]
-    assert len({tuple(s.lambdas[:6]) for s in result.signals}) == 1
+    assert len({tuple(s.lambdas[n] for n in CHARACTERISTICS[:6]) for s in result.signals}) == 1
     assert [s.set for s in result.signals] == [1, 1, 2, 2]
     assert len(calls) == 1
 
@@ -374,7 +379,7 @@ def test_engine_long_signal(tmp_path: Path) -> None:
     result = evaluate_spec(_spec(tmp_path, ONE, "alignment: {max_lag_s: 1}\n"))
     assert result.result.alignment["n_samples"] == LONG
     assert result.result.signals[0].lag_s == 0.0
-    assert result.result.signals[0].lambdas[0] > 0.99
+    assert result.result.signals[0].lambdas["lag_correlation"] > 0.99
 
 
 def test_engine_omits_gaps_when_asked(tmp_path: Path) -> None:

@@ -45,7 +45,16 @@ def test_good_spec_loads_with_lines_and_defaults() -> None:
     assert spec.reference.options.time == "Time [s]"
     assert spec.alignment.window == (0.0, 100.0)
     assert spec.thresholds == {"mae": 0.9, "rms": 0.8}
-    assert spec.weights == (1.0, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0)
+    assert spec.weights == {"mae": 2.0}
+    assert spec.beta() == {
+        "lag_correlation": 1.0,
+        "derivative_match": 1.0,
+        "mae": 2.0,
+        "rms": 1.0,
+        "anomaly": 1.0,
+        "error_std": 1.0,
+        "emergent": 1.0,
+    }
     walked = [("/".join(path), node.line, index) for index, path, node in spec.walk()]
     assert walked == [
         ("FCcum", 9, 1),

@@ -13,16 +13,17 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
 from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
+from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
 
 __all__ = [
     "CHARACTERISTICS",
@@ -33,26 +34,9 @@ __all__ = [
     "signal_characteristics",
 ]
 
-#: The seven characteristics in paper order (λ1 … λ7).
-CHARACTERISTICS: tuple[str, ...] = (
-    "lag_correlation",
-    "derivative_match",
-    "mae",
-    "rms",
-    "anomaly",
-    "error_std",
-    "emergent",
-)
-
-CHARACTERISTIC_LABELS: dict[str, str] = {
-    "lag_correlation": "λ1 lag correlation",
-    "derivative_match": "λ2 derivative match",
-    "mae": "λ3 MAE",
-    "rms": "λ4 RMS",
-    "anomaly": "λ5 anomaly (RMS−MAE)",
-    "error_std": "λ6 error spread",
-    "emergent": "λ7 emergent",
-}
+#: The seven characteristics in paper order (λ1 … λ7) and their headings; the registry
+#: describes each one.
+CHARACTERISTICS: tuple[str, ...] = PAPER_CHARACTERISTICS
 
 CorrelationKind = Literal["xcorr", "pearson"]
 
@@ -104,6 +88,11 @@ class SignalCharacteristics:
     lag_search: LagSearch | None = field(default=None, compare=False, repr=False)
 
     @property
+    def values(self) -> dict[str, float]:
+        """λ1–λ6 keyed by characteristic name."""
+        return dict(zip(FUSED_CHARACTERISTICS, self.lambdas, strict=True))
+
+    @property
     def lag_correlation(self) -> float:
         return self.lambdas[0]
 
@@ -142,6 +131,30 @@ class SignalCharacteristics:
             "dt": self.dt,
             "correlation": self.correlation,
         }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> SignalCharacteristics:
+        """The inverse of :meth:`as_dict`; ``lambdas`` may also be keyed by name."""
+        raw = data["lambdas"]
+        if isinstance(raw, Mapping):
+            raw = [raw[name] for name in FUSED_CHARACTERISTICS]
+        lambdas = tuple(float(v) for v in raw[: len(FUSED_CHARACTERISTICS)])
+        mae = float(data["mae"])
+        rms = float(data["rms"])
+        return cls(
+            lambdas=lambdas,  # type: ignore[arg-type]
+            lag_s=float(data["lag_s"]),
+            peak_correlation=float(data["peak_correlation"]),
+            mae=mae,
+            rms=rms,
+            delta_e=float(data.get("delta_e", rms - mae)),
+            error_std=float(data.get("error_std", 0.0)),
+            mean_error=float(data.get("mean_error", 0.0)),
+            reference_range=float(data.get("reference_range", 0.0)),
+            n_samples=int(data.get("n_samples", 0)),
+            dt=float(data.get("dt", 0.0)),
+            correlation=data.get("correlation", "xcorr"),
+        )
 
 
 @dataclass

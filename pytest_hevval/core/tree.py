@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from .characteristics import CHARACTERISTICS
+from .registry import FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS, describe, get_characteristic
 
 __all__ = [
     "EmergentVariant",
@@ -53,62 +53,81 @@ class ScoredNode:
     level: int
     position: int
     alpha: float
-    lambdas: tuple[float, ...]
+    #: Every characteristic of the node keyed by name, in report order (λ7 ``emergent`` last
+    #: of the paper's seven).
+    lambdas: Mapping[str, float]
     children: tuple[ScoredNode, ...] = field(default=())
 
     @property
     def emergent(self) -> float:
-        return self.lambdas[6]
+        return self.lambdas["emergent"]
 
     @property
     def path_str(self) -> str:
         return "/".join(self.path)
 
 
+Lambdas = Sequence[float] | Mapping[str, float]
+
+
+def _basis(values: Lambdas) -> list[float]:
+    """λ1..λ6 of a node, from a mapping by name or a sequence in paper order."""
+    if isinstance(values, Mapping):
+        return [values[name] for name in FUSED_CHARACTERISTICS]
+    return list(values[:6])
+
+
+def _own_emergent(values: Lambdas) -> float:
+    if isinstance(values, Mapping):
+        return values["emergent"]
+    return values[6]
+
+
 def emergent(
-    parent: Sequence[float],
-    children: Sequence[tuple[Sequence[float], bool]],
+    parent: Lambdas,
+    children: Sequence[tuple[Lambdas, bool]],
     *,
     variant: EmergentVariant = "V2",
 ) -> float:
     """λ7 of a node from its own λ1..λ6 and its children's λ values (eq. 13).
 
-    ``children`` holds, per child, its seven λ values and whether the child has children of
-    its own (so that its λ7 is real, not the leaf placeholder). ``V2`` (default) averages each
-    child's λ1..λ6 plus its λ7 where it has one; ``V1`` averages λ1..λ6 only. Returns
-    ``1 − |mean(parent λ1..λ6) − mean(children)|`` clipped to [0, 1]; a leaf gets 1.
+    λ values are mappings by characteristic name or sequences in paper order. ``children``
+    holds, per child, its λ values and whether the child has children of its own (so that its
+    λ7 is real, not the leaf placeholder). ``V2`` (default) averages each child's λ1..λ6 plus
+    its λ7 where it has one; ``V1`` averages λ1..λ6 only. Returns
+    ``1 − |mean(parent λ1..λ6) − mean(children)|`` clipped to [0, 1]; a leaf gets 1. Only the
+    paper's λ1..λ6 enter, whatever other characteristics are registered.
     """
     if not children:
         return 1.0
-    parent_mean = sum(parent[:6]) / 6.0
+    parent_mean = sum(_basis(parent)) / 6.0
     values: list[float] = []
     for lambdas, has_children in children:
-        values.extend(lambdas[:6])
+        values.extend(_basis(lambdas))
         if variant == "V2" and has_children:
-            values.append(lambdas[6])
+            values.append(_own_emergent(lambdas))
     child_mean = sum(values) / len(values)
     return float(min(1.0, max(0.0, 1.0 - abs(parent_mean - child_mean))))
 
 
 def score_tree(
     root: TreeNode,
-    base: Callable[[tuple[str, ...]], Sequence[float]],
+    base: Callable[[tuple[str, ...]], Lambdas],
     *,
     set_index: int = 1,
     variant: EmergentVariant = "V2",
 ) -> ScoredNode:
-    """Attach λ1..λ7 to every node of one set.
+    """Attach every characteristic, λ7 included, to every node of one set.
 
-    ``base(path)`` returns λ1..λ6 of the node at ``path`` (a tuple of names from the root).
+    ``base(path)`` returns the node's per-signal characteristics: a mapping by name holding at
+    least λ1..λ6, or the six values λ1..λ6 in paper order.
     """
     positions: dict[int, int] = {}
 
     def visit(node: TreeNode, path: tuple[str, ...], level: int) -> ScoredNode:
         positions[level] = positions.get(level, 0) + 1
         position = positions[level]
-        own = tuple(float(v) for v in base(path))
-        if len(own) != 6:
-            raise ValueError(f"base() must return six values for {'/'.join(path)}")
+        own = _own_values(base(path), path)
         kids = tuple(visit(child, (*path, child.name), level + 1) for child in node.children)
         lam7 = emergent(own, [(k.lambdas, bool(k.children)) for k in kids], variant=variant)
         return ScoredNode(
@@ -118,11 +137,27 @@ def score_tree(
             level=level,
             position=position,
             alpha=float(node.alpha),
-            lambdas=(*own, lam7),
+            lambdas=_ordered({**own, "emergent": lam7}),
             children=kids,
         )
 
     return visit(root, (root.name,), 1)
+
+
+def _own_values(values: Lambdas, path: tuple[str, ...]) -> dict[str, float]:
+    if isinstance(values, Mapping):
+        own = {str(k): float(v) for k, v in values.items()}
+        missing = [name for name in FUSED_CHARACTERISTICS if name not in own]
+        if missing:
+            raise ValueError(f"base() lacks {missing} for {'/'.join(path)}")
+        return own
+    if len(values) != 6:
+        raise ValueError(f"base() must return six values for {'/'.join(path)}")
+    return dict(zip(FUSED_CHARACTERISTICS, (float(v) for v in values), strict=True))
+
+
+def _ordered(values: Mapping[str, float]) -> dict[str, float]:
+    return {name: values[name] for name in sorted(values, key=lambda n: describe(n).order)}
 
 
 def iter_nodes(roots: Iterable[ScoredNode]) -> Iterator[ScoredNode]:
@@ -133,25 +168,30 @@ def iter_nodes(roots: Iterable[ScoredNode]) -> Iterator[ScoredNode]:
 
 
 def global_metric(
-    rows: Iterable[tuple[float, Sequence[float]]],
+    rows: Iterable[tuple[float, Lambdas]],
     beta: Sequence[float] | Mapping[str, float] | None = None,
 ) -> float:
-    """Φ = Σ α·β·λ / Σ α·β over every signal and all seven characteristics (eq. 14).
+    """Φ = Σ α·β·λ / Σ α·β over every signal and every characteristic it has (eq. 14).
 
-    ``rows`` are ``(alpha, seven_lambdas)`` pairs, one per signal occurrence. ``beta`` is seven
-    weights in paper order, or a mapping from characteristic name to weight (missing = 1).
+    ``rows`` are ``(alpha, lambdas)`` pairs, one per signal occurrence; ``lambdas`` maps
+    characteristic name to value (every characteristic the spec scores), or is the paper's
+    seven values in order. ``beta`` maps name to weight (missing = the characteristic's
+    ``default_weight``, 1 for all built-ins), or is seven weights in paper order.
     """
-    weights = _beta_vector(beta)
+    weights = _beta_mapping(beta)
     numerator = 0.0
     denominator = 0.0
     count = 0
     for alpha, lambdas in rows:
-        if len(lambdas) != 7:
-            raise ValueError(f"each row needs seven λ values (got {len(lambdas)})")
+        if not isinstance(lambdas, Mapping):
+            if len(lambdas) != 7:
+                raise ValueError(f"each row needs seven λ values (got {len(lambdas)})")
+            lambdas = dict(zip(PAPER_CHARACTERISTICS, lambdas, strict=True))
         if alpha < 0:
             raise ValueError(f"α must be ≥ 0 (got {alpha})")
         count += 1
-        for b, lam in zip(weights, lambdas, strict=True):
+        for name, lam in lambdas.items():
+            b = weights[name] if name in weights else describe(name).default_weight
             numerator += alpha * b * lam
             denominator += alpha * b
     if count == 0:
@@ -161,19 +201,17 @@ def global_metric(
     return numerator / denominator
 
 
-def _beta_vector(beta: Sequence[float] | Mapping[str, float] | None) -> tuple[float, ...]:
+def _beta_mapping(beta: Sequence[float] | Mapping[str, float] | None) -> dict[str, float]:
     if beta is None:
-        return (1.0,) * 7
+        return {}
     if isinstance(beta, Mapping):
-        unknown = set(beta) - set(CHARACTERISTICS)
-        if unknown:
-            raise ValueError(f"unknown characteristic(s) in β: {sorted(unknown)}")
-        values = tuple(float(beta.get(name, 1.0)) for name in CHARACTERISTICS)
+        values = {get_characteristic(str(name)).name: float(b) for name, b in beta.items()}
     else:
-        values = tuple(float(b) for b in beta)
-        if len(values) != 7:
-            raise ValueError(f"β needs seven weights (got {len(values)})")
-    if any(b < 0 for b in values):
+        as_tuple = tuple(float(b) for b in beta)
+        if len(as_tuple) != 7:
+            raise ValueError(f"β needs seven weights (got {len(as_tuple)})")
+        values = dict(zip(PAPER_CHARACTERISTICS, as_tuple, strict=True))
+    if any(b < 0 for b in values.values()):
         raise ValueError(f"β weights must be ≥ 0 (got {values})")
     return values
 

@@ -15,13 +15,14 @@ from typing import Any
 
 from ..errors import did_you_mean
 from ..files import write_atomic
-from ._base import CHARACTERISTICS, HistoryError
+from ._base import HistoryError
 from .compare import Comparison, compare, parse_compare_fail, regressions, specs_of
 from .records import migrate_record
 from .render import render
 from .store import HistoryStore
 from .trends import (
     HistoryRow,
+    characteristic_names,
     detect_steps,
     history_table,
     plot_history,
@@ -88,7 +89,7 @@ def run_history(args: argparse.Namespace) -> int:
 def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
     lines = []
     for (spec, signal), series in row_series(rows).items():
-        fields = ["phi"] if signal is None else ["phi", *CHARACTERISTICS]
+        fields = ["phi"] if signal is None else ["phi", *characteristic_names(series)]
         for field in fields:
             for step in detect_steps([r.value(field) for r in series], min_size=min_size):
                 if not step.regression:

@@ -21,8 +21,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from ..core.registry import (
+    LAMBDA_ALIASES,
+    PAPER_CHARACTERISTICS,
+    describe,
+    is_registered,
+    keyed_lambdas,
+    order_names,
+)
 from ..errors import did_you_mean
-from ._base import CHARACTERISTICS, ERROR_FIELDS, HistoryError, spec_key
+from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
     "BaselineDecision",
@@ -46,10 +54,10 @@ RULE_FIELDS: dict[str, str] = {
     "phi": "Φ of each spec",
     "lambda": "every λ1–λ7 of every signal",
     "lag": "|lag| of every signal, in seconds (a growth is a regression)",
-    **{name: f"λ{i} of every signal" for i, name in enumerate(CHARACTERISTICS, start=1)},
-    **{f"lambda{i}": f"λ{i} ({name})" for i, name in enumerate(CHARACTERISTICS, start=1)},
+    **{name: f"{describe(name).symbol} of every signal" for name in PAPER_CHARACTERISTICS},
+    **{alias: f"{describe(name).symbol} ({name})" for alias, name in LAMBDA_ALIASES.items()},
 }
-_ALIASES = {f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)}
+_ALIASES = LAMBDA_ALIASES
 _AMOUNT = re.compile(r"^(?P<number>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<percent>%?)$")
 _EXAMPLE = "phi:0.01,lambda:0.02 or mae:1%"
 # Float noise from re-running the same model must never count as a drop.
@@ -71,7 +79,8 @@ class Rule:
 
     def applies_to(self, field: str) -> bool:
         if self.field == "lambda":
-            return field in CHARACTERISTICS
+            # Called with Φ, lag and λ fields only; every other field is a characteristic.
+            return field not in ("phi", "lag")
         return self.field == field
 
 
@@ -94,7 +103,7 @@ def parse_compare_fail(expr: str, *, option: str = "--hevval-compare-fail") -> l
                 key=option,
                 hint=f"write field:amount, e.g. {_EXAMPLE}",
             )
-        if name not in RULE_FIELDS:
+        if name not in RULE_FIELDS and not is_registered(name):
             suggestion = did_you_mean(name, RULE_FIELDS)
             raise HistoryError(
                 f"unknown field {name!r} in {clause!r}" + (f"; {suggestion}" if suggestion else ""),
@@ -368,13 +377,19 @@ def _signals(spec: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
     }
 
 
-def _lambda(signal: Mapping[str, Any], index: int) -> float | None:
-    lambdas = signal.get("lambdas")
-    if isinstance(lambdas, Mapping):  # tolerate the schema-1 mapping form
-        return _number(lambdas.get(CHARACTERISTICS[index]))
-    if isinstance(lambdas, (list, tuple)) and index < len(lambdas):
-        return _number(lambdas[index])
-    return None
+def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
+    """λ values keyed by name; a result of schema 1 (a list in paper order) is read too."""
+    try:
+        return keyed_lambdas(signal.get("lambdas"))
+    except ValueError:
+        return {}
+
+
+def _lambda_deltas(
+    before: Mapping[str, float | None], after: Mapping[str, float | None]
+) -> tuple[FieldDelta, ...]:
+    names = order_names([*before, *after])
+    return tuple(FieldDelta(name, before.get(name), after.get(name)) for name in names)
 
 
 def _compare_spec(
@@ -396,10 +411,7 @@ def _compare_spec(
                 path=path,
                 name=str(sig_after.get("name", path.rsplit("/", 1)[-1])),
                 unit=sig_after.get("unit") if isinstance(sig_after.get("unit"), str) else None,
-                lambdas=tuple(
-                    FieldDelta(name, _lambda(sig_before, i), _lambda(sig_after, i))
-                    for i, name in enumerate(CHARACTERISTICS)
-                ),
+                lambdas=_lambda_deltas(_lambdas(sig_before), _lambdas(sig_after)),
                 errors=tuple(
                     FieldDelta(name, _number(sig_before.get(name)), _number(sig_after.get(name)))
                     for name in ERROR_FIELDS
@@ -449,7 +461,8 @@ class Regression:
         if self.field == "phi":
             label = "Φ"
         else:
-            label = f"λ{CHARACTERISTICS.index(self.field) + 1} {self.field}"
+            symbol = describe(self.field).symbol
+            label = self.field if symbol == self.field else f"{symbol} {self.field}"
         return (
             f"{where}: {label} dropped {self.before:.4g} → {after} "
             f"(allowed drop {self.allowed:.4g}, rule {self.rule!r})"

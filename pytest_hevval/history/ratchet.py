@@ -23,9 +23,10 @@ from typing import Any
 
 import yaml
 
+from ..core.registry import keyed_lambdas, order_names
 from ..files import write_atomic
 from ..spec.sidecar import Thresholds, load_sidecar, sidecar_path
-from ._base import CHARACTERISTICS, HistoryError
+from ._base import HistoryError
 from .records import format_utc
 
 __all__ = [
@@ -124,9 +125,7 @@ def ratchet_thresholds(
             continue
         lambdas = signal.get("lambdas")
         out = {}
-        for name in CHARACTERISTICS:
-            if name not in current:
-                continue
+        for name in order_names(current):
             achieved = _achieved(lambdas, name)
             value = current[name]
             if achieved is not None:
@@ -137,22 +136,16 @@ def ratchet_thresholds(
 
 
 def _achieved(lambdas: Any, name: str) -> float | None:
-    index = CHARACTERISTICS.index(name)
-    if isinstance(lambdas, (list, tuple)) and index < len(lambdas):
-        value = lambdas[index]
-    elif isinstance(lambdas, Mapping):
-        value = lambdas.get(name)
-    else:
+    try:
+        return keyed_lambdas(lambdas).get(name)
+    except ValueError:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None
 
 
 def render_sidecar(
     thresholds: Thresholds, *, model_version: str, created_utc: datetime, margin: float
 ) -> str:
-    """The sidecar text: an explanatory header, then signals sorted, λ in paper order."""
+    """The sidecar text: an explanatory header, then signals sorted, λ in report order."""
     header = [
         "# λ thresholds ratcheted by pytest-hevval (--hevval-ratchet); review and commit.",
         f"# Produced from model version {model_version} on {format_utc(created_utc)}"
@@ -165,7 +158,7 @@ def render_sidecar(
     body: dict[str, dict[str, float]] = {}
     for path in sorted(thresholds):
         values = thresholds[path]
-        ordered = {name: float(values[name]) for name in CHARACTERISTICS if name in values}
+        ordered = {name: float(values[name]) for name in order_names(values)}
         if ordered:
             body[path] = ordered
     dumped = yaml.safe_dump(body, sort_keys=False, allow_unicode=True, default_flow_style=False)

@@ -2,12 +2,14 @@
 
 A record is plain JSON (see ``docs/history.md``)::
 
-    {"schema_version": 2, "model_version": "v1.4-3-gabc123", "started_utc": "...Z",
+    {"schema_version": 3, "model_version": "v1.4-3-gabc123", "started_utc": "...Z",
      "tool_versions": {"pytest-hevval": "...", "numpy": "...", "scipy": "...", "python": "..."},
      "specs": [<spec result>, ...]}
 
-Schema 1 (``version``, ``timestamp`` in POSIX seconds, ``tools``, ``results``, λ as a mapping)
-is migrated on read; records are never rewritten on disk.
+Each signal's ``lambdas`` and each spec's ``weights`` map characteristic name to value.
+Schema 2 (λ values and weights as lists in paper order) and schema 1 (``version``,
+``timestamp`` in POSIX seconds, ``tools``, ``results``) are migrated on read; records are never
+rewritten on disk.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from ._base import CHARACTERISTICS, HistoryError, json_safe, optional_float
+from ..core.registry import PAPER_CHARACTERISTICS
+from ._base import HistoryError, json_safe, optional_float
 
 __all__ = [
     "MODEL_VERSION_ENV",
@@ -35,7 +38,7 @@ __all__ = [
     "validate_record",
 ]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 MODEL_VERSION_ENV = "HEVVAL_MODEL_VERSION"
 _GIT_TIMEOUT_S = 5.0
 
@@ -74,6 +77,9 @@ _SIGNAL_KEYS = (
     "mean_error",
     "reference_range",
     "n_samples",
+    "dt",
+    "correlation",
+    "components",
     "thresholds",
     "failures",
     "passed",
@@ -192,8 +198,10 @@ def make_record(
 
 
 def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
-    """Return ``document`` as a validated schema-2 record, migrating older layouts.
+    """Return ``document`` as a validated schema-3 record, migrating older layouts.
 
+    Schema 2 differs from 3 only in that each signal's ``lambdas`` and each spec's ``weights``
+    were lists in paper order (λ1…λ7) rather than mappings by characteristic name.
     Schema 1 differs from 2 in four places: ``version`` → ``model_version``; ``timestamp``
     (POSIX seconds) → ``started_utc`` (ISO 8601 UTC); ``tools`` → ``tool_versions``;
     ``results`` → ``specs``; and each signal's ``lambdas`` was a mapping by characteristic name
@@ -208,8 +216,10 @@ def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
     version = document.get("schema_version")
     if version == SCHEMA_VERSION:
         return validate_record(document, file=file)
+    if version == 2:
+        return validate_record(_migrate_2_to_3(document), file=file)
     if version == 1:
-        return validate_record(_migrate_1_to_2(document, file), file=file)
+        return validate_record(_migrate_2_to_3(_migrate_1_to_2(document, file)), file=file)
     if isinstance(version, int) and not isinstance(version, bool) and version > SCHEMA_VERSION:
         raise HistoryError(
             f"schema_version {version} is newer than this pytest-hevval understands "
@@ -219,7 +229,7 @@ def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
             hint="upgrade pytest-hevval to read it",
         )
     raise HistoryError(
-        f"unknown schema_version (got {version!r}); expected 1 or {SCHEMA_VERSION}",
+        f"unknown schema_version (got {version!r}); expected 1 to {SCHEMA_VERSION}",
         file=file,
         key="schema_version",
         hint=_HINT_CORRUPT,
@@ -263,7 +273,7 @@ def _migrate_1_to_2(old: Mapping[str, Any], file: str | None) -> dict[str, Any]:
             new_spec["signals"] = [_migrate_signal_1(sig) for sig in signals]
         specs.append(new_spec)
     return {
-        "schema_version": SCHEMA_VERSION,
+        "schema_version": 2,
         "model_version": old.get("version"),
         "started_utc": format_utc(started),
         "tool_versions": old.get("tools", {}),
@@ -277,12 +287,41 @@ def _migrate_signal_1(signal: Any) -> Any:
     new = dict(signal)
     lambdas = signal.get("lambdas")
     if isinstance(lambdas, Mapping):
-        new["lambdas"] = [lambdas.get(name) for name in CHARACTERISTICS]
+        new["lambdas"] = [lambdas.get(name) for name in PAPER_CHARACTERISTICS]
     return new
 
 
+def _migrate_2_to_3(old: Mapping[str, Any]) -> dict[str, Any]:
+    """Lists in paper order become mappings by characteristic name."""
+    specs = []
+    for spec in old.get("specs", []) if isinstance(old.get("specs"), list) else []:
+        if not isinstance(spec, Mapping):
+            specs.append(spec)
+            continue
+        new_spec = dict(spec)
+        if isinstance(spec.get("weights"), list):
+            new_spec["weights"] = _paper_order(spec["weights"])
+        signals = spec.get("signals")
+        if isinstance(signals, list):
+            new_spec["signals"] = [
+                {**sig, "lambdas": _paper_order(sig["lambdas"])}
+                if isinstance(sig, Mapping) and isinstance(sig.get("lambdas"), list)
+                else sig
+                for sig in signals
+            ]
+        specs.append(new_spec)
+    return {**old, "schema_version": SCHEMA_VERSION, "specs": specs if specs else old.get("specs")}
+
+
+def _paper_order(values: list[Any]) -> Any:
+    # A list of the wrong length stays a list, so that validation names it.
+    if len(values) != len(PAPER_CHARACTERISTICS):
+        return values
+    return dict(zip(PAPER_CHARACTERISTICS, values, strict=True))
+
+
 def validate_record(record: Mapping[str, Any], *, file: str | None = None) -> dict[str, Any]:
-    """Check a schema-2 record and return a normalised copy; errors name the file and key."""
+    """Check a schema-3 record and return a normalised copy; errors name the file and key."""
     if record.get("schema_version") != SCHEMA_VERSION:
         raise HistoryError(
             f"expected schema_version {SCHEMA_VERSION} (got {record.get('schema_version')!r})",
@@ -345,6 +384,8 @@ def _normalise_spec(spec: Any, where: str, file: str | None) -> dict[str, Any]:
     out: dict[str, Any] = {key: spec[key] for key in _SPEC_KEYS if key in spec}
     out["name"] = name
     out["phi"] = optional_float(spec.get("phi"), where=f"{where}.phi", file=file)
+    if "weights" in spec:
+        out["weights"] = _lambda_mapping(spec["weights"], f"{where}.weights", file)
     if "min_phi" in spec:
         out["min_phi"] = optional_float(spec["min_phi"], where=f"{where}.min_phi", file=file)
     signals = spec.get("signals", [])
@@ -371,19 +412,22 @@ def _normalise_signal(signal: Any, where: str, file: str | None) -> dict[str, An
             hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
         )
     out: dict[str, Any] = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
-    lambdas = signal.get("lambdas")
-    if not isinstance(lambdas, (list, tuple)) or len(lambdas) != len(CHARACTERISTICS):
-        raise HistoryError(
-            f"expected a list of {len(CHARACTERISTICS)} values λ1–λ7 (got {lambdas!r})",
-            file=file,
-            key=f"{where}.lambdas",
-            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
-        )
-    out["lambdas"] = [
-        optional_float(value, where=f"{where}.lambdas[{k}]", file=file)
-        for k, value in enumerate(lambdas)
-    ]
+    out["lambdas"] = _lambda_mapping(signal.get("lambdas"), f"{where}.lambdas", file)
     for key in ("lag_s", "peak_correlation", "mae", "rms", "delta_e", "error_std", "mean_error"):
         if key in signal:
             out[key] = optional_float(signal[key], where=f"{where}.{key}", file=file)
     return out
+
+
+def _lambda_mapping(raw: Any, where: str, file: str | None) -> dict[str, float | None]:
+    """Values keyed by characteristic name; a spec result of schema 1 gives seven in order."""
+    if isinstance(raw, (list, tuple)) and len(raw) == len(PAPER_CHARACTERISTICS):
+        raw = dict(zip(PAPER_CHARACTERISTICS, raw, strict=True))
+    if not isinstance(raw, Mapping) or not raw or not all(isinstance(k, str) for k in raw):
+        raise HistoryError(
+            f"expected a mapping of characteristic name to value (got {raw!r})",
+            file=file,
+            key=where,
+            hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
+        )
+    return {name: optional_float(raw[name], where=f"{where}.{name}", file=file) for name in raw}

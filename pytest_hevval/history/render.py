@@ -6,7 +6,7 @@ import json
 from collections.abc import Sequence
 from typing import Any
 
-from ._base import CHARACTERISTICS
+from ..core.registry import describe
 from .compare import Comparison, FieldDelta, Regression, SignalComparison
 
 __all__ = ["FORMATS", "comparison_json", "comparison_markdown", "comparison_table", "render"]
@@ -23,8 +23,9 @@ _ERROR_LABELS = {
 }
 
 
-def _lambda_label(index: int, name: str) -> str:
-    return f"λ{index + 1} {name}"
+def _lambda_label(name: str) -> str:
+    symbol = describe(name).symbol
+    return name if symbol == name else f"{symbol} {name}"
 
 
 def _value(value: float | None, *, physical: bool) -> str:
@@ -44,10 +45,10 @@ def _delta(delta: FieldDelta, *, physical: bool) -> str:
 
 def _signal_rows(signal: SignalComparison) -> list[tuple[str, str, str, str]]:
     rows = []
-    for i, (name, delta) in enumerate(zip(CHARACTERISTICS, signal.lambdas, strict=True)):
+    for delta in signal.lambdas:
         rows.append(
             (
-                _lambda_label(i, name),
+                _lambda_label(delta.field),
                 _value(delta.before, physical=False),
                 _value(delta.after, physical=False),
                 _delta(delta, physical=False),

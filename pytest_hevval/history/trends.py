@@ -16,11 +16,13 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ._base import CHARACTERISTICS, HistoryError, spec_key
+from ..core.registry import describe, keyed_lambdas, order_names
+from ._base import HistoryError, spec_key
 
 __all__ = [
     "HistoryRow",
     "Step",
+    "characteristic_names",
     "detect_steps",
     "history_table",
     "plot_history",
@@ -43,7 +45,8 @@ class HistoryRow:
     spec_name: str
     signal: str | None
     phi: float | None
-    lambdas: tuple[float | None, ...]
+    #: λ values keyed by characteristic name (empty on a spec row).
+    lambdas: Mapping[str, float | None]
     lag_s: float | None
     passed: bool | None
 
@@ -53,8 +56,7 @@ class HistoryRow:
             return self.phi
         if field == "lag_s":
             return self.lag_s
-        index = CHARACTERISTICS.index(field)
-        return self.lambdas[index] if index < len(self.lambdas) else None
+        return self.lambdas.get(field)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -64,9 +66,7 @@ class HistoryRow:
             "spec_name": self.spec_name,
             "signal": self.signal,
             "phi": self.phi,
-            "lambdas": dict(zip(CHARACTERISTICS, self.lambdas, strict=True))
-            if self.lambdas
-            else None,
+            "lambdas": dict(self.lambdas) if self.lambdas else None,
             "lag_s": self.lag_s,
             "passed": self.passed,
         }
@@ -115,7 +115,7 @@ def history_table(
                 spec_name=str(spec_result.get("name", spec_key(spec_result))),
                 signal=None,
                 phi=_number(spec_result.get("phi")),
-                lambdas=(),
+                lambdas={},
                 lag_s=None,
                 passed=passed if isinstance(passed, bool) else None,
             )
@@ -131,14 +131,17 @@ def history_table(
                     replace(
                         spec_row,
                         signal=str(sig["path"]),
-                        lambdas=tuple(_number(v) for v in lambdas)
-                        if isinstance(lambdas, list)
-                        else (),
+                        lambdas={k: _number(v) for k, v in keyed_lambdas(lambdas).items()},
                         lag_s=_number(sig.get("lag_s")),
                         passed=passed if isinstance(passed, bool) else None,
                     )
                 )
     return rows
+
+
+def characteristic_names(rows: Sequence[HistoryRow]) -> list[str]:
+    """Every characteristic any of ``rows`` carries, in report order."""
+    return order_names(name for row in rows for name in row.lambdas)
 
 
 def row_series(rows: Sequence[HistoryRow]) -> dict[tuple[str, str | None], list[HistoryRow]]:
@@ -158,12 +161,13 @@ def render_history_table(rows: Sequence[HistoryRow]) -> str:
     if not rows:
         return "(no recorded runs match)"
     with_signals = any(row.signal is not None for row in rows)
+    names = characteristic_names(rows)
     header = ["time (UTC)", "model version", "spec"]
     if with_signals:
         header += ["signal"]
     header += ["Φ"]
     if with_signals:
-        header += [f"λ{i}" for i in range(1, len(CHARACTERISTICS) + 1)] + ["lag s"]
+        header += [describe(n).symbol for n in names] + ["lag s"]
     header += ["passed"]
     table = [header]
     for row in rows:
@@ -172,8 +176,7 @@ def render_history_table(rows: Sequence[HistoryRow]) -> str:
             cells.append(row.signal or "")
         cells.append(_fmt(row.phi))
         if with_signals:
-            lambdas = row.lambdas or (None,) * len(CHARACTERISTICS)
-            cells += [_fmt(v) for v in lambdas] + [_fmt(row.lag_s, 2)]
+            cells += [_fmt(row.lambdas.get(n)) for n in names] + [_fmt(row.lag_s, 2)]
         cells.append({True: "yes", False: "NO", None: "—"}[row.passed])
         table.append(cells)
     widths = [max(len(line[i]) for line in table) for i in range(len(header))]
@@ -347,10 +350,13 @@ def plot_history(rows: Sequence[HistoryRow], path: Path | str) -> Path:
     if with_signals:
         for (_spec, signal), series in row_series(rows).items():
             xs = [x_of[(r.started_utc, r.model_version)] for r in series]
-            for i, name in enumerate(CHARACTERISTICS):
+            for name in characteristic_names(series):
                 ys = [r.value(name) for r in series]
                 axes[1].plot(
-                    xs, [np.nan if y is None else y for y in ys], ".-", label=f"{signal} λ{i + 1}"
+                    xs,
+                    [np.nan if y is None else y for y in ys],
+                    ".-",
+                    label=f"{signal} {describe(name).symbol}",
                 )
         axes[1].set_ylabel("λ")
         axes[1].legend(fontsize="x-small", ncol=2, loc="best")

@@ -155,7 +155,7 @@ def render_html(
         summary=model.summary(spec_results),
         specs=specs,
         worst=worst,
-        characteristics=model.CHARACTERISTICS,
+        characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,
         short_labels=model.SHORT_LABELS,
         colours=model.CHARACTERISTIC_COLOURS,

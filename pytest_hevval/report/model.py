@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, TypeGuard, cast
 
 from ..core.characteristics import CHARACTERISTICS
+from ..core.registry import describe, keyed_lambdas, order_names, registered_characteristics
 
 __all__ = [
     "CHARACTERISTICS",
@@ -24,6 +25,7 @@ __all__ = [
     "GlyphPoint",
     "WorstRow",
     "cells",
+    "characteristic_names",
     "failing_signals",
     "glyph_points",
     "is_finite_number",
@@ -36,26 +38,40 @@ __all__ = [
     "worst_rows",
 ]
 
-LABELS: dict[str, str] = {
-    "lag_correlation": "lag correlation",
-    "derivative_match": "derivative match",
-    "mae": "MAE",
-    "rms": "RMS",
-    "anomaly": "anomaly (RMS−MAE)",
-    "error_std": "error spread",
-    "emergent": "emergent",
-}
-SHORT_LABELS: dict[str, str] = {name: f"λ{i}" for i, name in enumerate(CHARACTERISTICS, 1)}
-#: Fill colour of each characteristic λ1…λ7 (Okabe–Ito, safe for colour-blind readers).
-CHARACTERISTIC_COLOURS: dict[str, str] = {
-    "lag_correlation": "#0072B2",
-    "derivative_match": "#E69F00",
-    "mae": "#009E73",
-    "rms": "#56B4E9",
-    "anomaly": "#CC79A7",
-    "error_std": "#D55E00",
-    "emergent": "#F0E442",
-}
+
+class _Described(Mapping[str, str]):
+    """One field of every characteristic's registry entry, by name (plain names for unknowns)."""
+
+    def __init__(self, attribute: str) -> None:
+        self._attribute = attribute
+
+    def __getitem__(self, name: str) -> str:
+        return str(getattr(describe(name), self._attribute))
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([c.name for c in registered_characteristics()])
+
+    def __len__(self) -> int:
+        return len(registered_characteristics())
+
+
+#: Long label of each characteristic ("lag correlation", "MAE", …).
+LABELS: Mapping[str, str] = _Described("label")
+#: Symbol of each characteristic ("λ1" … "λ7"; a registered one's name).
+SHORT_LABELS: Mapping[str, str] = _Described("symbol")
+#: Fill colour of each characteristic (Okabe–Ito for λ1…λ7, safe for colour-blind readers).
+CHARACTERISTIC_COLOURS: Mapping[str, str] = _Described("colour")
+
+
+def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
+    """Every characteristic any signal of ``specs`` carries, in report order."""
+    names: list[str] = []
+    for spec in specs:
+        for signal in items(spec.get("signals")):
+            if isinstance(signal, Mapping):
+                names.extend(_lambdas(signal))
+    return order_names(names) if names else list(CHARACTERISTICS)
+
 
 Status = Literal["pass", "fail", "ungated"]
 
@@ -81,13 +97,13 @@ def items(value: object) -> list[Any]:
         return []
 
 
-def _lambdas(signal: Mapping[str, Any]) -> list[float | None]:
-    raw = items(signal.get("lambdas"))
-    out: list[float | None] = []
-    for i in range(len(CHARACTERISTICS)):
-        value = raw[i] if i < len(raw) else None
-        out.append(float(value) if is_finite_number(value) else None)
-    return out
+def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
+    """λ values by name, in report order (a list in paper order is read too)."""
+    try:
+        raw = keyed_lambdas(signal.get("lambdas"))
+    except ValueError:
+        return {}
+    return {name: raw[name] for name in order_names(raw)}
 
 
 def _thresholds(signal: Mapping[str, Any]) -> dict[str, float]:
@@ -130,7 +146,7 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
     gates = _thresholds(signal)
     failed = _failed_names(signal)
     out: list[Cell] = []
-    for i, (name, value) in enumerate(zip(CHARACTERISTICS, values, strict=True), 1):
+    for i, (name, value) in enumerate(values.items(), 1):
         threshold = gates.get(name)
         status: Status
         if name in failed:
@@ -156,7 +172,7 @@ def margin(signal: Mapping[str, Any]) -> float | None:
 
 
 def _min_lambda(signal: Mapping[str, Any]) -> float:
-    values = [v for v in _lambdas(signal) if v is not None]
+    values = [v for v in _lambdas(signal).values() if v is not None]
     return min(values) if values else 1.0
 
 
@@ -234,12 +250,12 @@ class GlyphPoint:
     status: Status
 
 
-def _weights(spec: Mapping[str, Any]) -> list[float]:
-    raw = items(spec.get("weights"))
-    return [
-        float(raw[i]) if i < len(raw) and is_finite_number(raw[i]) else 1.0
-        for i in range(len(CHARACTERISTICS))
-    ]
+def _weights(spec: Mapping[str, Any]) -> dict[str, float]:
+    try:
+        raw = keyed_lambdas(spec.get("weights"))
+    except ValueError:
+        return {}
+    return {name: value for name, value in raw.items() if value is not None}
 
 
 def glyph_points(spec: Mapping[str, Any]) -> list[GlyphPoint]:
@@ -258,7 +274,8 @@ def glyph_points(spec: Mapping[str, Any]) -> list[GlyphPoint]:
                     characteristic=c.characteristic,
                     index=c.index,
                     value=c.value,
-                    weight=alpha * beta[c.index - 1],
+                    weight=alpha
+                    * beta.get(c.characteristic, describe(c.characteristic).default_weight),
                     level=max(1, level),
                     status=c.status,
                 )

@@ -17,10 +17,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ..core.registry import order_names
 from ..errors import MissingExtraError
 from .model import (
     CHARACTERISTIC_COLOURS,
-    CHARACTERISTICS,
     LABELS,
     SHORT_LABELS,
     GlyphPoint,
@@ -175,7 +175,7 @@ def glyph_plot(spec: Mapping[str, Any]) -> Png | None:
             markeredgecolor="#1f2328",
             label=f"{SHORT_LABELS[name]} {LABELS[name]}",
         )
-        for name in CHARACTERISTICS
+        for name in order_names(p.characteristic for p in points)
     ]
     for level in sorted({p.level for p in points}):
         handles.append(

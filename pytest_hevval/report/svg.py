@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .model import CHARACTERISTIC_COLOURS, CHARACTERISTICS, SHORT_LABELS, is_finite_number, items
+from ..core.registry import order_names
+from .model import CHARACTERISTIC_COLOURS, SHORT_LABELS, _lambdas, is_finite_number
 
 __all__ = ["history_svg", "nice_ticks", "signal_svg"]
 
@@ -425,11 +426,11 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
     if not entries:
         return None
     lines: dict[str, FloatArray] = {}
-    for i, name in enumerate(CHARACTERISTICS):
+    keyed = [_lambdas(h) for h in entries]
+    for name in order_names(n for values_of in keyed for n in values_of):
         values = []
-        for h in entries:
-            lambdas = items(h.get("lambdas"))
-            value = lambdas[i] if i < len(lambdas) else None
+        for values_of in keyed:
+            value = values_of.get(name)
             values.append(float(value) if is_finite_number(value) else np.nan)
         lines[name] = np.array(values, dtype=np.float64)
     phi = np.array(

@@ -9,13 +9,18 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import yaml
 
-from ..core.characteristics import CHARACTERISTICS
+from ..core.registry import (
+    LAMBDA_ALIASES,
+    is_registered,
+    registered_characteristics,
+    select_characteristics,
+)
 from ..data.record import SourceOptions
 from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
@@ -27,9 +32,7 @@ from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 __all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
 
 #: ``lambda1`` … ``lambda7`` name the seven characteristics in paper order.
-THRESHOLD_ALIASES: dict[str, str] = {
-    f"lambda{i}": name for i, name in enumerate(CHARACTERISTICS, start=1)
-}
+THRESHOLD_ALIASES: dict[str, str] = LAMBDA_ALIASES
 
 _TOP_KEYS = (
     "name",
@@ -39,6 +42,7 @@ _TOP_KEYS = (
     "alignment",
     "thresholds",
     "weights",
+    "metrics",
     "min_phi",
     "correlation",
     "emergent",
@@ -83,9 +87,13 @@ T = TypeVar("T")
 
 def characteristic_name(name: str) -> str | None:
     """Canonical characteristic name for a name or alias, or None."""
-    if name in CHARACTERISTICS:
+    if is_registered(name):
         return name
     return THRESHOLD_ALIASES.get(name)
+
+
+def _registered_names() -> tuple[str, ...]:
+    return tuple(c.name for c in registered_characteristics())
 
 
 class _Context:
@@ -260,8 +268,11 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     reference = _source(context, top["reference"], top.line_of("reference"), "reference", base)
     model = _source(context, top["model"], top.line_of("model"), "model", base)
     alignment = _alignment(context, top)
+    metrics = _metrics(context, top)
+    scored = {c.name for c in select_characteristics(metrics)}
     thresholds = _thresholds(context, top, "thresholds", "thresholds")
-    weights = _weights(context, top)
+    _check_scored(context, thresholds, scored, top.line_of("thresholds"), "thresholds")
+    weights = _weights(context, top, scored)
     min_phi = context.get(top, "min_phi", "", context.unit_interval, None)
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
@@ -277,6 +288,8 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         for i, item in enumerate(sets_value)
     )
     _check_unique_paths(context, roots)
+    for _, node in _all_nodes(roots):
+        _check_scored(context, node.thresholds, scored, node.line, _join(node.key, "thresholds"))
     name = context.get(top, "name", "", context.text, _default_name(path))
     return Spec(
         path=path,
@@ -289,12 +302,21 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         description=context.get(top, "description", "", context.text, None),
         thresholds=thresholds,
         weights=weights,
+        metrics=metrics,
         min_phi=min_phi,
         min_phi_line=top.line_of("min_phi"),
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
     )
+
+
+def _all_nodes(roots: Sequence[SignalSpec]) -> Iterator[tuple[int, SignalSpec]]:
+    stack = [(1, root) for root in roots]
+    while stack:
+        level, node = stack.pop()
+        yield level, node
+        stack.extend((level + 1, child) for child in node.children)
 
 
 def _default_name(path: Path) -> str:
@@ -503,7 +525,7 @@ def _thresholds(context: _Context, mapping: LineDict, name: str, key: str) -> di
         return {}
     table = context.mapping(mapping[name], mapping.line_of(name), key)
     out: dict[str, float] = {}
-    allowed = (*CHARACTERISTICS, *THRESHOLD_ALIASES)
+    allowed = (*_registered_names(), *THRESHOLD_ALIASES)
     for raw_name, value in table.items():
         canonical = characteristic_name(raw_name)
         line = table.line_of(raw_name)
@@ -513,7 +535,7 @@ def _thresholds(context: _Context, mapping: LineDict, name: str, key: str) -> di
                 _join(key, raw_name),
                 "unknown characteristic",
                 hint=did_you_mean(raw_name, allowed)
-                or "use one of " + ", ".join(CHARACTERISTICS) + " (or lambda1…lambda7)",
+                or "use one of " + ", ".join(_registered_names()) + " (or lambda1…lambda7)",
             )
         if canonical in out:
             raise context.error(line, _join(key, raw_name), f"repeats {canonical}")
@@ -521,11 +543,53 @@ def _thresholds(context: _Context, mapping: LineDict, name: str, key: str) -> di
     return out
 
 
-def _weights(context: _Context, top: LineDict) -> tuple[float, ...]:
+def _metrics(context: _Context, top: LineDict) -> tuple[str, ...]:
+    if "metrics" not in top or top["metrics"] is None:
+        return ()
+    value = top["metrics"]
+    line = top.line_of("metrics")
+    if not isinstance(value, LineList):
+        raise context.error(line, "metrics", "must be a list of characteristic names", got=value)
+    names: list[str] = []
+    for i, item in enumerate(value):
+        key = f"metrics[{i}]"
+        name = context.text(item, value.line_of(i), key)
+        canonical = characteristic_name(name)
+        if canonical is None:
+            raise context.error(
+                value.line_of(i),
+                key,
+                f"unknown characteristic {name!r}",
+                hint=did_you_mean(name, _registered_names())
+                or "registered: " + ", ".join(_registered_names()),
+            )
+        if canonical not in names:
+            names.append(canonical)
+    return tuple(names)
+
+
+def _check_scored(
+    context: _Context,
+    table: Mapping[str, float],
+    scored: set[str],
+    line: int,
+    key: str,
+) -> None:
+    for name in table:
+        if name not in scored:
+            raise context.error(
+                line,
+                _join(key, name),
+                f"characteristic {name!r} is not scored by this spec",
+                hint=f"add it to the spec's metrics: [{name}]",
+            )
+
+
+def _weights(context: _Context, top: LineDict, scored: set[str]) -> dict[str, float]:
     if "weights" not in top or top["weights"] is None:
-        return (1.0,) * 7
+        return {}
     table = context.mapping(top["weights"], top.line_of("weights"), "weights")
-    values = dict.fromkeys(CHARACTERISTICS, 1.0)
+    values: dict[str, float] = {}
     for raw_name, value in table.items():
         canonical = characteristic_name(raw_name)
         line = table.line_of(raw_name)
@@ -534,12 +598,18 @@ def _weights(context: _Context, top: LineDict) -> tuple[float, ...]:
                 line,
                 _join("weights", raw_name),
                 "unknown characteristic",
-                hint=did_you_mean(raw_name, (*CHARACTERISTICS, *THRESHOLD_ALIASES)) or None,
+                hint=did_you_mean(raw_name, (*_registered_names(), *THRESHOLD_ALIASES)) or None,
             )
         values[canonical] = context.non_negative(value, line, _join("weights", raw_name))
-    if not any(values.values()):
+    _check_scored(context, values, scored, top.line_of("weights"), "weights")
+    effective = [
+        values.get(c.name, c.default_weight)
+        for c in registered_characteristics()
+        if c.name in scored
+    ]
+    if not any(effective):
         raise context.error(top.line_of("weights"), "weights", "cannot all be 0")
-    return tuple(values[name] for name in CHARACTERISTICS)
+    return values
 
 
 def _expression(context: _Context, value: Any, line: int, key: str) -> Expression:

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from ..core.characteristics import CHARACTERISTICS
+from ..core.registry import Characteristic, is_registered, select_characteristics
 from ..data.record import SourceOptions
 from .expressions import Expression
 
@@ -99,7 +99,10 @@ class Spec:
     alignment: AlignmentSpec = AlignmentSpec()
     description: str | None = None
     thresholds: Mapping[str, float] = field(default_factory=dict)
-    weights: tuple[float, ...] = (1.0,) * 7
+    #: β by characteristic name; a scored characteristic missing here weighs its default.
+    weights: Mapping[str, float] = field(default_factory=dict)
+    #: Characteristics scored beyond those enabled by default (the ``metrics:`` key).
+    metrics: tuple[str, ...] = ()
     min_phi: float | None = None
     min_phi_line: int = 1
     correlation: Literal["xcorr", "pearson"] = "xcorr"
@@ -125,9 +128,17 @@ class Spec:
         """Effective thresholds of one node: spec defaults < node < ratchet (only if stricter)."""
         merged = {**self.thresholds, **node.thresholds}
         for name, value in self.ratchet.get("/".join(path), {}).items():
-            if name in CHARACTERISTICS and value > merged.get(name, -1.0):
+            if is_registered(name) and value > merged.get(name, -1.0):
                 merged[name] = value
         return merged
+
+    def characteristics(self) -> tuple[Characteristic, ...]:
+        """What this spec scores: the default characteristics plus its ``metrics``."""
+        return select_characteristics(self.metrics)
+
+    def beta(self) -> dict[str, float]:
+        """β of every scored characteristic, keyed by name."""
+        return {c.name: self.weights.get(c.name, c.default_weight) for c in self.characteristics()}
 
     def reference_columns(self) -> set[str]:
         columns: set[str] = set()

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import yaml
 
-from ..core.characteristics import CHARACTERISTICS
+from ..core.registry import is_registered, registered_characteristics
 from ..errors import SpecError, did_you_mean
 
 __all__ = ["Thresholds", "load_sidecar", "sidecar_path"]
@@ -79,13 +79,14 @@ def load_sidecar(spec_path: Path | str) -> Thresholds:
         entry: dict[str, float] = {}
         for name, value in values.items():
             key = f"{signal}.{name}"
-            if name not in CHARACTERISTICS:
-                suggestion = did_you_mean(str(name), CHARACTERISTICS)
+            if not isinstance(name, str) or not is_registered(name):
+                known = [c.name for c in registered_characteristics()]
+                suggestion = did_you_mean(str(name), known)
                 raise SpecError(
                     f"unknown characteristic {name!r}" + (f"; {suggestion}" if suggestion else ""),
                     file=str(path),
                     key=key,
-                    hint="valid: " + ", ".join(CHARACTERISTICS) + f"; {hint}",
+                    hint="valid: " + ", ".join(known) + f"; {hint}",
                 )
             if (
                 isinstance(value, bool)
