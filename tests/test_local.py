@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval.core.characteristics import CHARACTERISTICS, signal_characteristics
@@ -35,6 +35,11 @@ def test_one_group_over_the_whole_record_is_the_global_result(
     pair: tuple[np.ndarray, np.ndarray], correlation: str
 ) -> None:
     ref, sim = pair
+    if correlation == "pearson":
+        # Pearson's variances come from Σx² − (Σx)²/n; for a signal constant to within
+        # rounding that difference is rounding noise in both computations (the core and the
+        # per-group sums add in different orders), so there is nothing to compare.
+        assume(np.ptp(sim) > 1e-6 * (np.abs(sim).max() + 1))
     whole = signal_characteristics(ref, sim, dt=0.1, correlation=correlation)  # type: ignore[arg-type]
     n = ref.shape[0]
     sums = segment_sums(ref, sim, np.array([0]), np.array([n]))
