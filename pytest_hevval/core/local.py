@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
+from .registry import FUSED_CHARACTERISTICS
 
 __all__ = [
     "HOT_FACTOR",
@@ -52,15 +53,8 @@ __all__ = [
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
-#: The characteristics that have a meaning over part of a record, in paper order.
-LOCAL_CHARACTERISTICS: tuple[str, ...] = (
-    "lag_correlation",
-    "derivative_match",
-    "mae",
-    "rms",
-    "anomaly",
-    "error_std",
-)
+#: The characteristics that have a meaning over part of a record: λ1–λ6, in paper order.
+LOCAL_CHARACTERISTICS: tuple[str, ...] = FUSED_CHARACTERISTICS
 #: Fewer samples than this in a window or cell: its characteristics are NaN (not judged).
 MIN_GROUP_SAMPLES = 3
 #: A window whose mean squared error exceeds this many times the record's is "hot": the
