@@ -250,3 +250,16 @@ def test_spec_errors_survive_pickling() -> None:
     copy = pickle.loads(pickle.dumps(error))
     assert str(copy) == str(error) == "f.yaml:3: sets[0]: bad; fix it"
     assert copy.line == 3
+
+
+def test_all_alphas_zero_is_a_spec_error_not_a_traceback() -> None:
+    text = (
+        "reference: ref.csv\nmodel: {path: sim.csv}\n"
+        "sets:\n  - {signal: v, alpha: 0}\n  - {signal: w, alpha: 0}\n"
+    )
+    with pytest.raises(SpecError) as info:
+        parse_spec_text(text, Path("/p/t.hevval.yaml"))
+    assert str(info.value) == (
+        "/p/t.hevval.yaml:3: sets: every signal's alpha is zero, so Φ is undefined; "
+        "give at least one signal an alpha above 0"
+    )

@@ -290,6 +290,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     _check_unique_paths(context, roots)
     for _, node in _all_nodes(roots):
         _check_scored(context, node.thresholds, scored, node.line, _join(node.key, "thresholds"))
+    _check_phi_defined(context, roots, sets_line)
     name = context.get(top, "name", "", context.text, _default_name(path))
     return Spec(
         path=path,
@@ -309,6 +310,17 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
     )
+
+
+def _check_phi_defined(context: _Context, roots: Sequence[SignalSpec], line: int) -> None:
+    """Φ (eq. 14) divides by Σ α·β; with every α zero it can never be scored (β: _weights)."""
+    if not any(node.alpha > 0 for _, node in _all_nodes(roots)):
+        raise context.error(
+            line,
+            "sets",
+            "every signal's alpha is zero, so Φ is undefined",
+            hint="give at least one signal an alpha above 0",
+        )
 
 
 def _all_nodes(roots: Sequence[SignalSpec]) -> Iterator[tuple[int, SignalSpec]]:
