@@ -204,7 +204,8 @@ def _signal_values(
     node: SignalSpec,
 ) -> FloatArray:
     record = aligned.reference if side == "reference" else aligned.model
-    method = node.interpolation
+    # A CAN log's signals hold their value between frames; other sources are interpolated.
+    method = node.interpolation or record.meta.get("interpolation", "linear")
     names = _columns_of(expression, record)
     columns = aligned.columns(side, names, method)  # type: ignore[arg-type]
     if expression.is_column or names == (expression.source,):

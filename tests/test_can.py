@@ -795,3 +795,32 @@ def test_kcd_database_decodes_as_dbc(tmp_path: Path, database: Any, database_fil
         np.testing.assert_array_equal(
             from_kcd.channels[name].values, from_dbc.channels[name].values
         )
+
+
+def test_can_signals_are_held_between_frames_unless_the_spec_says_otherwise(
+    tmp_path: Path, database: Any
+) -> None:
+    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.spec.load import parse_spec_text
+
+    messages = _frames(database)
+    (tmp_path / "powertrain.dbc").write_text(DBC)
+    _write_log(tmp_path / "trip.blf", messages)
+    times, values = _expected(database, messages)["c"]
+    expected_t, expected = np.asarray(times), np.asarray(values)
+    t = np.arange(0.0, 1.98, 0.01)
+    pd.DataFrame({"time": t, "c": np.zeros_like(t)}).to_csv(tmp_path / "sim.csv", index=False)
+    base = "reference: {path: trip.blf, dbc: powertrain.dbc}\nmodel: {path: sim.csv}\nsets:\n"
+    for node, method in (
+        ("{signal: c}", "previous"),
+        ("{signal: c, interpolation: linear}", "linear"),
+    ):
+        spec = parse_spec_text(base + f"  - {node}\n", tmp_path / "t.hevval.yaml")
+        evaluation = evaluate_spec(spec, keep_arrays=True)
+        ref, _ = evaluation.arrays["c"]
+        grid = evaluation.aligned.time if evaluation.aligned is not None else t
+        if method == "previous":
+            held = expected[np.clip(np.searchsorted(expected_t, grid, side="right") - 1, 0, None)]
+            np.testing.assert_array_equal(ref, held)
+        else:
+            np.testing.assert_allclose(ref, np.interp(grid, expected_t, expected), rtol=1e-12)

@@ -684,9 +684,9 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         unit=context.get(mapping, "unit", key, context.text, None),
         description=context.get(mapping, "description", key, context.text, None),
         interpolation=cast(
-            Interpolation,
+            "Interpolation | None",
             context.get(
-                mapping, "interpolation", key, context.choice(("linear", "previous")), "linear"
+                mapping, "interpolation", key, context.choice(("linear", "previous")), None
             ),
         ),
         reference_range=context.get(mapping, "reference_range", key, context.positive, None),

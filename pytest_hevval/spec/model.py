@@ -74,7 +74,8 @@ class SignalSpec:
     alpha: float = 1.0
     unit: str | None = None
     description: str | None = None
-    interpolation: Interpolation = "linear"
+    #: None: the source's own default (zero-order hold for CAN logs, else linear).
+    interpolation: Interpolation | None = None
     reference_range: float | None = None
     thresholds: Mapping[str, float] = field(default_factory=dict)
     ref_unit: str | None = None
