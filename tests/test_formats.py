@@ -80,7 +80,7 @@ def test_unknown_format_option_suggests() -> None:
         detect_format("data.bin", SourceOptions(format="parquett"))
     assert str(info.value) == (
         "data.bin: format: unknown format 'parquett'; did you mean 'parquet'? "
-        "supported formats: csv, tsv, parquet, mat, hdf5, mdf, can"
+        "supported formats: csv, tsv, parquet, mat, hdf5, mdf, can, tdms"
     )
 
 
