@@ -369,6 +369,7 @@ def _align(
         offset_from=alignment.offset_from,
         max_offset_s=alignment.max_offset_s,
         nan_policy=alignment.nan,
+        by=alignment.by,
     )
 
 
@@ -591,6 +592,13 @@ def _spec_result(
             "offset_s": aligned.offset_s,
             "offset_found": aligned.offset_found,
             "coverage": aligned.coverage,
+            "by": aligned.by,
+            **({"clock_offset_s": aligned.clock_offset_s} if aligned.by == "clock" else {}),
+            **(
+                {"absolute_start": aligned.absolute_start()}
+                if aligned.absolute_start() is not None
+                else {}
+            ),
         },
     )
 

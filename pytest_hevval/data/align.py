@@ -63,6 +63,10 @@ class AlignedData:
     offset_s: float
     offset_found: bool
     nan_policy: Literal["raise", "omit"] = "raise"
+    #: "clock" when the records were lined up by their absolute start times.
+    by: Literal["time", "clock"] = "time"
+    #: The model's absolute start minus the reference's (by clock only).
+    clock_offset_s: float = 0.0
     _cache: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
     _times: FloatArray | None = None
     _on_grid: dict[tuple[int, float], bool] = field(default_factory=dict)
@@ -122,6 +126,16 @@ class AlignedData:
         self, side: Literal["reference", "model"], names: Iterable[str], method: Method
     ) -> dict[str, FloatArray]:
         return {name: self.column(side, name, method) for name in names}
+
+    def absolute_start(self) -> str | None:
+        """The grid's first point as clock time (ISO 8601, UTC), when the reference has one."""
+        epoch = self.reference.meta.get("start_epoch_s")
+        if epoch is None:
+            return None
+        from datetime import datetime, timezone
+
+        start = datetime.fromtimestamp(float(epoch) + self.grid.start_s, tz=timezone.utc)
+        return start.isoformat()
 
     @property
     def coverage(self) -> float:
@@ -234,8 +248,14 @@ def align_records(
     offset_from: tuple[str, str] | None = None,
     max_offset_s: float = 30.0,
     nan_policy: Literal["raise", "omit"] = "raise",
+    by: Literal["time", "clock"] = "time",
 ) -> AlignedData:
-    """Build the common grid for the channels a spec uses."""
+    """Build the common grid for the channels a spec uses.
+
+    With ``by="clock"`` both records carry an absolute start (``meta["start_epoch_s"]``, set
+    by readers of clock-time columns) and the model's time is shifted by the difference of
+    the two starts before any declared or found offset.
+    """
     ref_names = list(dict.fromkeys(reference_columns))
     model_names = list(dict.fromkeys(model_columns))
     for name in ref_names:
@@ -257,6 +277,10 @@ def align_records(
             )
         rate_hz = nominal_rate(min(finite))
 
+    clock_offset = 0.0
+    if by == "clock":
+        clock_offset = _clock_offset(reference, model)
+        offset_s = offset_s + clock_offset
     found = False
     if offset_from is not None:
         ref_channel = reference.channel(offset_from[0])
@@ -303,7 +327,25 @@ def align_records(
         offset_s=float(offset_s),
         offset_found=found,
         nan_policy=nan_policy,
+        by=by,
+        clock_offset_s=clock_offset,
     )
+
+
+def _clock_offset(reference: Record, model: Record) -> float:
+    """Seconds to add to the model's time so both count from the reference's start."""
+    starts = []
+    for record in (reference, model):
+        start = record.meta.get("start_epoch_s")
+        if start is None:
+            raise DataError(
+                "alignment.by is clock, but this record has no absolute time",
+                file=record.source,
+                hint="give it a clock-time column (ISO 8601 text, a datetime, or Unix epoch "
+                "time) or drop `by: clock`",
+            )
+        starts.append(float(start))
+    return starts[1] - starts[0]
 
 
 def _range(record: Record, names: list[str], shift: float = 0.0) -> str:

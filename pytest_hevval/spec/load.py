@@ -62,7 +62,16 @@ _SOURCE_KEYS = (
     "dbc",
 )
 _MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
-_ALIGN_KEYS = ("rate_hz", "window", "max_lag_s", "offset_s", "offset_from", "max_offset_s", "nan")
+_ALIGN_KEYS = (
+    "rate_hz",
+    "window",
+    "max_lag_s",
+    "offset_s",
+    "offset_from",
+    "max_offset_s",
+    "nan",
+    "by",
+)
 _SIGNAL_KEYS = (
     "signal",
     "ref",
@@ -529,6 +538,7 @@ def _alignment(context: _Context, top: LineDict) -> AlignmentSpec:
         offset_from=offset_from,
         max_offset_s=context.get(mapping, "max_offset_s", key, context.positive, 30.0),
         nan=context.get(mapping, "nan", key, context.choice(("raise", "omit")), "raise"),  # type: ignore[arg-type]
+        by=context.get(mapping, "by", key, context.choice(("time", "clock")), "time"),  # type: ignore[arg-type]
     )
 
 

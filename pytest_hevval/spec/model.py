@@ -60,6 +60,8 @@ class AlignmentSpec:
     offset_from: tuple[str, str] | None = None
     max_offset_s: float = 30.0
     nan: NanPolicy = "raise"
+    #: "time": both records' own time columns; "clock": their absolute start times.
+    by: Literal["time", "clock"] = "time"
 
 
 @dataclass(frozen=True)

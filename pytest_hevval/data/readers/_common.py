@@ -35,6 +35,85 @@ def _import(module: str, feature: str, extra: str) -> ModuleType:
         raise MissingExtraError.for_extra(feature, extra, module.split(".")[0]) from None
 
 
+#: First time stamps in these ranges are Unix epoch times (1980–2100) in that unit; a relative
+#: time base starts near zero and never reaches them.
+_EPOCH_UNITS: tuple[tuple[str, float], ...] = (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+_EPOCH_SECONDS = (3.15e8, 4.1e9)
+
+
+def _clock_seconds(raw: npt.NDArray[Any]) -> tuple[npt.NDArray[Any], float] | None:
+    """Absolute time stamps as (seconds since the first stamp, the first as Unix seconds).
+
+    Absolute means: datetime64 values (naive ones are taken as UTC), ISO-8601 text, or numbers
+    whose first value is a Unix time in s, ms, µs or ns between 1980 and 2100. None for a
+    relative time base (seconds from some start), which is returned as it is by the caller.
+    """
+    values = np.asarray(raw)
+    if values.ndim != 1 or values.size == 0:
+        return None
+    if np.issubdtype(values.dtype, np.datetime64):
+        stamps = values.astype("datetime64[ns]").astype(np.int64)
+    elif values.dtype.kind in "OUS":
+        import pandas as pd
+
+        try:
+            parsed = pd.to_datetime(pd.Series(values), utc=True, format="ISO8601")
+        except (ValueError, TypeError, OverflowError):
+            return None
+        if parsed.isna().any():
+            return None
+        stamps = parsed.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+    elif values.dtype.kind in "iuf":
+        first = float(values[0])
+        for _, scale in _EPOCH_UNITS:
+            if _EPOCH_SECONDS[0] <= first * scale <= _EPOCH_SECONDS[1]:
+                if values.dtype.kind in "iu":
+                    # Subtract in integers: epoch nanoseconds exceed float64's exact range.
+                    relative = (values.astype(np.int64) - int(values[0])).astype(np.float64)
+                else:
+                    relative = values.astype(np.float64) - first
+                return relative * scale, first * scale
+        return None
+    else:
+        return None
+    return (stamps - stamps[0]).astype(np.float64) * 1e-9, float(stamps[0]) * 1e-9
+
+
+def _start_meta(start_epoch_s: float) -> dict[str, Any]:
+    """The record's absolute start, as Record.meta keys (read by clock-time alignment)."""
+    from datetime import datetime, timezone
+
+    start = datetime.fromtimestamp(start_epoch_s, tz=timezone.utc)
+    return {"start_epoch_s": start_epoch_s, "absolute_start": start.isoformat()}
+
+
+def _time_base(
+    source: str,
+    column: str,
+    raw: npt.NDArray[Any],
+    options: SourceOptions,
+    *,
+    first_line: int | None = None,
+) -> tuple[FloatArray, dict[str, Any]]:
+    """:func:`_check_time` for relative or absolute (clock) time; the meta of a clock start."""
+    clock = _clock_seconds(raw)
+    if clock is None:
+        return _check_time(source, column, raw, options, first_line=first_line), {}
+    relative, start = clock
+    checked = _check_time(source, column, relative, _clock_options(options), first_line=first_line)
+    return checked, _start_meta(start)
+
+
+def _clock_options(options: SourceOptions) -> SourceOptions:
+    """Clock time is seconds already: no time_scale, no milliseconds check."""
+    return SourceOptions(
+        time=options.time,
+        format=options.format,
+        time_scale=1.0,
+        extra={**options.extra, "check_time_unit": False},
+    )
+
+
 def _check_time(
     source: str,
     column: str,

@@ -20,11 +20,12 @@ from ._common import (
     _as_list,
     _as_values,
     _channel_list,
-    _check_time,
+    _clock_seconds,
     _first_line,
     _no_rows,
     _pick_time,
     _table_record,
+    _time_base,
     _unit_from_name,
 )
 
@@ -191,12 +192,15 @@ def _read_delimited(
     if len(frame) == 0:
         raise _no_rows(path)
 
-    time_raw = _numeric_column(path, frame, time_name, decimal)
-    time = _check_time(path, time_name, time_raw, options, first_line=2)
+    time_raw = frame[time_name].to_numpy()
+    if time_raw.dtype.kind not in "OUSM" or _clock_seconds(time_raw) is None:
+        time_raw = _numeric_column(path, frame, time_name, decimal)
+    time, start_meta = _time_base(path, time_name, time_raw, options, first_line=2)
     values = {
         name: _as_values(path, name, _numeric_column(path, frame, name, decimal)) for name in wanted
     }
     meta: dict[str, Any] = {"sep": sep, "encoding": encoding, "decimal": decimal, "engine": engine}
+    meta.update(start_meta)
     if renamed:
         meta["renamed_duplicates"] = renamed
     return _table_record(

@@ -24,6 +24,7 @@ from ._common import (
     _is_numeric_dtype,
     _kind_name,
     _not_numbers,
+    _start_meta,
 )
 from .guards.mdf import _MDF3_TEXT_TYPES, _MDF4_NUMERIC_TYPES, _check_mdf_record, _mdf_loop
 
@@ -246,6 +247,7 @@ def _read_plain_mdf(path: str, plan: _PlainMdfPlan) -> list[_MdfSamples]:
 def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) -> Record:
     with _open_mdf(path) as mdf:
         version = str(mdf.version)
+        started = _mdf_start(mdf)
         first: dict[str, tuple[int, int]] = {}
         numeric_flag: dict[str, bool] = {}
         repeated: set[str] = set()
@@ -316,6 +318,8 @@ def _read_mdf(path: str, columns: Iterable[str] | None, options: SourceOptions) 
         unit = str(signal.unit) if signal.unit else None
         channels[name] = Channel(time=time, values=_as_values(path, name, samples), unit=unit)
     meta: dict[str, Any] = {"mdf_version": version}
+    if started is not None:
+        meta.update(_start_meta(started))
     if repeated:
         # The first occurrence wins; the others are reachable only by renaming at export.
         meta["repeated_channel_names"] = sorted(repeated)
@@ -332,3 +336,17 @@ def _mdf_numeric(version: str, data_type: int) -> bool:
     if version.startswith("4"):
         return data_type in _MDF4_NUMERIC_TYPES
     return data_type not in _MDF3_TEXT_TYPES
+
+
+def _mdf_start(mdf: Any) -> float | None:
+    """The measurement's absolute start (MDF header), as Unix seconds; naive times are UTC."""
+    from datetime import datetime, timezone
+
+    start = getattr(mdf, "start_time", None)
+    if not isinstance(start, datetime):
+        return None
+    if start.tzinfo is None:
+        start = start.replace(tzinfo=timezone.utc)
+    seconds = start.timestamp()
+    # asammdf reports a header without a date as the epoch itself.
+    return seconds if seconds > 0 else None

@@ -19,12 +19,15 @@ from ._common import (
     _as_values,
     _channel_list,
     _check_time,
+    _clock_options,
     _corrupt,
     _import,
     _no_rows,
     _not_numbers,
     _pick_time,
+    _start_meta,
     _table_record,
+    _time_base,
     _unit_from_name,
 )
 
@@ -68,6 +71,7 @@ def _read_parquet_columns(
         if time_table.num_rows == 0:
             raise _no_rows(path)
         time_column = time_table.column(0)
+        start_meta: dict[str, Any] = {}
         if types.is_timestamp(time_column.type) or types.is_duration(time_column.type):
             # Absolute or elapsed time stamps become seconds since the first sample.
             # Subtract in int64: epoch nanoseconds exceed float64's exact integer range.
@@ -76,6 +80,9 @@ def _read_parquet_columns(
             time_raw: npt.NDArray[Any] = (stamps - stamps[0]).astype(np.float64) * _SECONDS_PER[
                 unit
             ]
+            if types.is_timestamp(time_column.type) and stamps.size:
+                # Arrow keeps time-zone-aware stamps in UTC; naive ones are taken as UTC.
+                start_meta = _start_meta(float(stamps[0]) * _SECONDS_PER[unit])
         elif is_numeric(time_name):
             time_raw = _arrow_to_numpy(time_column)
         else:
@@ -86,7 +93,10 @@ def _read_parquet_columns(
                 hint="set `time:` to the numeric time column",
             )
         del time_table, time_column
-        time = _check_time(path, time_name, time_raw, options)
+        if start_meta:
+            time = _check_time(path, time_name, time_raw, _clock_options(options))
+        else:
+            time, start_meta = _time_base(path, time_name, time_raw, options)
         for name in wanted:
             if not is_numeric(name):
                 raise _not_numbers(path, name, str(schema.field(name).type))
@@ -114,7 +124,14 @@ def _read_parquet_columns(
         values = {name: loaded[name] for name in wanted}
     units = {n: _field_unit(schema.field(n)) for n in needed}
     return _table_record(
-        path, time_name, time, values, available=names, numeric=numeric, units=units
+        path,
+        time_name,
+        time,
+        values,
+        available=names,
+        numeric=numeric,
+        units=units,
+        meta=start_meta,
     )
 
 

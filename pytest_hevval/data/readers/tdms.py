@@ -48,7 +48,7 @@ def read_tdms(path: str, columns: Iterable[str] | None, options: SourceOptions) 
         candidates = [n for n in numeric if not _is_waveform(by_name[n])]
         time_name = _pick_time(path, list(by_name), options, candidates)
         raw = np.asarray(by_name[time_name][:])
-        shared_time = _check_time(path, time_name, raw * options.time_scale, options)
+        shared_time = _check_time(path, time_name, raw, options)
     channels: dict[str, Channel] = {}
     start: datetime | None = None
     for name in wanted:
@@ -63,8 +63,8 @@ def read_tdms(path: str, columns: Iterable[str] | None, options: SourceOptions) 
             )
         if _is_waveform(channel):
             properties = channel.properties
-            step = float(properties[_WAVEFORM_STEP]) * options.time_scale
-            offset = float(properties.get(_WAVEFORM_OFFSET, 0.0)) * options.time_scale
+            step = float(properties[_WAVEFORM_STEP])
+            offset = float(properties.get(_WAVEFORM_OFFSET, 0.0))
             time = offset + step * np.arange(values.shape[0], dtype=np.float64)
             time = _check_time(path, name, time, options)
             start = start or _absolute(properties.get(_WAVEFORM_START))
