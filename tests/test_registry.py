@@ -233,7 +233,11 @@ unit = st.floats(0.0, 1.0, allow_nan=False)
 @settings(max_examples=200, deadline=None)
 @given(
     rows=st.lists(
-        st.tuples(st.floats(0.0, 5.0, allow_nan=False), st.lists(unit, min_size=7, max_size=7)),
+        # Subnormal α times β underflows to 0: eq. 14 is then 0/0, a spec error at load time.
+        st.tuples(
+            st.floats(0.0, 5.0, allow_nan=False, allow_subnormal=False),
+            st.lists(unit, min_size=7, max_size=7),
+        ),
         min_size=1,
         max_size=6,
     ),
