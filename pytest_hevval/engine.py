@@ -22,6 +22,7 @@ from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
 from .data.align import AlignedData, align_records
+from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
 from .errors import (
     CharacteristicError,
@@ -358,7 +359,10 @@ def _align(
         ref_columns.update(_columns_of(node.ref, reference))
         model_columns.update(_columns_of(node.sim, model_record))
     alignment = spec.alignment
-    return align_records(
+    findings = assess(reference, sorted(ref_columns), spec.data_quality)
+    if spec.data_quality.action == "error":
+        fail_on(findings, reference.source)
+    aligned = align_records(
         reference,
         model_record,
         reference_columns=sorted(ref_columns),
@@ -368,9 +372,15 @@ def _align(
         offset_s=alignment.offset_s,
         offset_from=alignment.offset_from,
         max_offset_s=alignment.max_offset_s,
-        nan_policy=alignment.nan,
+        # Scoring around bad stretches includes stretches of NaN.
+        nan_policy="omit" if spec.data_quality.action == "omit" else alignment.nan,
         by=alignment.by,
     )
+    aligned.quality = findings
+    if findings and spec.data_quality.action == "omit":
+        bad = mask_on_grid(findings, aligned.time)
+        aligned.gap_mask = bad if aligned.gap_mask is None else aligned.gap_mask | bad
+    return aligned
 
 
 def _signal_arrays(
@@ -583,6 +593,16 @@ def _spec_result(
                 "sha256": cache.digest(str(spec.reference.path)),
             },
             "model": model_info,
+            **(
+                {
+                    "quality": {
+                        "action": spec.data_quality.action,
+                        "findings": [f.to_dict() for f in aligned.quality],
+                    }
+                }
+                if aligned.quality
+                else {}
+            ),
         },
         alignment={
             "rate_hz": aligned.grid.rate_hz,

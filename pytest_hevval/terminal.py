@@ -114,4 +114,22 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                 lines.append(f"  {label} [{signal.path}] {failed}{origin}")
         if not details and result.passed:
             lines.append(f"  all {len(result.signals)} signals pass")
+        lines.extend(quality_lines(result))
+    return lines
+
+
+def quality_lines(result: SpecResult) -> list[str]:
+    """The data-quality findings on the measurement, one line each."""
+    quality = result.data.get("quality")
+    if not quality:
+        return []
+    action = quality.get("action", "warn")
+    done = {"warn": "", "omit": ", scored around", "error": ""}.get(action, "")
+    findings = quality.get("findings", [])
+    lines = [f"  data quality: {len(findings)} finding(s) in the measurement{done}"]
+    for found in findings:
+        lines.append(
+            f"    {found['channel']}: {found['kind']} at {found['start_s']:.6g}–"
+            f"{found['stop_s']:.6g} s ({found['detail']})"
+        )
     return lines

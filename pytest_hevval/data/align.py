@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -75,6 +75,8 @@ class AlignedData:
     interpolated: list[tuple[str, str]] = field(default_factory=list)
     #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
     gap_mask: npt.NDArray[np.bool_] | None = None
+    #: Data-quality findings on the reference channels (:mod:`pytest_hevval.data.quality`).
+    quality: list[Any] = field(default_factory=list)
 
     @property
     def time(self) -> FloatArray:

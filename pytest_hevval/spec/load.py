@@ -21,6 +21,7 @@ from ..core.registry import (
     registered_characteristics,
     select_characteristics,
 )
+from ..data.quality import QUALITY_ACTIONS, QualityLimits
 from ..data.record import SourceOptions
 from ..data.remote import is_url
 from ..errors import ExpressionError, SpecError, did_you_mean
@@ -47,6 +48,7 @@ _TOP_KEYS = (
     "correlation",
     "emergent",
     "candidates",
+    "data_quality",
     "sets",
 )
 _SOURCE_KEYS = (
@@ -286,6 +288,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
     candidates = _candidates(context, top)
+    data_quality = _data_quality(context, top)
     sets_value = top["sets"]
     sets_line = top.line_of("sets")
     if not isinstance(sets_value, LineList) or not sets_value:
@@ -318,6 +321,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
+        data_quality=data_quality,
     )
 
 
@@ -642,6 +646,45 @@ def _expression(context: _Context, value: Any, line: int, key: str) -> Expressio
         raise SpecError(
             f"{exc.problem} (got {text!r})", file=context.file, line=line, key=key, hint=exc.hint
         ) from None
+
+
+_QUALITY_KEYS = (
+    "action",
+    "max_gap_s",
+    "straight_run_s",
+    "flat_run_s",
+    "saturation_run_s",
+    "rate_limits",
+)
+
+
+def _data_quality(context: _Context, top: LineDict) -> QualityLimits:
+    if "data_quality" not in top or top["data_quality"] is None:
+        return QualityLimits()
+    key = "data_quality"
+    mapping = context.mapping(top[key], top.line_of(key), key)
+    context.check_keys(mapping, _QUALITY_KEYS, key)
+    defaults = QualityLimits()
+    rate_limits: dict[str, float] = {}
+    if "rate_limits" in mapping:
+        where = _join(key, "rate_limits")
+        table = context.mapping(mapping["rate_limits"], mapping.line_of("rate_limits"), where)
+        rate_limits = {
+            str(name): context.positive(value, table.line_of(name), _join(where, name))
+            for name, value in table.items()
+        }
+    return QualityLimits(
+        action=context.get(mapping, "action", key, context.choice(QUALITY_ACTIONS), "warn"),  # type: ignore[arg-type]
+        max_gap_s=context.get(mapping, "max_gap_s", key, context.positive, defaults.max_gap_s),
+        straight_run_s=context.get(
+            mapping, "straight_run_s", key, context.positive, defaults.straight_run_s
+        ),
+        flat_run_s=context.get(mapping, "flat_run_s", key, context.positive, defaults.flat_run_s),
+        saturation_run_s=context.get(
+            mapping, "saturation_run_s", key, context.positive, defaults.saturation_run_s
+        ),
+        rate_limits=rate_limits,
+    )
 
 
 def _candidates(context: _Context, top: LineDict) -> dict[str, Expression]:

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from ..core.registry import Characteristic, is_registered, select_characteristics
+from ..data.quality import QualityLimits
 from ..data.record import SourceOptions
 from .expressions import Expression
 
@@ -111,6 +112,8 @@ class Spec:
     correlation: Literal["xcorr", "pearson"] = "xcorr"
     emergent: Literal["V1", "V2"] = "V2"
     candidates: Mapping[str, Expression] = field(default_factory=dict)
+    #: Limits and action of the data-quality gate on the reference channels.
+    data_quality: QualityLimits = field(default_factory=QualityLimits)
     #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
     ratchet: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 

@@ -1,0 +1,234 @@
+"""A data-quality gate on the measurement: a failing model must not be blamed for bad data.
+
+Every reference channel a spec uses is checked on its own time base for what loggers get
+wrong: gaps in time, stretches a logger filled by straight-line interpolation, flat-lined
+(stuck) values, saturation at a constant, NaN runs, and, where a physical rate limit is
+declared, spikes. Each finding names the channel and the time span. The spec's
+``data_quality:`` sets the limits and what happens: ``warn`` (report), ``omit`` (score around
+the bad stretches) or ``error`` (the spec errors, saying the measurement is at fault).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import DataError
+from .record import Record
+
+__all__ = [
+    "QUALITY_ACTIONS",
+    "Finding",
+    "QualityLimits",
+    "assess",
+    "fail_on",
+    "mask_on_grid",
+]
+
+FloatArray = npt.NDArray[np.float64]
+Action = Literal["warn", "omit", "error"]
+QUALITY_ACTIONS: tuple[str, ...] = ("warn", "omit", "error")
+
+#: A step in time longer than this is a gap (dropout, logger pause) on any channel.
+MAX_GAP_S = 5.0
+#: A run this long whose second difference is within the channel's resolution, while it moves,
+#: is what a logger writes when it fills a dropout by linear interpolation; real signals are
+#: not that straight for that long.
+STRAIGHT_RUN_S = 20.0
+#: Exactly the same value this long is a stuck sensor (a vehicle at a stop moves on sooner).
+FLAT_RUN_S = 600.0
+#: A run this long at the channel's maximum (or a non-zero minimum) is saturation.
+SATURATION_RUN_S = 10.0
+#: Saturation is reported when the extreme is held this many separate times or more.
+SATURATION_EPISODES = 2
+#: At most this many findings of one kind on one channel are listed; the rest are counted.
+MAX_LISTED = 5
+
+
+@dataclass(frozen=True)
+class QualityLimits:
+    """The spec's ``data_quality:`` (every limit in seconds, rates per second)."""
+
+    action: Action = "warn"
+    max_gap_s: float = MAX_GAP_S
+    straight_run_s: float = STRAIGHT_RUN_S
+    flat_run_s: float = FLAT_RUN_S
+    saturation_run_s: float = SATURATION_RUN_S
+    #: Channel → largest physical rate of change (signal unit per second); beyond is a spike.
+    rate_limits: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One stretch of one channel that the measurement got wrong."""
+
+    channel: str
+    kind: str
+    start_s: float
+    stop_s: float
+    detail: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "channel": self.channel,
+            "kind": self.kind,
+            "start_s": self.start_s,
+            "stop_s": self.stop_s,
+            "detail": self.detail,
+        }
+
+    def line(self) -> str:
+        return (
+            f"{self.channel}: {self.kind} at {self.start_s:.6g}–{self.stop_s:.6g} s ({self.detail})"
+        )
+
+
+def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
+    """[start, stop) of each run of True."""
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    return list(
+        zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True)
+    )
+
+
+def _long_runs(
+    mask: npt.NDArray[np.bool_], time: FloatArray, seconds: float, widen: int = 0
+) -> list[tuple[int, int]]:
+    """Runs of ``mask`` (over samples, or over steps when ``widen`` is 1 or 2) lasting at least
+    ``seconds``, as sample index ranges [start, stop] inclusive."""
+    found = []
+    last = time.shape[0] - 1
+    for a, b in _runs(mask):
+        first, final = a, min(b - 1 + widen, last)
+        if time[final] - time[first] >= seconds:
+            found.append((first, final))
+    return found
+
+
+def assess(record: Record, channels: Iterable[str], limits: QualityLimits) -> list[Finding]:
+    """Every finding on the named channels of ``record``, channel by channel, in time order."""
+    findings: list[Finding] = []
+    for name in channels:
+        if name not in record.channels:
+            continue  # an expression's helper column may live on the model side
+        channel = record.channels[name]
+        findings.extend(
+            _channel_findings(
+                name,
+                np.asarray(channel.time, dtype=np.float64),
+                np.asarray(channel.values, dtype=np.float64),
+                limits,
+                channel.unit,
+            )
+        )
+    return findings
+
+
+def _channel_findings(
+    name: str, time: FloatArray, values: FloatArray, limits: QualityLimits, unit: str | None
+) -> list[Finding]:
+    found: list[Finding] = []
+    if time.shape[0] < 3:
+        return found
+    unit_text = f" {unit}" if unit else ""
+
+    def add(kind: str, spans: list[tuple[int, int]], detail: str) -> None:
+        for i, (a, b) in enumerate(spans):
+            if i == MAX_LISTED:
+                found.append(
+                    Finding(
+                        name,
+                        kind,
+                        float(time[a]),
+                        float(time[spans[-1][1]]),
+                        f"and {len(spans) - MAX_LISTED} more stretches like it",
+                    )
+                )
+                return
+            found.append(Finding(name, kind, float(time[a]), float(time[b]), detail))
+
+    steps = np.diff(time)
+    gaps = [(int(i), int(i) + 1) for i in np.flatnonzero(steps > limits.max_gap_s)]
+    add("time gap", gaps, f"no samples for more than {limits.max_gap_s:g} s")
+    resets = [(int(i), int(i) + 1) for i in np.flatnonzero(steps <= 0)]
+    add("clock reset", resets, "time stamps go back or repeat")
+
+    bad = ~np.isfinite(values)
+    nan_runs = [(a, b - 1) for a, b in _runs(bad)]
+    if nan_runs:
+        add("NaN run", nan_runs, f"{int(bad.sum())} values missing in the channel")
+    finite = np.where(bad, np.nan, values)
+
+    d1 = np.diff(finite)
+    moving = np.abs(d1) > 0
+    if moving.any():
+        resolution = float(np.min(np.abs(d1[moving])))
+        d2 = np.diff(finite, 2)
+        straight = (np.abs(d2) <= 2.0 * resolution) & moving[1:] & moving[:-1]
+        add(
+            "straight-line fill",
+            _long_runs(straight, time, limits.straight_run_s, widen=2),
+            f"changes at a constant rate for over {limits.straight_run_s:g} s, as a logger "
+            "filling a dropout writes",
+        )
+    # Zero held for long is a vehicle at rest (a soak, a stop), not a stuck sensor.
+    flat = (d1 == 0) & (finite[1:] != 0)
+    add(
+        "flat line",
+        _long_runs(flat, time, limits.flat_run_s, widen=1),
+        f"the same non-zero value for over {limits.flat_run_s:g} s: a stuck sensor?",
+    )
+    if np.isfinite(finite).any():
+        top = float(np.nanmax(finite))
+        bottom = float(np.nanmin(finite))
+        if top > bottom:
+            for extreme, where in ((top, "maximum"), (bottom, "minimum")):
+                if extreme == 0.0:
+                    continue  # resting at zero is a standstill, not saturation
+                spans = _long_runs(finite == extreme, time, limits.saturation_run_s)
+                # A clipped sensor hits its limit again and again; a slow signal such as the
+                # state of charge sits at its extreme once, at the start or the end.
+                if len(spans) >= SATURATION_EPISODES:
+                    add(
+                        "saturation",
+                        spans,
+                        f"held at its {where} {extreme:g}{unit_text} for over "
+                        f"{limits.saturation_run_s:g} s, {len(spans)} times",
+                    )
+    rate = limits.rate_limits.get(name)
+    if rate is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            too_fast = np.abs(d1) / np.where(steps > 0, steps, np.inf) > rate
+        add(
+            "spike",
+            [(a, b) for a, b in _runs(too_fast)],
+            f"changes faster than the declared {rate:g}{unit_text}/s",
+        )
+    return found
+
+
+def mask_on_grid(findings: Iterable[Finding], grid: FloatArray) -> npt.NDArray[np.bool_]:
+    """Grid points inside any finding's stretch (the stretches ``omit`` scores around)."""
+    mask = np.zeros(grid.shape[0], dtype=bool)
+    for finding in findings:
+        mask |= (grid >= finding.start_s) & (grid <= finding.stop_s)
+    return mask
+
+
+def fail_on(findings: list[Finding], source: str) -> None:
+    """The ``error`` action: the first finding as a DataError that blames the measurement."""
+    if not findings:
+        return
+    first = findings[0]
+    more = f" ({len(findings) - 1} more findings)" if len(findings) > 1 else ""
+    raise DataError(
+        f"the measurement is at fault, not the model: {first.kind} at "
+        f"{first.start_s:.6g}–{first.stop_s:.6g} s ({first.detail}){more}",
+        file=source,
+        column=first.channel,
+        hint="fix or cut the recording, or set data_quality.action: omit to score around it",
+    )

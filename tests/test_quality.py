@@ -1,0 +1,142 @@
+"""The data-quality gate: real logger faults from the i3 data, and each kind of finding."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pytest_hevval.data.quality import QualityLimits, assess
+from pytest_hevval.data.readers import read_record
+from pytest_hevval.data.record import Channel, Record, SourceOptions
+from pytest_hevval.engine import evaluate_spec
+from pytest_hevval.errors import DataError, SpecError
+from pytest_hevval.spec.load import parse_spec_text
+
+DATA = Path(__file__).parent / "data" / "i3"
+B02 = DATA / "TripB02_0-400s.parquet"
+B34 = DATA / "TripB34_0-400s.parquet"
+pytest.importorskip("pyarrow")
+
+
+def _findings(
+    path: Path, columns: list[str], **limits: object
+) -> list[tuple[str, str, float, float]]:
+    record = read_record(str(path), columns, SourceOptions(time="Time [s]"))
+    found = assess(record, columns, QualityLimits(**limits))  # type: ignore[arg-type]
+    return [(f.channel, f.kind, f.start_s, f.stop_s) for f in found]
+
+
+def test_b02_straight_line_fill_is_found_on_every_channel_it_touched() -> None:
+    columns = ["Velocity [km/h]", "Battery Voltage [V]", "Battery Current [A]"]
+    found = _findings(B02, columns)
+    assert found == [
+        (name, "straight-line fill", pytest.approx(39.3), pytest.approx(199.1)) for name in columns
+    ]
+
+
+def test_b34_nan_run_in_soc_is_found() -> None:
+    found = _findings(B34, ["Velocity [km/h]", "SoC [%]"])
+    assert found == [("SoC [%]", "NaN run", pytest.approx(293.1), pytest.approx(400.0))]
+
+
+def _record(**channels: tuple[np.ndarray, np.ndarray]) -> Record:
+    return Record(source="log.csv", channels={k: Channel(t, v) for k, (t, v) in channels.items()})
+
+
+def test_each_kind_of_finding() -> None:
+    t = np.arange(0.0, 1000.0, 0.1)
+    rng = np.random.default_rng(0)
+    noisy = 50.0 + rng.normal(0.0, 1.0, t.shape[0])
+    stuck = noisy.copy()
+    stuck[2000:9000] = 42.0  # 700 s at one non-zero value
+    at_rest = noisy.copy()
+    at_rest[2000:9000] = 0.0  # a long stop: not a stuck sensor
+    clipped = np.minimum(noisy, 51.5)
+    clipped[1000:1200] = 51.5
+    clipped[5000:5200] = 51.5  # held at the top twice
+    spiky = noisy.copy()
+    spiky[4000] += 500.0
+    gap_t = np.concatenate([t[:3000], t[3100:]])  # 10 s without samples
+    record = _record(
+        stuck=(t, stuck),
+        at_rest=(t, at_rest),
+        clipped=(t, clipped),
+        spiky=(t, spiky),
+        gappy=(gap_t, noisy[: gap_t.shape[0]]),
+    )
+    limits = QualityLimits(rate_limits={"spiky": 1000.0})
+    found: dict[tuple[str, str], list[tuple[float, float]]] = {}
+    for f in assess(record, record.channels, limits):
+        found.setdefault((f.channel, f.kind), []).append((f.start_s, f.stop_s))
+    assert found.pop(("stuck", "flat line")) == [pytest.approx((200.0, 899.9))]
+    clipped_runs = found.pop(("clipped", "saturation"))
+    assert len(clipped_runs) == 2
+    assert clipped_runs[0] == pytest.approx((100.0, 119.9), abs=0.2)
+    assert clipped_runs[1] == pytest.approx((500.0, 519.9), abs=0.2)
+    assert found.pop(("spiky", "spike")) == [pytest.approx((399.9, 400.1))]  # up and back
+    assert found.pop(("gappy", "time gap")) == [pytest.approx((299.9, 310.0))]
+    assert found == {}  # nothing on the channel at rest, nothing else anywhere
+
+
+SPEC = """\
+reference: {{path: ref.parquet, time: "Time [s]"}}
+model: {{path: sim.csv, time: "Time [s]"}}
+data_quality: {{action: {action}}}
+sets:
+  - {{signal: v, ref: "Velocity [km/h]", sim: "Velocity [km/h]"}}
+"""
+
+
+def _project(tmp_path: Path) -> None:
+    frame = pd.read_parquet(B02)
+    frame.to_parquet(tmp_path / "ref.parquet", index=False)
+    frame[["Time [s]", "Velocity [km/h]"]].to_csv(tmp_path / "sim.csv", index=False)
+
+
+def test_error_blames_the_measurement_with_channel_and_time(tmp_path: Path) -> None:
+    _project(tmp_path)
+    spec = parse_spec_text(SPEC.format(action="error"), tmp_path / "t.hevval.yaml")
+    with pytest.raises(DataError) as caught:
+        evaluate_spec(spec)
+    assert str(caught.value) == (
+        f"{tmp_path / 'ref.parquet'}: column 'Velocity [km/h]': the measurement is at fault, "
+        "not the model: straight-line fill at 39.3–199.1 s (changes at a constant rate for "
+        "over 20 s, as a logger filling a dropout writes); fix or cut the recording, or set "
+        "data_quality.action: omit to score around it"
+    )
+
+
+def test_warn_reports_and_omit_scores_around(tmp_path: Path) -> None:
+    _project(tmp_path)
+    warned = evaluate_spec(parse_spec_text(SPEC.format(action="warn"), tmp_path / "w.hevval.yaml"))
+    quality = warned.result.data["quality"]
+    assert quality["action"] == "warn"
+    assert [f["kind"] for f in quality["findings"]] == ["straight-line fill"]
+    assert warned.result.alignment["coverage"] == 1.0
+    omitted = evaluate_spec(parse_spec_text(SPEC.format(action="omit"), tmp_path / "o.hevval.yaml"))
+    # 39.3–199.1 s of a 400 s record are left out: 1599 of 4001 grid points.
+    assert omitted.result.alignment["coverage"] == pytest.approx(1 - 1599 / 4001)
+    assert omitted.result.signals[0].characteristics.n_samples == 4001 - 1599
+
+
+def test_bad_data_quality_keys_are_spec_errors(tmp_path: Path) -> None:
+    with pytest.raises(SpecError, match=r"data_quality\.action: must be one of warn, omit, error"):
+        parse_spec_text(SPEC.format(action="ignore"), tmp_path / "t.hevval.yaml")
+    text = SPEC.format(action="warn").replace("{action: warn}", "{max_gap: 3}")
+    with pytest.raises(SpecError, match="unknown key; did you mean 'max_gap_s'"):
+        parse_spec_text(text, tmp_path / "t.hevval.yaml")
+
+
+def test_the_terminal_summary_lists_the_findings(pytester: pytest.Pytester) -> None:
+    _project(pytester.path)
+    pytester.makefile(".hevval.yaml", trip=SPEC.format(action="warn"))
+    result = pytester.runpytest("--hevval", "-p", "no:cacheprovider")
+    result.stdout.fnmatch_lines(
+        [
+            "*data quality: 1 finding(s) in the measurement*",
+            "*Velocity [[]km/h[]]: straight-line fill at 39.3–199.1 s*",
+        ]
+    )
