@@ -140,3 +140,19 @@ def test_the_terminal_summary_lists_the_findings(pytester: pytest.Pytester) -> N
             "*Velocity [[]km/h[]]: straight-line fill at 39.3–199.1 s*",
         ]
     )
+
+
+def test_reports_show_the_findings(tmp_path: Path) -> None:
+    pytest.importorskip("jinja2")
+    from pytest_hevval.report.html import render_html
+    from pytest_hevval.report.text import render_markdown
+
+    _project(tmp_path)
+    result = evaluate_spec(parse_spec_text(SPEC.format(action="warn"), tmp_path / "w.hevval.yaml"))
+    payload = [result.result.to_dict()]
+    assert "Velocity [km/h]: straight-line fill at 39.3–199.1 s" in render_html(
+        payload, title="t", generated_utc="now"
+    )
+    markdown = render_markdown(payload)
+    assert "**Data quality of" in markdown
+    assert "straight-line fill at 39.3–199.1 s" in markdown

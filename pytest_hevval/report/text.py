@@ -195,6 +195,21 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
             lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
+    for spec in spec_results:
+        quality = (spec.get("data") or {}).get("quality")
+        if not quality or not quality.get("findings"):
+            continue
+        lines += [
+            "",
+            f"**Data quality of {_md(spec.get('name', ''))}** ({quality.get('action', 'warn')}): "
+            "the measurement, not the model",
+            "",
+        ]
+        for found in quality["findings"]:
+            lines.append(
+                f"- {_code(str(found['channel']))}: {_md(str(found['kind']))} at "
+                f"{found['start_s']:.6g}–{found['stop_s']:.6g} s ({_md(str(found['detail']))})"
+            )
     return "\n".join(lines) + "\n"
 
 
