@@ -20,7 +20,7 @@ formulas and the interpretation of every field.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from typing import Any, Literal
 
@@ -730,17 +730,126 @@ def diagnose_residual(
     ν = n (1 − φ̄ρ)/(1 + φ̄ρ) − k, φ̄ = Σφ and ρ the lag-one autocorrelation of the regressor
     (Bretherton et al. 1999), which keeps slowly varying regressors in persistent noise honest.
     """
+    dt = _checked_dt(dt)
+    _check_settings(alpha, max_selected, max_samples)
+    ref, sim, user, names = _checked_inputs(reference, simulated, candidates)
+    n = ref.shape[0]
+    if not np.any(ref - sim):
+        return _exact_match(n)
+    # Exact power-of-two rescaling keeps sums of squares of 1e200-sized or 1e-200-sized signals
+    # inside float64; fractions, p-values, gain and delay do not depend on it.
+    s_sig = _pow2_scale(max(float(np.max(np.abs(ref))), float(np.max(np.abs(sim)))))
+    ref = ref * s_sig
+    sim = sim * s_sig
+    user, units = _rescaled_candidates(user, s_sig)
+    notes: list[str] = []
+    sim_varies = _varies(sim)
+
+    lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
+    lag_s = lag * dt
+    # The candidates are analysed where sim(t − lag) exists, so that the lag candidate is exact
+    # on every sample it is fitted to.
+    window = slice(max(0, lag), n + min(0, lag))
+    r = (ref - sim)[window]
+    n_w = r.shape[0]
+    factor = max(1, math.ceil(n_w / max_samples))
+    r_g = _block_means(r, factor)
+    order = _ar_order(r_g - float(np.mean(r_g)))
+
+    head = _gain_and_offset(ref, sim, lag, order, alpha, max_samples, sim_varies)
+    if not sim_varies:
+        notes.append("the simulated signal is constant: gain and lag cannot be estimated")
+
+    series = _candidate_series(sim, lag, dt, window, factor, user, units, names)
+    kept, z_rows = _independent(series, r_g.shape[0], notes)
+    m = len(kept)
+    # Alone: every candidate with an intercept.
+    ones = np.ones((r_g.shape[0], 1))
+    alone = _screen(r_g, ones, z_rows, order) if m else None
+    selected, holm_levels, base = _forward_selection(
+        r_g, z_rows, order, alpha=alpha, max_selected=max_selected
+    )
+
+    findings, explained, remaining_full, remaining_grid = _joint_model(
+        r, r_g, kept, selected, holm_levels, base, order, alpha
+    )
+    findings.extend(_alone_findings(r, kept, selected, alone, alpha))
+    mean_sq = _dot(r, r) / n_w
+    offset_finding = CandidateFinding(
+        name=_free_name("offset", names),
+        kind="offset",
+        explained_fraction=min(1.0, float(np.mean(r)) ** 2 / mean_sq),
+        joint_explained_fraction=None,
+        coefficient=head.offset / s_sig,
+        interval=_scaled(head.offset_interval, 1.0 / s_sig),
+        p_value=head.offset_p,
+        significant=head.offset_significant,
+        selected=head.offset_significant,
+        rank=0,
+    )
+    ordered = _rank([*findings, offset_finding])
+    timing_significant = _timing_significant(ordered, lag, dt)
+
+    remaining = ljung_box(remaining_grid, LJUNG_BOX_LAGS, alpha=alpha)
+    frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
+    effective = _effective_samples(r_g, order)
+    if factor > 1:
+        notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
+
+    summary = _summary(
+        ordered,
+        lag_s=lag_s,
+        timing_significant=timing_significant,
+        gain=head.gain,
+        gain_significant=head.gain_significant,
+        remaining=remaining,
+    )
+    return Diagnosis(
+        lag_s=lag_s,
+        gain=head.gain,
+        gain_interval=head.gain_interval,
+        offset=head.offset / s_sig,
+        offset_interval=_scaled(head.offset_interval, 1.0 / s_sig),
+        timing_significant=timing_significant,
+        gain_significant=head.gain_significant,
+        offset_significant=head.offset_significant,
+        candidates=tuple(ordered),
+        explained_fraction=explained,
+        remaining=remaining,
+        dominant_frequencies_hz=frequencies,
+        effective_samples=effective,
+        summary=summary,
+        notes=tuple(notes),
+    )
+
+
+# -- the steps of diagnose_residual, in order ---------------------------------------------------
+
+
+def _checked_dt(dt: Any) -> float:
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating, np.integer)):
         raise DegenerateSignalError(f"dt must be a number of seconds, got {dt!r}")
     if not math.isfinite(float(dt)) or float(dt) <= 0.0:
         raise DegenerateSignalError(f"dt must be a positive, finite number of seconds, got {dt}")
-    dt = float(dt)
+    return float(dt)
+
+
+def _check_settings(alpha: float, max_selected: int, max_samples: int) -> None:
     if not 0.0 < alpha < 1.0:
         raise SpecError(f"alpha must lie strictly between 0 and 1, got {alpha}")
     if max_selected < 0:
         raise SpecError(f"max_selected must be 0 or more, got {max_selected}")
     if max_samples < 10:
         raise SpecError(f"max_samples must be at least 10, got {max_samples}")
+
+
+_UserSeries = list[tuple[str, str, FloatArray]]
+
+
+def _checked_inputs(
+    reference: npt.ArrayLike, simulated: npt.ArrayLike, candidates: Sequence[Candidate]
+) -> tuple[FloatArray, FloatArray, _UserSeries, set[str]]:
+    """The two signals and the user's candidates as finite float64 series of one length."""
     ref = _as_signal(reference, "reference")
     sim = _as_signal(simulated, "simulated")
     if ref.shape[0] != sim.shape[0]:
@@ -770,39 +879,55 @@ def diagnose_residual(
                 f"candidate {name!r} has {values.shape[0]} samples, the signals have {n}",
                 key=name,
             )
+    return ref, sim, user, names
 
-    if not np.any(ref - sim):
-        return _exact_match(n)
-    # Exact power-of-two rescaling keeps sums of squares of 1e200-sized or 1e-200-sized signals
-    # inside float64; fractions, p-values, gain and delay do not depend on it.
-    s_sig = _pow2_scale(max(float(np.max(np.abs(ref))), float(np.max(np.abs(sim)))))
-    ref = ref * s_sig
-    sim = sim * s_sig
+
+def _rescaled_candidates(user: _UserSeries, s_sig: float) -> tuple[_UserSeries, dict[str, float]]:
+    """Each candidate scaled by its own power of two; ``units`` turns coefficients back."""
     units: dict[str, float] = {}
-    scaled_user: list[tuple[str, str, FloatArray]] = []
+    scaled: _UserSeries = []
     for name, kind, values in user:
         c = _pow2_scale(np.max(np.abs(values), initial=0.0))
         units[name] = c / s_sig
-        scaled_user.append((name, kind, values * c))
-    user = scaled_user
-    notes: list[str] = []
-    sim_varies = _varies(sim)
+        scaled.append((name, kind, values * c))
+    return scaled, units
 
-    # --- timing -------------------------------------------------------------------------------
+
+def _timing(
+    ref: FloatArray, sim: FloatArray, dt: float, max_lag_s: float | None, sim_varies: bool
+) -> int:
+    """The lag (samples) of the peak mean-removed cross-correlation."""
+    n = ref.shape[0]
     window_s = _DEFAULT_MAX_LAG_S if max_lag_s is None else float(max_lag_s)
     # At least 10 samples must remain where both records overlap at the searched lag.
     max_lag = int(min(max(window_s, 0.0) / dt, (n - 10) if max_lag_s is not None else n // 4))
     # A constant signal correlates equally with every shift: there is no lag to find.
-    lag = search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0
-    lag_s = lag * dt
-    # The candidates are analysed where sim(t − lag) exists, so that the lag candidate is exact
-    # on every sample it is fitted to.
-    window = slice(max(0, lag), n + min(0, lag))
-    r = (ref - sim)[window]
-    n_w = r.shape[0]
-    factor = max(1, math.ceil(n_w / max_samples))
+    return search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0
 
-    # --- gain and offset on the lag-aligned pair ----------------------------------------------
+
+@dataclass(frozen=True)
+class _Headline:
+    """Gain and offset of reference ≈ gain · simulated + offset on the lag-aligned pair."""
+
+    gain: float
+    gain_interval: tuple[float, float]
+    gain_significant: bool
+    offset: float
+    offset_interval: tuple[float, float]
+    offset_p: float
+    offset_significant: bool
+
+
+def _gain_and_offset(
+    ref: FloatArray,
+    sim: FloatArray,
+    lag: int,
+    order: int,
+    alpha: float,
+    max_samples: int,
+    sim_varies: bool,
+) -> _Headline:
+    n = ref.shape[0]
     if lag >= 0:
         ref_a, sim_a = ref[lag:], sim[: n - lag]
     else:
@@ -811,8 +936,6 @@ def diagnose_residual(
     ref_g = _block_means(ref_a, factor_a)
     sim_g = _block_means(sim_a, factor_a)
     ref_range = float(np.ptp(ref)) or float(np.max(np.abs(ref))) or 1.0
-    r_g = _block_means(r, factor)
-    order = _ar_order(r_g - float(np.mean(r_g)))
     design = (
         np.column_stack([np.ones_like(sim_g), sim_g])
         if sim_varies
@@ -831,36 +954,55 @@ def diagnose_residual(
         and not (offset_interval[0] <= 0.0 <= offset_interval[1])
         and abs(offset) > OFFSET_MATERIALITY * ref_range
     )
-    if sim_varies:
-        gain = float(head.beta[1])
-        gain_se = float(head_se[1])
-        gain_interval = _interval(gain, gain_se, int(head.df[1]), alpha)
-        gain_significant = (
-            _p_value(gain - 1.0, gain_se, int(head.df[1])) <= headline_level
-            and not (gain_interval[0] <= 1.0 <= gain_interval[1])
-            and abs(gain - 1.0) > GAIN_MATERIALITY
+    if not sim_varies:
+        return _Headline(
+            1.0, (1.0, 1.0), False, offset, offset_interval, offset_p, offset_significant
         )
-    else:
-        gain, gain_interval, gain_significant = 1.0, (1.0, 1.0), False
-        notes.append("the simulated signal is constant: gain and lag cannot be estimated")
+    gain = float(head.beta[1])
+    gain_se = float(head_se[1])
+    gain_interval = _interval(gain, gain_se, int(head.df[1]), alpha)
+    gain_significant = (
+        _p_value(gain - 1.0, gain_se, int(head.df[1])) <= headline_level
+        and not (gain_interval[0] <= 1.0 <= gain_interval[1])
+        and abs(gain - 1.0) > GAIN_MATERIALITY
+    )
+    return _Headline(
+        gain, gain_interval, gain_significant, offset, offset_interval, offset_p, offset_significant
+    )
 
-    # --- candidate series ---------------------------------------------------------------------
-    series: list[_Series] = []
+
+def _candidate_series(
+    sim: FloatArray,
+    lag: int,
+    dt: float,
+    window: slice,
+    factor: int,
+    user: _UserSeries,
+    units: Mapping[str, float],
+    names: set[str],
+) -> list[_Series]:
+    """The automatic lag and gain candidates, then the user's, on the analysis window."""
     kinds = {kind for _, kind, _ in user}
-    auto: list[tuple[str, str, FloatArray]] = []
+    auto: _UserSeries = []
     # A user channel may already be called "lag" or "gain"; the automatic one then steps aside.
     if "lag" not in kinds:
         auto.append((_free_name("lag", names), "lag", _delay_slope(sim, lag, dt)[window]))
     if "gain" not in kinds:
         auto.append((_free_name("gain", names), "gain", sim[window]))
+    series: list[_Series] = []
     for label, kind, values in [*auto, *((a, b, v[window]) for a, b, v in user)]:
         grid = _block_means(values, factor)
         unit = units.get(label, 1.0)
         series.append(
             _Series(label, kind, values, grid, float(np.mean(grid)), float(np.std(grid)), unit)
         )
+    return series
 
-    ng = r_g.shape[0]
+
+def _independent(
+    series: list[_Series], ng: int, notes: list[str]
+) -> tuple[list[_Series], FloatArray]:
+    """Candidates that are neither constant nor collinear, and their standardised rows."""
     usable: list[_Series] = []
     for s in series:
         scale = max(float(np.max(np.abs(s.grid))), 1e-300)
@@ -901,22 +1043,23 @@ def diagnose_residual(
                 f"candidate {s.name!r} is (nearly) a linear combination of the candidates "
                 "before it and was dropped"
             )
-    kept_rows = kept_rows[1:]
+    rows = kept_rows[1:]
+    z_rows = np.ascontiguousarray(standardised[rows]) if kept else np.zeros((0, ng))
+    return kept, z_rows
 
-    m = len(kept)
-    z_rows = np.ascontiguousarray(standardised[kept_rows]) if m else np.zeros((0, ng))
+
+def _forward_selection(
+    r_g: FloatArray, z_rows: FloatArray, order: int, *, alpha: float, max_selected: int
+) -> tuple[list[int], list[float], FloatArray]:
+    """Holm-guarded forward selection; (selected rows, their levels, the final design)."""
+    ng = r_g.shape[0]
+    m = z_rows.shape[0]
     rc_g = r_g - float(np.mean(r_g))
     sst_g = _dot(rc_g, rc_g)
-
-    # Alone: every candidate with an intercept.
-    ones = np.ones((ng, 1))
-    alone = _screen(r_g, ones, z_rows, order) if m else None
-
-    # --- forward selection --------------------------------------------------------------------
     selected: list[int] = []
     holm_levels: list[float] = []
     remaining_idx = list(range(m))
-    base = ones
+    base = np.ones((ng, 1))
     while remaining_idx and len(selected) < max_selected and sst_g > 0.0:
         level = alpha / (m - len(selected))
         q = _orthonormal(base)
@@ -941,8 +1084,20 @@ def diagnose_residual(
         selected.append(chosen)
         holm_levels.append(level)
         base = np.column_stack([base, z_rows[chosen]])
+    return selected, holm_levels, base
 
-    # --- final joint model --------------------------------------------------------------------
+
+def _joint_model(
+    r: FloatArray,
+    r_g: FloatArray,
+    kept: list[_Series],
+    selected: list[int],
+    holm_levels: list[float],
+    base: FloatArray,
+    order: int,
+    alpha: float,
+) -> tuple[list[CandidateFinding], float, FloatArray, FloatArray]:
+    """The selected candidates fitted jointly: findings, explained share, what is left."""
     findings: list[CandidateFinding] = []
     joint_r2_full: list[float] = []
     full_cols: list[FloatArray] = []
@@ -950,118 +1105,87 @@ def diagnose_residual(
         full_cols.append(kept[idx].full)
         joint_r2_full.append(_full_rate_r2(r, full_cols))
     explained = joint_r2_full[-1] if joint_r2_full else 0.0
-
     remaining_full = r.copy()
     remaining_grid = r_g.copy()
-    if selected:
-        # Intervals of selected candidates use the noise model of the final joint model.
-        joint = _hac_fit(r_g, base, order)
-        se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
-        for pos, idx in enumerate(selected):
-            s = kept[idx]
-            b_std = float(joint.beta[pos + 1])
-            se_std = float(se[pos + 1])
-            coef = b_std / s.std
-            df = int(joint.df[pos + 1])
-            p = _p_value(b_std, se_std, df)
-            remaining_full -= coef * (s.full - s.mean)
-            remaining_grid -= coef * (s.grid - s.mean)
-            findings.append(
-                CandidateFinding(
-                    name=s.name,
-                    kind=s.kind,
-                    explained_fraction=_full_rate_r2(r, [s.full]),
-                    joint_explained_fraction=joint_r2_full[pos],
-                    coefficient=coef * s.unit,
-                    interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
-                    p_value=p,
-                    significant=p <= holm_levels[pos],
-                    selected=True,
-                    rank=0,
-                )
+    if not selected:
+        return findings, explained, remaining_full, remaining_grid
+    # Intervals of selected candidates use the noise model of the final joint model.
+    joint = _hac_fit(r_g, base, order)
+    se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
+    for pos, idx in enumerate(selected):
+        s = kept[idx]
+        b_std = float(joint.beta[pos + 1])
+        se_std = float(se[pos + 1])
+        coef = b_std / s.std
+        df = int(joint.df[pos + 1])
+        p = _p_value(b_std, se_std, df)
+        remaining_full -= coef * (s.full - s.mean)
+        remaining_grid -= coef * (s.grid - s.mean)
+        findings.append(
+            CandidateFinding(
+                name=s.name,
+                kind=s.kind,
+                explained_fraction=_full_rate_r2(r, [s.full]),
+                joint_explained_fraction=joint_r2_full[pos],
+                coefficient=coef * s.unit,
+                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                p_value=p,
+                significant=p <= holm_levels[pos],
+                selected=True,
+                rank=0,
             )
-    if alone is not None:
-        for j, s in enumerate(kept):
-            if j in selected:
-                continue
-            coef = float(alone.beta[j]) / s.std
-            p = float(alone.p[j])
-            findings.append(
-                CandidateFinding(
-                    name=s.name,
-                    kind=s.kind,
-                    explained_fraction=_full_rate_r2(r, [s.full]),
-                    joint_explained_fraction=None,
-                    coefficient=coef * s.unit,
-                    interval=_scaled(
-                        _interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha), s.unit
-                    ),
-                    p_value=p,
-                    significant=p <= alpha / m,
-                    selected=False,
-                    rank=0,
-                )
-            )
-
-    mean_sq = _dot(r, r) / n_w
-    offset_finding = CandidateFinding(
-        name=_free_name("offset", names),
-        kind="offset",
-        explained_fraction=min(1.0, float(np.mean(r)) ** 2 / mean_sq),
-        joint_explained_fraction=None,
-        coefficient=offset / s_sig,
-        interval=_scaled(offset_interval, 1.0 / s_sig),
-        p_value=offset_p,
-        significant=offset_significant,
-        selected=offset_significant,
-        rank=0,
-    )
-    ordered = _rank([*findings, offset_finding])
-
-    # --- timing significance ------------------------------------------------------------------
-    # Timing counts only when the delay survived the forward selection, with the sign of the
-    # searched lag and a size of at least half a sample: the lag search maximises the fit over
-    # many lags, so an unadjusted test of the lag it picked would see delays in pure noise.
-    timing_significant = False
-    lag_finding = next((f for f in ordered if f.kind == "lag"), None)
-    if lag_finding is not None and lag != 0:
-        timing_significant = (
-            lag_finding.selected
-            and lag_finding.significant
-            and (lag_finding.coefficient > 0) == (lag < 0)
-            and abs(lag_finding.coefficient) >= dt / 2.0
         )
+    return findings, explained, remaining_full, remaining_grid
 
-    remaining = ljung_box(remaining_grid, LJUNG_BOX_LAGS, alpha=alpha)
-    frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
-    effective = _effective_samples(r_g, order)
-    if factor > 1:
-        notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
 
-    summary = _summary(
-        ordered,
-        lag_s=lag_s,
-        timing_significant=timing_significant,
-        gain=gain,
-        gain_significant=gain_significant,
-        remaining=remaining,
-    )
-    return Diagnosis(
-        lag_s=lag_s,
-        gain=gain,
-        gain_interval=gain_interval,
-        offset=offset / s_sig,
-        offset_interval=_scaled(offset_interval, 1.0 / s_sig),
-        timing_significant=timing_significant,
-        gain_significant=gain_significant,
-        offset_significant=offset_significant,
-        candidates=tuple(ordered),
-        explained_fraction=explained,
-        remaining=remaining,
-        dominant_frequencies_hz=frequencies,
-        effective_samples=effective,
-        summary=summary,
-        notes=tuple(notes),
+def _alone_findings(
+    r: FloatArray,
+    kept: list[_Series],
+    selected: list[int],
+    alone: _Screen | None,
+    alpha: float,
+) -> list[CandidateFinding]:
+    """Each candidate not selected, tested alone with an intercept (Bonferroni over all)."""
+    if alone is None:
+        return []
+    m = len(kept)
+    findings = []
+    for j, s in enumerate(kept):
+        if j in selected:
+            continue
+        coef = float(alone.beta[j]) / s.std
+        p = float(alone.p[j])
+        findings.append(
+            CandidateFinding(
+                name=s.name,
+                kind=s.kind,
+                explained_fraction=_full_rate_r2(r, [s.full]),
+                joint_explained_fraction=None,
+                coefficient=coef * s.unit,
+                interval=_scaled(
+                    _interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha), s.unit
+                ),
+                p_value=p,
+                significant=p <= alpha / m,
+                selected=False,
+                rank=0,
+            )
+        )
+    return findings
+
+
+def _timing_significant(ordered: Sequence[CandidateFinding], lag: int, dt: float) -> bool:
+    """Timing counts only when the delay survived the forward selection, with the sign of the
+    searched lag and a size of at least half a sample: the lag search maximises the fit over
+    many lags, so an unadjusted test of the lag it picked would see delays in pure noise."""
+    lag_finding = next((f for f in ordered if f.kind == "lag"), None)
+    if lag_finding is None or lag == 0:
+        return False
+    return (
+        lag_finding.selected
+        and lag_finding.significant
+        and (lag_finding.coefficient > 0) == (lag < 0)
+        and abs(lag_finding.coefficient) >= dt / 2.0
     )
 
 
