@@ -31,7 +31,24 @@ if TYPE_CHECKING:
     )
     from .core.registry import Characteristic, CharacteristicValue, register_characteristic
 
-__version__ = "0.1.0"
+
+def _version() -> str:
+    """The installed distribution's version; from pyproject.toml when run from a source tree."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("pytest-hevval")
+    except metadata.PackageNotFoundError:
+        import re
+        from pathlib import Path
+
+        pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
+        found = re.search(r'^version = "([^"]+)"', pyproject.read_text("utf-8"), re.MULTILINE)
+        return found.group(1) if found else "unknown"
+
+
+#: One source: ``version`` in pyproject.toml (installed as the distribution's metadata).
+__version__ = _version()
 
 #: Public name → the module that defines it, imported when the name is first used.
 _LAZY: dict[str, str] = {

@@ -83,8 +83,11 @@ def _run(args: argparse.Namespace) -> int:
     for line in tree_summary(results, details=args.details):
         print(line)
     passed = all(r.passed for r in results)
+    from . import __version__
+
     payload = {
         "schema_version": 1,
+        "hevval_version": __version__,
         "passed": passed,
         "specs": [r.to_dict() for r in results],
     }

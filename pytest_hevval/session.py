@@ -26,7 +26,8 @@ from .terminal import tree_summary
 __all__ = ["HevvalSession"]
 
 
-@dataclass
+# eq=False keeps identity hashing: pluggy (before 1.4) keeps registered plugins in a set.
+@dataclass(eq=False)
 class HevvalSession:
     config: pytest.Config
     cache: DataCache = field(default_factory=DataCache)

@@ -14,6 +14,7 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from .. import __version__
 from ..errors import MissingExtraError
 from . import model, plots, svg
 
@@ -152,6 +153,7 @@ def render_html(
     text: str = template.render(
         title=title,
         generated_utc=generated_utc,
+        version=__version__,
         summary=model.summary(spec_results),
         specs=specs,
         worst=worst,

@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path, PurePath
 from typing import Any
 
+from .. import __version__
 from . import model
 
 __all__ = [
@@ -75,6 +76,7 @@ def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
     """
     payload = {
         "report_schema_version": REPORT_SCHEMA_VERSION,
+        "generated_by": f"pytest-hevval {__version__}",
         "summary": model.summary(spec_results),
         "worst": _worst_json(spec_results),
         "specs": list(spec_results),
@@ -195,6 +197,7 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
             lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
+    lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
         quality = (spec.get("data") or {}).get("quality")
         if not quality or not quality.get("findings"):
