@@ -944,3 +944,12 @@ def test_missing_library_names_the_extra(
     assert message.startswith(f"{path}: ")
     assert f"needs the optional package {module!r}" in message
     assert message.endswith(f"install it with: pip install 'pytest-hevval[{extra}]'")
+
+
+def test_a_header_with_nul_bytes_is_a_data_error(tmp_path: Path) -> None:
+    # UTF-16 text without a declared encoding: Python 3.10's csv module raises on the NUL bytes.
+    path = tmp_path / "utf16.csv"
+    path.write_bytes(b"\xff\xfet\x00i\x00m\x00e\x00")
+    with pytest.raises(DataError) as caught:
+        read_record(str(path), None, SourceOptions())
+    assert str(path) in str(caught.value)

@@ -144,7 +144,16 @@ def _read_delimited(
     )
     names = [str(c) for c in sample.columns]
     header = _header_line(head, encoding)
-    raw_names = next(csv.reader([header], delimiter=sep)) if len(sep) == 1 else names
+    try:
+        raw_names = next(csv.reader([header], delimiter=sep)) if len(sep) == 1 else names
+    except (csv.Error, TypeError) as exc:
+        # Python 3.10's csv module refuses NUL bytes, in the text (UTF-16 read as 8-bit, for
+        # one) or as the separator.
+        raise DataError(
+            f"cannot read the header line with separator {sep!r}: {exc}",
+            file=path,
+            hint="save the file as UTF-8 text, or set `encoding:` and `sep:` to the file's",
+        ) from None
     renamed = {new: old for new, old in zip(names, raw_names, strict=False) if new != old}
 
     if len(names) == 1:
