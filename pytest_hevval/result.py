@@ -19,8 +19,8 @@ __all__ = ["RESULT_SCHEMA_VERSION", "Failure", "SignalResult", "SpecResult"]
 
 RESULT_SCHEMA_VERSION = 2
 
-# The physical errors of a signal, flat in its JSON form beside ``lambdas``.
-_ERROR_KEYS = (
+#: The physical errors of a signal, flat in its JSON form beside ``lambdas``.
+ERROR_KEYS = (
     "lag_s",
     "peak_correlation",
     "mae",
@@ -138,7 +138,7 @@ class SignalResult:
             "unit": self.unit,
             "description": self.description,
             "lambdas": {name: float(v) for name, v in self.lambdas.items()},
-            **{key: errors[key] for key in _ERROR_KEYS},
+            **{key: errors[key] for key in ERROR_KEYS},
             "thresholds": dict(self.thresholds),
             "failures": [f.to_dict() for f in self.failures],
             "passed": self.passed,

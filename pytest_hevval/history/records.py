@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
+from ..result import ERROR_KEYS
 from ._base import HistoryError, json_safe, optional_float
 
 __all__ = [
@@ -68,17 +69,7 @@ _SIGNAL_KEYS = (
     "unit",
     "description",
     "lambdas",
-    "lag_s",
-    "peak_correlation",
-    "mae",
-    "rms",
-    "delta_e",
-    "error_std",
-    "mean_error",
-    "reference_range",
-    "n_samples",
-    "dt",
-    "correlation",
+    *ERROR_KEYS,
     "components",
     "thresholds",
     "failures",
