@@ -475,9 +475,13 @@ def _resolve(context: _Context, base: Path, raw: str, line: int, key: str) -> st
     if "\x00" in raw:
         raise context.error(line, key, "a file path cannot contain a NUL character", got=raw)
     try:
+        # strict=True on 3.13+ reports a symlink loop as OSError (non-strict resolve no longer
+        # raises there); earlier versions raise RuntimeError even when not strict. A missing
+        # file is not an error here: the reader reports it with what to do.
+        return str((base / raw).resolve(strict=True))
+    except FileNotFoundError:
         return str((base / raw).resolve())
     except (OSError, RuntimeError) as exc:
-        # Python before 3.13 raises RuntimeError for a symlink loop.
         raise context.error(line, key, f"cannot resolve the path ({exc})", got=raw) from None
 
 
