@@ -410,3 +410,19 @@ def test_two_failing_leaves_are_both_origins() -> None:
 def test_passing_node_has_no_origin() -> None:
     _, origins = _three_level({"Teng"})
     assert origins == ()
+
+
+@pytest.mark.parametrize(
+    "reference",
+    [
+        [5e-324, 0.0, 0.0, 0.0],  # found by Hypothesis: the mean underflowed, lag came out −1
+        [1e-310, 3e-320, 0.0, 7e-315, 1e-312, 0.0],
+        [1e300, -1e300, 5e299, 0.0, 2e300],
+    ],
+)
+def test_rescaled_identical_signals_have_no_lag(reference: list[float]) -> None:
+    values = np.array(reference)
+    got = signal_characteristics(values, values.copy(), dt=0.01)
+    assert got.lag_s == 0.0
+    assert got.peak_correlation == pytest.approx(1.0, abs=1e-12)
+    assert got.lambdas[1:] == (1.0,) * 5

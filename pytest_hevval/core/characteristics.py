@@ -578,24 +578,36 @@ def signal_characteristics(
         if not (math.isfinite(max_lag_s) and max_lag_s >= 0):
             raise DegenerateSignalError(f"max_lag_s must be ≥ 0 (got {max_lag_s!r})")
         max_lag = min(round(max_lag_s / dt), n - 1)
-    r_mean = sums.ref_sum / n / scale
-    s_mean = sums.sim_sum / n / scale
+    lag_ref, lag_sim, lag_scale = ref, sim, scale
+    if scale != 1.0:
+        # Search the rescaled records themselves: their means, which are the sums' own units,
+        # would underflow (or overflow) if taken back to the original scale, and a centring
+        # by a lost mean can make a varying record look flat. Scaling by a power of two is
+        # exact, so nothing else changes; the copies are made only in this rare case.
+        lag_ref = np.multiply(ref, scale, dtype=np.float64)
+        lag_sim = np.multiply(sim, scale, dtype=np.float64)
+        lag_scale = 1.0
+    # The sums are in the units of the records searched (rescaled or not): so are the means.
+    r_mean = sums.ref_sum / n
+    s_mean = sums.sim_sum / n
     search, centred_peak = _search(
-        ref,
-        sim,
+        lag_ref,
+        lag_sim,
         max_lag,
         ref_mean=r_mean,
         sim_mean=s_mean,
-        scale=scale,
+        scale=lag_scale,
         workers=workers,
         levels=levels or (),
     )
     del levels
     if centred_peak is None:
-        peak_correlation = _correlation_at(ref, sim, search.lag, sums, correlation, scale)
+        peak_correlation = _correlation_at(
+            lag_ref, lag_sim, search.lag, sums, correlation, lag_scale
+        )
     else:
         peak_correlation = _correlation_from_centred(
-            ref, sim, search.lag, sums, correlation, scale, centred_peak, r_mean, s_mean
+            lag_ref, lag_sim, search.lag, sums, correlation, lag_scale, centred_peak, r_mean, s_mean
         )
 
     lambdas = (
