@@ -1,0 +1,184 @@
+"""The compiled loops behind :mod:`pytest_hevval.core.kernel` (imports numba; load it lazily).
+
+Each parallel loop writes one row of partial results per chunk; the caller combines the rows
+in chunk order, so a result depends on the chunk size but not on the thread count. Every
+function is called with one set of argument types (C-contiguous float64 arrays, float64
+scalars, int64 counts), so each compiles once and its cache holds one entry.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+# Reassociation lets LLVM vectorise the sums; no-NaN lets it vectorise min and max. NaN input
+# still poisons the sums of squares, which the caller checks before trusting an extreme.
+_FAST = {"reassoc", "contract", "nnan", "nsz"}
+
+from .kernel import (
+    ABS_ERROR,
+    CROSS,
+    ERROR_M2,
+    ERROR_SUM,
+    FIELDS,
+    N,
+    REF_MAX,
+    REF_MIN,
+    REF_SQ,
+    REF_SUM,
+    SIGN_MATCHES,
+    SIM_MAX,
+    SIM_MIN,
+    SIM_SQ,
+    SIM_SUM,
+    SQ_ERROR,
+)
+
+
+@numba.njit(cache=True)  # type: ignore[misc]
+def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[no-untyped-def]
+    """Block means by 4 and 16 of x[start:stop]·scale, summed in the numpy path's order.
+
+    Compiled without reassociation: ((a + b) + (c + d))·0.25 here is bit-identical to the
+    strided pairwise additions of characteristics._quarter_means.
+    """
+    q0 = start // 4
+    quarters = (stop - start) // 4
+    for q in range(quarters):
+        i = start + 4 * q
+        a = x[i] * scale
+        b = x[i + 1] * scale
+        c = x[i + 2] * scale
+        d = x[i + 3] * scale
+        quarter[q0 + q] = ((a + b) + (c + d)) * 0.25
+    h0 = start // 16
+    for h in range(quarters // 4):
+        j = q0 + 4 * h
+        sixteenth[h0 + h] = (
+            (quarter[j] + quarter[j + 1]) + (quarter[j + 2] + quarter[j + 3])
+        ) * 0.25
+
+
+@numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
+def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-def]
+    n_total = ref.shape[0]
+    m = stop - start
+    abs_error = 0.0
+    sq_error = 0.0
+    error_sum = 0.0
+    ref_sum = 0.0
+    sim_sum = 0.0
+    ref_sq = 0.0
+    sim_sq = 0.0
+    cross = 0.0
+    ref_min = math.inf
+    ref_max = -math.inf
+    sim_min = math.inf
+    sim_max = -math.inf
+    for i in range(start, stop):
+        r = ref[i] * scale
+        s = sim[i] * scale
+        e = r - s
+        error_sum += e
+        sq_error += e * e
+        abs_error += abs(e)
+        ref_sum += r
+        sim_sum += s
+        ref_sq += r * r
+        sim_sq += s * s
+        cross += r * s
+        ref_min = min(ref_min, r)
+        ref_max = max(ref_max, r)
+        sim_min = min(sim_min, s)
+        sim_max = max(sim_max, s)
+    error_mean = error_sum / m
+    if error_mean * error_sum <= 0.5 * sq_error:
+        # As in the numpy path: Σe² − (Σe)²/m loses at most a bit when spread ≥ bias.
+        error_m2 = sq_error - error_mean * error_sum
+    else:
+        error_m2 = 0.0
+        for i in range(start, stop):
+            d = (ref[i] * scale - sim[i] * scale) - error_mean
+            error_m2 += d * d
+    # Central differences: the first and last sample of the record have derivative 0, and
+    # those endpoints always agree.
+    matches = 0
+    for i in range(max(start, 1), min(stop, n_total - 1)):
+        key_r = int(ref[i + 1] > ref[i - 1]) - int(ref[i + 1] < ref[i - 1])
+        key_s = int(sim[i + 1] > sim[i - 1]) - int(sim[i + 1] < sim[i - 1])
+        if key_r == key_s:
+            matches += 1
+    if start == 0:
+        matches += 1
+    if stop == n_total and n_total > 1:
+        matches += 1
+    row[N] = m
+    row[ABS_ERROR] = abs_error
+    row[SQ_ERROR] = sq_error
+    row[ERROR_SUM] = error_sum
+    row[ERROR_M2] = error_m2
+    row[REF_SUM] = ref_sum
+    row[SIM_SUM] = sim_sum
+    row[REF_SQ] = ref_sq
+    row[SIM_SQ] = sim_sq
+    row[CROSS] = cross
+    row[REF_MIN] = ref_min
+    row[REF_MAX] = ref_max
+    row[SIM_MIN] = sim_min
+    row[SIM_MAX] = sim_max
+    row[SIGN_MATCHES] = matches
+
+
+@numba.njit(parallel=True, cache=True)  # type: ignore[misc]
+def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore[no-untyped-def]
+    """One row of sums per chunk of ``chunk`` samples (a multiple of 16).
+
+    The block means by 4 and 16 are written into ref4 … sim16 unless they are empty.
+    """
+    n = ref.shape[0]
+    chunks = (n + chunk - 1) // chunk
+    rows = np.empty((chunks, FIELDS), dtype=np.float64)
+    levels = ref4.shape[0] > 0
+    for c in numba.prange(chunks):
+        start = c * chunk
+        stop = min(start + chunk, n)
+        _chunk_row(ref, sim, start, stop, scale, rows[c])
+        if levels:
+            _quarter_means(ref, start, stop, scale, ref4, ref16)
+            _quarter_means(sim, start, stop, scale, sim4, sim16)
+    return rows
+
+
+@numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
+def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ignore[no-untyped-def]
+    width = b - a
+    centred_s = np.empty(width, dtype=np.float64)
+    centred_r = np.empty(width + count - 1, dtype=np.float64)
+    for j in range(width):
+        centred_s[j] = (s[a + j] - s_mean) * scale
+    for j in range(width + count - 1):
+        centred_r[j] = (r[a + lo + j] - r_mean) * scale
+    for k in range(count):
+        total = 0.0
+        for j in range(width):
+            total += centred_r[j + k] * centred_s[j]
+        row[k] = total
+    energy = 0.0
+    for j in range(width):
+        energy += centred_r[j] * centred_r[j]
+    row[count] = energy
+
+
+@numba.njit(parallel=True, cache=True)  # type: ignore[misc]
+def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):  # type: ignore[no-untyped-def]
+    """Per chunk of the window [core_lo, core_hi): C(lo + k) for k < count, then the energy
+    Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""
+    chunks = (core_hi - core_lo + chunk - 1) // chunk
+    rows = np.empty((chunks, count + 1), dtype=np.float64)
+    for c in numba.prange(chunks):
+        a = core_lo + c * chunk
+        b = min(a + chunk, core_hi)
+        _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, rows[c])
+    return rows

@@ -1,0 +1,246 @@
+"""The optional compiled kernel: which path scores a record, numba or numpy.
+
+The numpy code in :mod:`~pytest_hevval.core.characteristics` and :mod:`~pytest_hevval.core.lag`
+is the reference. With the ``fast`` extra (numba) installed, the main pass (the sums behind
+λ1–λ6, the extremes, the λ2 sign count and the first pyramid levels) and the exact lag window
+run as compiled loops instead, parallel over chunks and combined in chunk order, so a result
+is the same for any thread count and agrees with numpy to rounding.
+
+Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
+kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
+on-disk cache is already warm. numba writes that cache next to this module (``__pycache__``)
+or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that folder.
+
+``HEVVAL_KERNEL`` forces a path: ``numpy``, ``numba`` (an error if numba cannot be loaded) or
+``auto`` (the default). numba is imported only when the kernel is about to run, and any
+failure to import it (not installed, or built for an older numpy) leaves the numpy path.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+import threading
+from pathlib import Path
+from types import ModuleType
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import HevvalError, MissingExtraError
+
+__all__ = [
+    "KERNEL_ENV",
+    "KERNEL_MIN_SAMPLES",
+    "KernelPath",
+    "active_path",
+    "describe",
+    "kernel_for",
+]
+
+KernelPath = Literal["auto", "numpy", "numba"]
+
+#: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
+KERNEL_ENV = "HEVVAL_KERNEL"
+#: On the auto path with a cold cache, records shorter than this stay on numpy. A first
+#: compile costs about as much as the kernel saves on 10^8 samples (see docs/performance.md),
+#: so only records long enough to be costly on numpy wait for it.
+KERNEL_MIN_SAMPLES = 1 << 24
+#: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
+#: centred copies, stay in a 1 MiB L2 cache.
+KERNEL_CHUNK = 1 << 15
+
+#: Columns of one chunk's row of sums from the compiled main pass.
+FIELDS = 15
+(
+    N,
+    ABS_ERROR,
+    SQ_ERROR,
+    ERROR_SUM,
+    ERROR_M2,
+    REF_SUM,
+    SIM_SUM,
+    REF_SQ,
+    SIM_SQ,
+    CROSS,
+    REF_MIN,
+    REF_MAX,
+    SIM_MIN,
+    SIM_MAX,
+    SIGN_MATCHES,
+) = range(FIELDS)
+
+_PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
+_lock = threading.Lock()
+_loaded: dict[str, ModuleType | None] = {}
+_failure: dict[str, str] = {}
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def requested_path() -> KernelPath:
+    """The path ``HEVVAL_KERNEL`` asks for (``auto`` when unset)."""
+    value = os.environ.get(KERNEL_ENV, "auto").strip().lower() or "auto"
+    for path in _PATHS:
+        if value == path:
+            return path
+    raise HevvalError(
+        f"{KERNEL_ENV}={value!r} is not a kernel path",
+        key=KERNEL_ENV,
+        hint="set it to auto, numpy or numba, or unset it",
+    )
+
+
+def _load() -> ModuleType | None:
+    """The compiled module, or None (the reason kept for :func:`describe`)."""
+    with _lock:
+        if "module" not in _loaded:
+            try:
+                _loaded["module"] = importlib.import_module(f"{__package__}._fused")
+            except Exception as error:  # noqa: BLE001 - any failure means: use numpy
+                _loaded["module"] = None
+                _failure["reason"] = f"{type(error).__name__}: {error}".splitlines()[0]
+        return _loaded["module"]
+
+
+def _cache_folders() -> list[Path]:
+    here = Path(__file__).resolve().parent
+    folders = [here / "__pycache__"]
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    if custom:
+        # numba files a module's cache under the module's folder path inside NUMBA_CACHE_DIR.
+        folders.insert(0, Path(custom) / here.relative_to(here.anchor))
+    return folders
+
+
+def cache_warm() -> bool:
+    """Whether numba's on-disk cache already holds the kernel for this Python.
+
+    A stale entry (another numba version or an edited source) costs one compile, after which
+    the cache is warm again.
+    """
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    names = ("main_pass", "lag_window")
+    for folder in _cache_folders():
+        if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
+            return True
+    return False
+
+
+def _numba_installed() -> bool:
+    return importlib.util.find_spec("numba") is not None
+
+
+def kernel_for(samples: int) -> ModuleType | None:
+    """The compiled module if it should score a record of ``samples`` samples, else None."""
+    path = requested_path()
+    if path == "numpy":
+        return None
+    if path == "numba":
+        module = _load()
+        if module is None:
+            raise MissingExtraError(
+                f"{KERNEL_ENV}=numba, but the compiled kernel cannot be loaded "
+                f"({_failure.get('reason', 'unknown reason')})",
+                key=KERNEL_ENV,
+                hint='install the extra (pip install "pytest-hevval[fast]") or unset '
+                f"{KERNEL_ENV}",
+            )
+        return module
+    if samples < KERNEL_MIN_SAMPLES and not cache_warm():
+        return None
+    if not _numba_installed():
+        return None
+    return _load()
+
+
+def active_path() -> str:
+    """``numba`` or ``numpy``: the path a long record takes now (loads numba if installed)."""
+    if requested_path() == "numpy" or not _numba_installed():
+        return "numpy"
+    return "numba" if _load() is not None else "numpy"
+
+
+def describe() -> str:
+    """One line for ``hevval --version``: the active path and why."""
+    path = requested_path()
+    if path == "numpy":
+        return f"kernel: numpy ({KERNEL_ENV}=numpy)"
+    if not _numba_installed():
+        return 'kernel: numpy (numba not installed; pip install "pytest-hevval[fast]")'
+    if _load() is None:
+        return f"kernel: numpy (numba unusable: {_failure.get('reason', 'unknown reason')})"
+    import numba
+
+    version = getattr(numba, "__version__", "?")
+    if path == "numba":
+        return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
+    warm = "cache warm: every record" if cache_warm() else "cache cold"
+    return (
+        f"kernel: numba {version} for records of ≥ {KERNEL_MIN_SAMPLES:,} samples ({warm}); "
+        "numpy otherwise"
+    )
+
+
+def _threads(module: ModuleType, workers: int) -> None:
+    import numba
+
+    numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
+
+
+def accepts(*arrays: npt.NDArray[np.floating]) -> bool:
+    """Whether the kernel's one compiled signature takes these arrays (float64, contiguous)."""
+    return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
+
+
+def main_pass(
+    module: ModuleType,
+    ref: FloatArray,
+    sim: FloatArray,
+    scale: float,
+    workers: int,
+    levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+) -> FloatArray:
+    """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
+    _threads(module, workers)
+    empty = np.empty(0, dtype=np.float64)
+    ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
+    rows: FloatArray = module.main_pass(
+        ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
+    )
+    return rows
+
+
+def lag_window(
+    module: ModuleType,
+    r: FloatArray,
+    s: FloatArray,
+    lo: int,
+    count: int,
+    r_mean: float,
+    s_mean: float,
+    scale: float,
+    window: tuple[int, int],
+    workers: int,
+) -> FloatArray:
+    """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
+    per-chunk rows summed in chunk order."""
+    _threads(module, workers)
+    rows: FloatArray = module.lag_window(
+        r,
+        s,
+        int(lo),
+        int(count),
+        float(r_mean),
+        float(s_mean),
+        float(scale),
+        int(window[0]),
+        int(window[1]),
+        KERNEL_CHUNK,
+    )
+    total = np.zeros(count + 1, dtype=np.float64)
+    for row in rows:
+        total += row
+    return total
