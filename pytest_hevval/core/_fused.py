@@ -63,8 +63,15 @@ def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[n
 
 @numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
 def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-def]
+    """The sums of one chunk, in three loops over it while it is in cache.
+
+    Loops index slice views from zero: an index that may be negative makes numba check for
+    wraparound, which stops LLVM from vectorising the loop.
+    """
     n_total = ref.shape[0]
     m = stop - start
+    ref_part = ref[start:stop]
+    sim_part = sim[start:stop]
     abs_error = 0.0
     sq_error = 0.0
     error_sum = 0.0
@@ -73,13 +80,9 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     ref_sq = 0.0
     sim_sq = 0.0
     cross = 0.0
-    ref_min = math.inf
-    ref_max = -math.inf
-    sim_min = math.inf
-    sim_max = -math.inf
-    for i in range(start, stop):
-        r = ref[i] * scale
-        s = sim[i] * scale
+    for i in range(m):
+        r = ref_part[i] * scale
+        s = sim_part[i] * scale
         e = r - s
         error_sum += e
         sq_error += e * e
@@ -89,27 +92,39 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
         ref_sq += r * r
         sim_sq += s * s
         cross += r * s
+    # The simulated extremes are left to the caller, which rarely needs them; min and max
+    # do not vectorise here and cost as much as all the sums above.
+    ref_min = math.inf
+    ref_max = -math.inf
+    for i in range(m):
+        r = ref_part[i] * scale
         ref_min = min(ref_min, r)
         ref_max = max(ref_max, r)
-        sim_min = min(sim_min, s)
-        sim_max = max(sim_max, s)
     error_mean = error_sum / m
     if error_mean * error_sum <= 0.5 * sq_error:
         # As in the numpy path: Σe² − (Σe)²/m loses at most a bit when spread ≥ bias.
         error_m2 = sq_error - error_mean * error_sum
     else:
         error_m2 = 0.0
-        for i in range(start, stop):
-            d = (ref[i] * scale - sim[i] * scale) - error_mean
+        for i in range(m):
+            d = (ref_part[i] * scale - sim_part[i] * scale) - error_mean
             error_m2 += d * d
     # Central differences: the first and last sample of the record have derivative 0, and
-    # those endpoints always agree.
+    # those endpoints always agree. Comparing the neighbours gives the sign of the difference.
+    first = max(start, 1)
+    last = min(stop, n_total - 1)
     matches = 0
-    for i in range(max(start, 1), min(stop, n_total - 1)):
-        key_r = int(ref[i + 1] > ref[i - 1]) - int(ref[i + 1] < ref[i - 1])
-        key_s = int(sim[i + 1] > sim[i - 1]) - int(sim[i + 1] < sim[i - 1])
-        if key_r == key_s:
-            matches += 1
+    if last > first:
+        r_before = ref[first - 1 : last - 1]
+        r_after = ref[first + 1 : last + 1]
+        s_before = sim[first - 1 : last - 1]
+        s_after = sim[first + 1 : last + 1]
+        for j in range(last - first):
+            a = r_after[j]
+            b = r_before[j]
+            c = s_after[j]
+            d = s_before[j]
+            matches += ((a > b) == (c > d)) & ((a < b) == (c < d))
     if start == 0:
         matches += 1
     if stop == n_total and n_total > 1:
@@ -126,8 +141,8 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     row[CROSS] = cross
     row[REF_MIN] = ref_min
     row[REF_MAX] = ref_max
-    row[SIM_MIN] = sim_min
-    row[SIM_MAX] = sim_max
+    row[SIM_MIN] = math.inf
+    row[SIM_MAX] = -math.inf
     row[SIGN_MATCHES] = matches
 
 
@@ -154,17 +169,40 @@ def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore
 @numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
 def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ignore[no-untyped-def]
     width = b - a
+    s_part = s[a:b]
+    r_part = r[a + lo : b + lo + count - 1]
     centred_s = np.empty(width, dtype=np.float64)
     centred_r = np.empty(width + count - 1, dtype=np.float64)
     for j in range(width):
-        centred_s[j] = (s[a + j] - s_mean) * scale
+        centred_s[j] = (s_part[j] - s_mean) * scale
     for j in range(width + count - 1):
-        centred_r[j] = (r[a + lo + j] - r_mean) * scale
-    for k in range(count):
-        total = 0.0
+        centred_r[j] = (r_part[j] - r_mean) * scale
+    # Four lags per sweep: each centred simulated sample is loaded once for all four.
+    k = 0
+    while k + 4 <= count:
+        t0 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        t3 = 0.0
+        shifted = centred_r[k:]
         for j in range(width):
-            total += centred_r[j + k] * centred_s[j]
+            x = centred_s[j]
+            t0 += shifted[j] * x
+            t1 += shifted[j + 1] * x
+            t2 += shifted[j + 2] * x
+            t3 += shifted[j + 3] * x
+        row[k] = t0
+        row[k + 1] = t1
+        row[k + 2] = t2
+        row[k + 3] = t3
+        k += 4
+    while k < count:
+        total = 0.0
+        shifted = centred_r[k:]
+        for j in range(width):
+            total += shifted[j] * centred_s[j]
         row[k] = total
+        k += 1
     energy = 0.0
     for j in range(width):
         energy += centred_r[j] * centred_r[j]

@@ -178,8 +178,6 @@ class _Sums:
     sim_min: float = math.inf
     sim_max: float = -math.inf
     sign_matches: int = 0
-    # Whether sim_min and sim_max were computed (the compiled pass always does).
-    sim_extremes_known: bool = False
 
     def merge(self, other: _Sums) -> None:
         if other.n == 0:
@@ -201,7 +199,6 @@ class _Sums:
         self.sim_min = min(self.sim_min, other.sim_min)
         self.sim_max = max(self.sim_max, other.sim_max)
         self.sign_matches += other.sign_matches
-        self.sim_extremes_known = other.sim_extremes_known
 
 
 def _sums_from_rows(rows: FloatArray) -> _Sums:
@@ -225,7 +222,6 @@ def _sums_from_rows(rows: FloatArray) -> _Sums:
             sim_min=values[kernel.SIM_MIN],
             sim_max=values[kernel.SIM_MAX],
             sign_matches=int(values[kernel.SIGN_MATCHES]),
-            sim_extremes_known=True,
         )
         total.merge(part)
     # The compiled min and max assume no NaN. A NaN sample makes the sum of squares NaN
@@ -559,7 +555,7 @@ def signal_characteristics(
     levels = _level_buffers(n, dt, max_lag_s)
     sums = _all_sums(ref, sim, 1.0, workers, levels)
     sim_extremes = _sim_extremes_needed(sums)
-    if sim_extremes and not sums.sim_extremes_known:
+    if sim_extremes:
         sums.sim_min = float(np.min(sim))
         sums.sim_max = float(np.max(sim))
     # Skipped simulated extremes stay ±inf; _sim_extremes_needed then proved Σ s² finite.
