@@ -87,7 +87,7 @@ def requested_path() -> KernelPath:
         if value == path:
             return path
     raise HevvalError(
-        f"{KERNEL_ENV}={value!r} is not a kernel path",
+        f"{value!r} is not a kernel path",
         key=KERNEL_ENV,
         hint="set it to auto, numpy or numba, or unset it",
     )
@@ -145,8 +145,7 @@ def kernel_for(samples: int) -> ModuleType | None:
                 f"{KERNEL_ENV}=numba, but the compiled kernel cannot be loaded "
                 f"({_failure.get('reason', 'unknown reason')})",
                 key=KERNEL_ENV,
-                hint='install the extra (pip install "pytest-hevval[fast]") or unset '
-                f"{KERNEL_ENV}",
+                hint=f'install the extra (pip install "pytest-hevval[fast]") or unset {KERNEL_ENV}',
             )
         return module
     if samples < KERNEL_MIN_SAMPLES and not cache_warm():
