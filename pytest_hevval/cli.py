@@ -65,6 +65,7 @@ def _run(args: argparse.Namespace) -> int:
         figures="html" in (args.report or ""),
         workers=args.workers,
         dask=args.dask,
+        data_hash=args.hash,
     )
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
     done = [0]
@@ -169,6 +170,8 @@ def _shared(parser: argparse.ArgumentParser, name: str, **overrides: Any) -> Non
         kwargs["action"] = "store_true"
     else:
         kwargs["default"] = option.default
+    if option.choices:
+        kwargs["choices"] = option.choices
     kwargs.update(overrides)
     parser.add_argument(f"--{name}", **kwargs)
 
@@ -209,6 +212,7 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "model-version")
     _shared(run, "dask", metavar="ADDRESS")
     _shared(run, "workers", type=_workers)
+    _shared(run, "hash")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     diagnose = commands.add_parser(
