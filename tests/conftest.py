@@ -21,6 +21,10 @@ from pytest_hevval import engine, session
 _KEPT_LOADED = [engine, session, importlib.import_module("pandas")]
 with contextlib.suppress(ImportError):  # the parquet extra
     _KEPT_LOADED.append(importlib.import_module("pyarrow"))
+# The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
+# and the next would pay its import again.
+with contextlib.suppress(Exception):
+    _KEPT_LOADED.append(importlib.import_module("pytest_hevval.core._fused"))
 
 
 def _kernel_unavailable() -> str | None:

@@ -72,7 +72,8 @@ def test_kernel_agrees_with_numpy_on_long_records(n: int, monkeypatch: pytest.Mo
     simulated = np.roll(reference, 9) * 1.01 + rng.normal(0.3, 0.5, size=n)
     numpy_path = _on("numpy", monkeypatch, reference, simulated, dt=0.01)
     compiled = _on("numba", monkeypatch, reference, simulated, dt=0.01)
-    assert compiled.lag_search is not None and compiled.lag_search.method == "pyramid"
+    assert compiled.lag_search is not None
+    assert compiled.lag_search.method == "pyramid"
     assert compiled.lag_s == pytest.approx(-0.09)
     _assert_agree(numpy_path, compiled)
 
@@ -143,7 +144,7 @@ def test_auto_path_falls_back_to_numpy_when_numba_cannot_load(
 def test_forcing_an_unknown_path_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(kernel.KERNEL_ENV, "gpu")
     with pytest.raises(
-        HevvalError, match="HEVVAL_KERNEL: 'gpu' is not a kernel path.*auto, numpy or numba"
+        HevvalError, match=r"HEVVAL_KERNEL: 'gpu' is not a kernel path.*auto, numpy or numba"
     ):
         signal_characteristics(np.arange(10.0), np.arange(10.0), dt=1.0)
 

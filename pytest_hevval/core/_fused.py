@@ -13,17 +13,12 @@ import math
 import numba
 import numpy as np
 
-# Reassociation lets LLVM vectorise the sums; no-NaN lets it vectorise min and max. NaN input
-# still poisons the sums of squares, which the caller checks before trusting an extreme.
-_FAST = {"reassoc", "contract", "nnan", "nsz"}
-
 from .kernel import (
     ABS_ERROR,
     CROSS,
     ERROR_M2,
     ERROR_SUM,
     FIELDS,
-    N,
     REF_MAX,
     REF_MIN,
     REF_SQ,
@@ -34,10 +29,15 @@ from .kernel import (
     SIM_SQ,
     SIM_SUM,
     SQ_ERROR,
+    N,
 )
 
+# Reassociation lets LLVM vectorise the sums; no-NaN lets it drop the NaN cases of comparisons. NaN input
+# still poisons the sums of squares, which the caller checks before trusting an extreme.
+_FAST = {"reassoc", "contract", "nnan", "nsz"}
 
-@numba.njit(cache=True)  # type: ignore[misc]
+
+@numba.njit(cache=True)
 def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[no-untyped-def]
     """Block means by 4 and 16 of x[start:stop]·scale, summed in the numpy path's order.
 
@@ -61,7 +61,7 @@ def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[n
         ) * 0.25
 
 
-@numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
+@numba.njit(cache=True, fastmath=_FAST)
 def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-def]
     """The sums of one chunk, in three loops over it while it is in cache.
 
@@ -146,7 +146,7 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     row[SIGN_MATCHES] = matches
 
 
-@numba.njit(parallel=True, cache=True)  # type: ignore[misc]
+@numba.njit(parallel=True, cache=True)
 def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore[no-untyped-def]
     """One row of sums per chunk of ``chunk`` samples (a multiple of 16).
 
@@ -166,7 +166,7 @@ def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore
     return rows
 
 
-@numba.njit(cache=True, fastmath=_FAST)  # type: ignore[misc]
+@numba.njit(cache=True, fastmath=_FAST)
 def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ignore[no-untyped-def]
     width = b - a
     s_part = s[a:b]
@@ -209,7 +209,7 @@ def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ign
     row[count] = energy
 
 
-@numba.njit(parallel=True, cache=True)  # type: ignore[misc]
+@numba.njit(parallel=True, cache=True)
 def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):  # type: ignore[no-untyped-def]
     """Per chunk of the window [core_lo, core_hi): C(lo + k) for k < count, then the energy
     Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""

@@ -19,12 +19,13 @@ failure to import it (not installed, or built for an older numpy) leaves the num
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 import sys
 import threading
 from pathlib import Path
 from types import ModuleType
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -78,6 +79,7 @@ _loaded: dict[str, ModuleType | None] = {}
 _failure: dict[str, str] = {}
 
 FloatArray = npt.NDArray[np.float64]
+AnyFloatArray = npt.NDArray[np.floating]
 
 
 def requested_path() -> KernelPath:
@@ -99,7 +101,7 @@ def _load() -> ModuleType | None:
         if "module" not in _loaded:
             try:
                 _loaded["module"] = importlib.import_module(f"{__package__}._fused")
-            except Exception as error:  # noqa: BLE001 - any failure means: use numpy
+            except Exception as error:
                 _loaded["module"] = None
                 _failure["reason"] = f"{type(error).__name__}: {error}".splitlines()[0]
         return _loaded["module"]
@@ -183,27 +185,26 @@ def describe() -> str:
     )
 
 
-def _threads(module: ModuleType, workers: int) -> None:
-    import numba
-
+def _threads(workers: int) -> None:
+    numba: Any = importlib.import_module("numba")
     numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
 
 
-def accepts(*arrays: npt.NDArray[np.floating]) -> bool:
+def accepts(*arrays: AnyFloatArray) -> bool:
     """Whether the kernel's one compiled signature takes these arrays (float64, contiguous)."""
     return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
 
 
 def main_pass(
     module: ModuleType,
-    ref: FloatArray,
-    sim: FloatArray,
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
     scale: float,
     workers: int,
     levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
 ) -> FloatArray:
     """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
-    _threads(module, workers)
+    _threads(workers)
     empty = np.empty(0, dtype=np.float64)
     ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
     rows: FloatArray = module.main_pass(
@@ -214,8 +215,8 @@ def main_pass(
 
 def lag_window(
     module: ModuleType,
-    r: FloatArray,
-    s: FloatArray,
+    r: AnyFloatArray,
+    s: AnyFloatArray,
     lo: int,
     count: int,
     r_mean: float,
@@ -226,7 +227,7 @@ def lag_window(
 ) -> FloatArray:
     """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
     per-chunk rows summed in chunk order."""
-    _threads(module, workers)
+    _threads(workers)
     rows: FloatArray = module.lag_window(
         r,
         s,

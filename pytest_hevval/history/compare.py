@@ -467,9 +467,9 @@ def _data_changed(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[
             continue
         old_id = identity(old)
         new_id = identity(new)
-        if old_id is not None and new_id is not None and old_id[0] == new_id[0]:
-            if old_id[1] != new_id[1]:
-                changed.append(side)
+        same_hash = old_id is not None and new_id is not None and old_id[0] == new_id[0]
+        if same_hash and old_id != new_id:
+            changed.append(side)
     return tuple(changed)
 
 
