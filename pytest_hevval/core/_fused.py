@@ -32,8 +32,9 @@ from .kernel import (
     N,
 )
 
-# Reassociation lets LLVM vectorise the sums; no-NaN lets it drop the NaN cases of comparisons. NaN input
-# still poisons the sums of squares, which the caller checks before trusting an extreme.
+# Reassociation lets LLVM vectorise the sums; no-NaN lets it drop the NaN cases of the
+# comparisons. NaN input still poisons the sums of squares, which the caller checks before
+# trusting an extreme.
 _FAST = {"reassoc", "contract", "nnan", "nsz"}
 
 
