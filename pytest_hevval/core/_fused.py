@@ -221,3 +221,21 @@ def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):
         b = min(a + chunk, core_hi)
         _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, rows[c])
     return rows
+
+
+@numba.njit(parallel=True, cache=True)
+def interpolate(values, index, right, offset, step, exact):  # type: ignore[no-untyped-def]
+    """values at the grid points of a plan (data/align.py), as np.interp rounds them.
+
+    Compiled without fast-math: the same operations in the same order as np.interp, so the
+    result is bit-identical to the numpy path.
+    """
+    n = index.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    for i in numba.prange(n):
+        left = values[index[i]]
+        if exact[i]:
+            out[i] = left
+        else:
+            out[i] = (values[right[i]] - left) / step[i] * offset[i] + left
+    return out

@@ -244,3 +244,19 @@ def lag_window(
     for row in rows:
         total += row
     return total
+
+
+def interpolate(
+    module: ModuleType,
+    values: AnyFloatArray,
+    index: npt.NDArray[np.intp],
+    right: npt.NDArray[np.intp],
+    offset: FloatArray,
+    step: FloatArray,
+    exact: npt.NDArray[np.bool_],
+    workers: int = 2,
+) -> FloatArray:
+    """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
+    _threads(workers)
+    out: FloatArray = module.interpolate(values, index, right, offset, step, exact)
+    return out
