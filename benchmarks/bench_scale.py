@@ -325,7 +325,8 @@ def part_e2e(signals: int, duration_s: float, rate_hz: float) -> None:
             f"  reads {m['reads']}: {'each file once' if reads_ok else 'FAIL: not once each'}\n"
             f"  end to end {process_s:.1f} s (process start to exit; {m['wall_s']:.1f} s after "
             f"imports) against read the used columns + core {yardstick:.1f} s "
-            f"(read {f['read_s']:.1f} s + core {f['core_s']:.1f} s, process {floor_process_s:.1f} s):"
+            f"(read {f['read_s']:.1f} s + core {f['core_s']:.1f} s, "
+            f"process {floor_process_s:.1f} s):"
             f" {m['wall_s'] / yardstick:.2f}× after imports, {process_s / floor_process_s:.2f}× "
             f"process to process; yardstick peak RSS {f['hwm_mib'] / 1024:.2f} GiB"
         )
