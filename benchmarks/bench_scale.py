@@ -268,6 +268,7 @@ def child_floor(spec_path: str) -> None:
                 "read_s": read_done - started,
                 "core_s": finished - read_done,
                 "wall_s": finished - started,
+                "cpu_s": sum(resource.getrusage(resource.RUSAGE_SELF)[:2]),
                 "hwm_mib": _rss_kib("VmHWM") / 1024,
             }
         )
@@ -328,7 +329,8 @@ def part_e2e(signals: int, duration_s: float, rate_hz: float) -> None:
             f"(read {f['read_s']:.1f} s + core {f['core_s']:.1f} s, "
             f"process {floor_process_s:.1f} s):"
             f" {m['wall_s'] / yardstick:.2f}× after imports, {process_s / floor_process_s:.2f}× "
-            f"process to process; yardstick peak RSS {f['hwm_mib'] / 1024:.2f} GiB"
+            f"process to process; CPU {m['cpu_s']:.1f} s against {f['cpu_s']:.1f} s; "
+            f"yardstick peak RSS {f['hwm_mib'] / 1024:.2f} GiB"
         )
 
 
