@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .digest import DEFAULT_HASH
 from .errors import (
     DataError,
     DegenerateSignalError,
@@ -107,6 +108,7 @@ def evaluate_spec_file(
     rootdir: str,
     figures: bool = False,
     threads_per_spec: int | None = None,
+    data_hash: str = DEFAULT_HASH,
 ) -> dict[str, Any]:
     """Load and evaluate one spec file here; the Dask task body (also usable on its own).
 
@@ -124,7 +126,9 @@ def evaluate_spec_file(
             spec = load_spec(spec_path)
     except HevvalError as exc:
         return error_payload(spec_path, exc)
-    options = RunOptions(rootdir=Path(rootdir), figures=figures, workers=threads_per_spec)
+    options = RunOptions(
+        rootdir=Path(rootdir), figures=figures, workers=threads_per_spec, data_hash=data_hash
+    )
     outcome = evaluate_here(spec, options)
     if isinstance(outcome, HevvalError):
         return error_payload(spec_path, outcome)
@@ -147,6 +151,7 @@ def evaluate_on_dask(
     figures: bool = False,
     progress: Progress | None = None,
     threads_per_spec: int | None = None,
+    data_hash: str = DEFAULT_HASH,
 ) -> list[dict[str, Any]]:
     """Evaluate every spec on the Dask cluster at ``address``; one result per spec, in order.
 
@@ -168,6 +173,8 @@ def evaluate_on_dask(
     threads_per_spec
         Threads the engine scores one spec's signals on; ``None`` keeps the engine's default
         (up to two), which also keeps results bit-identical to a local run.
+    data_hash
+        How data files are identified in the results: ``"fast"`` or ``"sha256"``.
 
     Returns
     -------
@@ -203,7 +210,9 @@ def evaluate_on_dask(
             ) as cluster,
             distributed.Client(cluster) as client,
         ):
-            return _run(client, distributed, paths, rootdir, figures, progress, threads_per_spec)
+            return _run(
+                client, distributed, paths, rootdir, figures, progress, threads_per_spec, data_hash
+            )
     connect: dict[str, Any] = (
         {"scheduler_file": address}
         if address.endswith(".json") and os.path.isfile(address)
@@ -220,7 +229,9 @@ def evaluate_on_dask(
             "or use 'local'",
         ) from None
     with client:
-        return _run(client, distributed, paths, rootdir, figures, progress, threads_per_spec)
+        return _run(
+            client, distributed, paths, rootdir, figures, progress, threads_per_spec, data_hash
+        )
 
 
 def _run(
@@ -231,6 +242,7 @@ def _run(
     figures: bool,
     progress: Progress | None,
     threads_per_spec: int | None,
+    data_hash: str,
 ) -> list[dict[str, Any]]:
     futures = [
         # pure=False: the same path may hold a changed spec or data by the next call.
@@ -240,6 +252,7 @@ def _run(
             str(rootdir),
             figures,
             threads_per_spec,
+            data_hash,
             pure=False,
             key=f"hevval-spec-{index}-{os.path.basename(path)}-{os.urandom(4).hex()}",
         )

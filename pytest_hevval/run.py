@@ -124,6 +124,7 @@ def _on_dask(
         figures=options.figures,
         progress=progress,
         threads_per_spec=options.workers,
+        data_hash=options.data_hash,
     )
     return [
         error_from_payload(payload)
