@@ -169,3 +169,25 @@ def test_version_names_the_active_path(path: str) -> None:
     assert out.startswith("pytest-hevval ")
     compiled = path == "auto" and _kernel_unavailable() is None
     assert ("kernel: numba" if compiled else "kernel: numpy") in out
+
+
+@needs_kernel
+def test_kernel_is_safe_from_several_threads_on_any_threading_layer() -> None:
+    """numba's workqueue layer cannot launch from two threads at once; the engine does."""
+    script = (
+        "import numpy as np\n"
+        "from concurrent.futures import ThreadPoolExecutor\n"
+        "from pytest_hevval import signal_characteristics as sc\n"
+        "r = np.random.default_rng(0).normal(size=2_200_000); s = r + 0.1\n"
+        "with ThreadPoolExecutor(4) as pool:\n"
+        "    got = set(pool.map(lambda _: sc(r, s, dt=1.0, workers=2).mae, range(8)))\n"
+        "assert len(got) == 1, got\n"
+        "import numba; print(numba.threading_layer())\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "HEVVAL_KERNEL": "numba"}
+    env["NUMBA_THREADING_LAYER"] = "workqueue"
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "workqueue"

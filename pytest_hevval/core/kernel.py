@@ -194,6 +194,24 @@ def describe() -> str:
     )
 
 
+# numba's own "workqueue" threading layer (used where neither OpenMP nor TBB is found) must not
+# launch parallel loops from two threads at once, and the engine scores signals on two.
+_launch_lock = threading.Lock()
+_concurrent_launches = threading.Event()
+
+
+def _launch(function: Any, *arguments: Any) -> Any:
+    """Call a parallel compiled loop, one at a time unless the threading layer allows more."""
+    if _concurrent_launches.is_set():
+        return function(*arguments)
+    with _launch_lock:
+        result = function(*arguments)
+        numba: Any = importlib.import_module("numba")
+        if numba.threading_layer() != "workqueue":
+            _concurrent_launches.set()
+    return result
+
+
 def _threads(workers: int, samples: int) -> None:
     numba: Any = importlib.import_module("numba")
     if samples < KERNEL_PARALLEL_MIN:
@@ -218,8 +236,8 @@ def main_pass(
     _threads(workers, ref.shape[0])
     empty = np.empty(0, dtype=np.float64)
     ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
-    rows: FloatArray = module.main_pass(
-        ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
+    rows: FloatArray = _launch(
+        module.main_pass, ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
     )
     return rows
 
@@ -239,7 +257,8 @@ def lag_window(
     """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
     per-chunk rows summed in chunk order."""
     _threads(workers, window[1] - window[0])
-    rows: FloatArray = module.lag_window(
+    rows: FloatArray = _launch(
+        module.lag_window,
         r,
         s,
         int(lo),
@@ -269,5 +288,5 @@ def interpolate(
 ) -> FloatArray:
     """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
     _threads(workers, index.shape[0])
-    out: FloatArray = module.interpolate(values, index, right, offset, step, exact)
+    out: FloatArray = _launch(module.interpolate, values, index, right, offset, step, exact)
     return out
