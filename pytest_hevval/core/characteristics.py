@@ -219,17 +219,14 @@ def _sums_from_rows(rows: FloatArray) -> _Sums:
             cross=values[kernel.CROSS],
             ref_min=values[kernel.REF_MIN],
             ref_max=values[kernel.REF_MAX],
-            sim_min=values[kernel.SIM_MIN],
-            sim_max=values[kernel.SIM_MAX],
             sign_matches=int(values[kernel.SIGN_MATCHES]),
         )
         total.merge(part)
     # The compiled min and max assume no NaN. A NaN sample makes the sum of squares NaN
-    # (overflow gives inf, never NaN), so that marks the extremes unusable.
+    # (overflow gives inf, never NaN), so that marks the extremes unusable. The simulated
+    # signal's NaN shows in its sum of squares, which _sim_extremes_needed checks.
     if math.isnan(total.ref_sq):
         total.ref_min = total.ref_max = math.nan
-    if math.isnan(total.sim_sq):
-        total.sim_min = total.sim_max = math.nan
     return total
 
 
