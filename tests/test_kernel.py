@@ -158,7 +158,9 @@ def test_forcing_numba_without_it_names_the_extra(monkeypatch: pytest.MonkeyPatc
 
 @pytest.mark.parametrize("path", ["numpy", "auto"])
 def test_version_names_the_active_path(path: str) -> None:
-    env = {"HEVVAL_KERNEL": path, "PYTHONPATH": str(ROOT)}
+    # The child must import what this process imports: this checkout, then the same path.
+    python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env = {"HEVVAL_KERNEL": path, "PYTHONPATH": python_path}
     out = subprocess.run(
         [sys.executable, "-m", "pytest_hevval", "--version"],
         capture_output=True,
@@ -184,7 +186,8 @@ def test_kernel_is_safe_from_several_threads_on_any_threading_layer() -> None:
         "assert len(got) == 1, got\n"
         "import numba; print(numba.threading_layer())\n"
     )
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "HEVVAL_KERNEL": "numba"}
+    python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env = {**os.environ, "PYTHONPATH": python_path, "HEVVAL_KERNEL": "numba"}
     env["NUMBA_THREADING_LAYER"] = "workqueue"
     done = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300
