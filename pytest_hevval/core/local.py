@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -33,6 +33,7 @@ from .registry import FUSED_CHARACTERISTICS
 
 __all__ = [
     "HOT_FACTOR",
+    "KERNEL_MIN_SAMPLES",
     "LOCAL_CHARACTERISTICS",
     "MIN_GROUP_SAMPLES",
     "PHASES",
@@ -44,6 +45,8 @@ __all__ = [
     "driving_phases",
     "fixed_windows",
     "group_lambdas",
+    "labelled_sums",
+    "merge_groups",
     "region_grid",
     "region_sums",
     "runs",
@@ -364,3 +367,128 @@ def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums
             f"the region grid has {grid.cell.shape[0]} samples, the signal {r.shape[0]}"
         )
     return _group_sums(r, s, grid.cell, int(np.prod(grid.shape)))
+
+
+# -- every grouping in one pass ------------------------------------------------------------
+
+
+#: From this many samples on, :func:`labelled_sums` uses the compiled pass when numba is
+#: installed: below it the numpy path is fast enough and a first compile would cost more.
+KERNEL_MIN_SAMPLES = 100_000
+#: The shift of the spread sums is the mean error of this many first samples.
+SHIFT_SAMPLES = 1024
+
+
+def _kernel() -> Any:
+    """The compiled grouped pass, or None where numba is missing or unusable."""
+    try:
+        from . import _local_kernel
+    except Exception:  # numba absent, or too old or new for this numpy: numpy does the work
+        return None
+    return _local_kernel
+
+
+def labelled_sums(
+    ref: FloatArray,
+    sim: FloatArray,
+    labels: IntArray,
+    groups: int,
+    *,
+    compiled: bool | None = None,
+) -> GroupSums:
+    """The sums of every label in [0, ``groups``), in one pass over the samples.
+
+    Callers combine several groupings (window × region cell × phase × condition) into one fine
+    label, so each signal is read once and every grouping is then a :func:`merge_groups` of the
+    small fine table. The spread term is taken about the record's mean error (shifted sums), so
+    a large bias does not cancel it. ``compiled``: None uses the numba pass from
+    :data:`KERNEL_MIN_SAMPLES` samples on when it is installed; True or False force a path.
+    """
+    r, s = _check_pair(ref, sim)
+    labels = np.asarray(labels, dtype=np.int64)
+    # Any value near the mean error keeps the shifted sums exact enough; the first samples'
+    # mean costs nothing and is the same on both paths.
+    shift = float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
+    kernel = None
+    if compiled is None:
+        kernel = _kernel() if r.shape[0] >= KERNEL_MIN_SAMPLES else None
+    elif compiled:
+        kernel = _kernel()
+        if kernel is None:
+            raise DegenerateSignalError("the compiled pass needs numba (pip install numba)")
+    if kernel is not None:
+        table = kernel.grouped_table(r, s, labels, groups, shift)
+        n = table[:, 0].astype(np.int64)
+        shifted_sum, shifted_sq = table[:, 1], table[:, 2]
+        sums = dict(zip(kernel.COLUMNS[3:], table[:, 3:].T, strict=True))
+    else:
+        e = r - s
+        d = e - shift
+        signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
+
+        def total(weights: npt.NDArray[np.generic]) -> FloatArray:
+            return np.bincount(labels, weights=weights, minlength=groups).astype(np.float64)
+
+        n = np.bincount(labels, minlength=groups).astype(np.int64)
+        shifted_sum = total(d)
+        shifted_sq = total(d * d)
+        sums = {
+            "abs_error": total(np.abs(e)),
+            "ref_sum": total(r),
+            "sim_sum": total(s),
+            "ref_sq": total(r * r),
+            "sim_sq": total(s * s),
+            "cross": total(r * s),
+            "sign_matches": total(signs_match),
+        }
+    nf = n.astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)
+    return GroupSums(
+        n=n,
+        error_sum=shifted_sum + nf * shift,
+        abs_error=sums["abs_error"],
+        sq_error=np.maximum(shifted_sq + 2.0 * shift * shifted_sum + nf * shift * shift, 0.0),
+        error_m2=np.maximum(error_m2, 0.0),
+        ref_sum=sums["ref_sum"],
+        sim_sum=sums["sim_sum"],
+        ref_sq=sums["ref_sq"],
+        sim_sq=sums["sim_sq"],
+        cross=sums["cross"],
+        sign_matches=np.rint(sums["sign_matches"]).astype(np.int64),
+    )
+
+
+def merge_groups(fine: GroupSums, mapping: IntArray, groups: int) -> GroupSums:
+    """Sums of coarse groups made of fine ones: fine group k goes to ``mapping[k]`` (−1: none).
+
+    Σ(e − ē)² merges by the parallel-variance rule, exactly.
+    """
+    mapping = np.asarray(mapping, dtype=np.int64)
+    keep = mapping >= 0
+    m = mapping[keep]
+
+    def total(values: npt.NDArray[np.generic]) -> FloatArray:
+        return np.bincount(m, weights=values[keep], minlength=groups).astype(np.float64)
+
+    n = np.bincount(m, weights=fine.n[keep], minlength=groups).astype(np.int64)
+    error_sum = total(fine.error_sum)
+    safe_fine = np.maximum(fine.n, 1).astype(np.float64)
+    fine_mean = fine.error_sum / safe_fine
+    coarse_mean = error_sum / np.maximum(n, 1)
+    spread = np.where(
+        mapping >= 0, fine.n * (fine_mean - coarse_mean[np.maximum(mapping, 0)]) ** 2, 0
+    )
+    return GroupSums(
+        n=n,
+        error_sum=error_sum,
+        abs_error=total(fine.abs_error),
+        sq_error=total(fine.sq_error),
+        error_m2=total(fine.error_m2) + total(spread),
+        ref_sum=total(fine.ref_sum),
+        sim_sum=total(fine.sim_sum),
+        ref_sq=total(fine.ref_sq),
+        sim_sq=total(fine.sim_sq),
+        cross=total(fine.cross),
+        sign_matches=total(fine.sign_matches).astype(np.int64),
+    )
