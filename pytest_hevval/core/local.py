@@ -422,9 +422,12 @@ def labelled_sums(
         shifted_sum, shifted_sq = table[:, 1], table[:, 2]
         sums = dict(zip(kernel.COLUMNS[3:], table[:, 3:].T, strict=True))
     else:
+        signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
+        if (labels < 0).any():  # samples in no group, as the compiled pass skips them
+            keep = labels >= 0
+            r, s, labels, signs_match = r[keep], s[keep], labels[keep], signs_match[keep]
         e = r - s
         d = e - shift
-        signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
 
         def total(weights: npt.NDArray[np.generic]) -> FloatArray:
             return np.bincount(labels, weights=weights, minlength=groups).astype(np.float64)
