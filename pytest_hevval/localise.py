@@ -24,11 +24,11 @@ from .core.local import (
     PHASES,
     CorrelationKind,
     GroupSums,
+    SumTable,
     concentration,
     driving_phases,
     group_lambdas,
-    labelled_sums,
-    merge_groups,
+    labelled_table,
     region_grid,
 )
 from .core.tree import global_metric
@@ -39,6 +39,7 @@ __all__ = [
     "Labels",
     "LocalFailure",
     "LocalResult",
+    "compact_local",
     "label_samples",
     "local_failures",
     "local_phi",
@@ -238,20 +239,30 @@ class Labels:
     """How a spec's samples fall into windows, phases, conditions and region cells."""
 
     fine: IntArray
-    fine_groups: int
-    window_of: IntArray
+    #: The fine label is a mixed-radix number: window, then phase, conditions and cell (0:
+    #: outside the grid, else cell + 1), in this shape.
+    shape: tuple[int, ...]
     windows: int
     spans_s: tuple[tuple[float, float], ...]
     window_starts: IntArray
     window_stops: IntArray
+    window_labels: tuple[str, ...]
     dt: float
     start_s: float
-    phase_of: IntArray | None = None
-    condition_of: Mapping[str, IntArray] = field(default_factory=dict)
+    phase_axis: int | None = None
+    condition_axes: Mapping[str, int] = field(default_factory=dict)
     #: Per window: the condition holding for most of it (None: none does).
     window_condition: tuple[str | None, ...] = ()
-    cell_of: IntArray | None = None
+    cell_axis: int | None = None
     region: Mapping[str, Any] | None = None
+
+    @property
+    def fine_groups(self) -> int:
+        return int(np.prod(self.shape))
+
+
+def _window_label(span: tuple[float, float]) -> str:
+    return f"{span[0]:.0f}–{span[1]:.0f} s"
 
 
 def _format_edge(value: float) -> str:
@@ -309,14 +320,12 @@ def label_samples(
         return values[keep] if keep is not None else values
 
     fine = scored(grid_window)
-    factor = windows
 
     phase_digit: IntArray | None = None
     if spec.local and spec.local.phases is not None:
         speed = evaluate(spec.local.phases, "local.phases")
         phase_digit = scored(driving_phases(speed, dt).astype(np.int64))
         fine = fine * len(PHASES) + phase_digit
-        factor *= len(PHASES)
 
     condition_masks: dict[str, BoolArray] = {}
     for condition in spec.local.conditions if spec.local else ():
@@ -324,7 +333,6 @@ def label_samples(
         mask = np.asarray(values, dtype=np.float64)
         condition_masks[condition.name] = scored(np.isfinite(mask) & (mask != 0))
         fine = fine * 2 + condition_masks[condition.name].astype(np.int64)
-        factor *= 2
 
     cell: IntArray | None = None
     cells = 0
@@ -339,7 +347,6 @@ def label_samples(
         cell = grid.cell
         cells = int(np.prod(grid.shape))
         fine = fine * (cells + 1) + (cell + 1)
-        factor *= cells + 1
         names = [expression.source for expression in spec.regions.by]
         region = {
             "by": names,
@@ -352,23 +359,19 @@ def label_samples(
             "outside": int((grid.cell < 0).sum()),
         }
 
-    # Decode each fine label back into its window, phase, conditions and cell.
-    ids = np.arange(factor, dtype=np.int64)
-    rest = ids
-    cell_of = None
-    if cell is not None:
-        cell_of = rest % (cells + 1) - 1
-        rest = rest // (cells + 1)
-    condition_of: dict[str, IntArray] = {}
-    for name in reversed(list(condition_masks)):
-        bit = rest % 2
-        condition_of[name] = np.where(bit == 1, 0, 1).astype(np.int64)  # 0: holds, 1: rest
-        rest = rest // 2
-    phase_of = None
+    shape = [windows]
+    phase_axis = None
     if phase_digit is not None:
-        phase_of = rest % len(PHASES)
-        rest = rest // len(PHASES)
-    window_of = rest
+        phase_axis = len(shape)
+        shape.append(len(PHASES))
+    condition_axes: dict[str, int] = {}
+    for name in condition_masks:
+        condition_axes[name] = len(shape)
+        shape.append(2)
+    cell_axis = None
+    if cell is not None:
+        cell_axis = len(shape)
+        shape.append(cells + 1)
 
     window_condition: list[str | None] = [None] * windows
     if condition_masks:
@@ -385,27 +388,23 @@ def label_samples(
                     window_condition[k] = condition.name
     return Labels(
         fine=np.ascontiguousarray(fine, dtype=np.int64),
-        fine_groups=factor,
-        window_of=window_of,
+        shape=tuple(shape),
         windows=windows,
         spans_s=spans,
         window_starts=starts,
         window_stops=stops,
+        window_labels=tuple(_window_label(span) for span in spans),
         dt=dt,
         start_s=start_s,
-        phase_of=phase_of,
-        condition_of={name: condition_of[name] for name in condition_masks},
+        phase_axis=phase_axis,
+        condition_axes=condition_axes,
         window_condition=tuple(window_condition),
-        cell_of=cell_of,
+        cell_axis=cell_axis,
         region=region,
     )
 
 
 # -- scoring one signal ----------------------------------------------------------------------
-
-
-def _window_label(span: tuple[float, float]) -> str:
-    return f"{span[0]:.0f}–{span[1]:.0f} s"
 
 
 def score_local(
@@ -416,21 +415,17 @@ def score_local(
     correlation: str,
 ) -> LocalResult:
     """One signal's tables over every grouping of ``labels``."""
-    fine = labelled_sums(ref, sim, labels.fine, labels.fine_groups)
-    total_sq = float(fine.sq_error.sum())
+    fine = labelled_table(ref, sim, labels.fine, labels.fine_groups)
+    total_sq = float(fine.sums().sq_error.sum())
 
-    def table(mapping: IntArray, groups: int, names: Sequence[str]) -> GroupTable:
-        return GroupTable.from_sums(
-            names, merge_groups(fine, mapping, groups), reference_range, correlation, total_sq
-        )
+    def table(axis: int, names: Sequence[str], rows: slice = slice(None)) -> GroupTable:
+        merged = fine.merged(labels.shape, axis)
+        merged = SumTable(merged.values[rows], merged.shift)
+        return GroupTable.from_sums(names, merged.sums(), reference_range, correlation, total_sq)
 
-    window_sums = merge_groups(fine, labels.window_of, labels.windows)
+    window_sums = fine.merged(labels.shape, 0).sums()
     windows = GroupTable.from_sums(
-        [_window_label(s) for s in labels.spans_s],
-        window_sums,
-        reference_range,
-        correlation,
-        total_sq,
+        labels.window_labels, window_sums, reference_range, correlation, total_sq
     )
     hot = concentration(
         window_sums, labels.window_starts, labels.window_stops, labels.dt, labels.start_s
@@ -445,16 +440,16 @@ def score_local(
             "windows": hot.windows,
             "spans_s": [list(span) for span in hot.spans_s],
         },
-        phases=(
-            table(labels.phase_of, len(PHASES), PHASES) if labels.phase_of is not None else None
-        ),
+        phases=table(labels.phase_axis, PHASES) if labels.phase_axis is not None else None,
+        # The condition's bit is 1 where it holds: rows reversed give (holds, rest).
         conditions={
-            name: table(mapping, 2, ("holds", "rest"))
-            for name, mapping in labels.condition_of.items()
+            name: table(axis, ("holds", "rest"), slice(None, None, -1))
+            for name, axis in labels.condition_axes.items()
         },
+        # Row 0 of the cell axis holds the samples outside the grid.
         regions=(
-            table(labels.cell_of, len(labels.region["labels"]), labels.region["labels"])
-            if labels.cell_of is not None and labels.region is not None
+            table(labels.cell_axis, labels.region["labels"], slice(1, None))
+            if labels.cell_axis is not None and labels.region is not None
             else None
         ),
     )
@@ -571,5 +566,21 @@ def spec_local_summary(
             "phi": local_phi(
                 [(a, r.regions.lambdas) for a, r in signals if r.regions is not None], weights
             ),
+        }
+    return out
+
+
+def compact_local(local: Mapping[str, Any]) -> dict[str, Any]:
+    """A signal's ``local`` as history keeps it: every table, but windows without their λ.
+
+    Per-window λ of every signal of every run would make a record as large as the report;
+    the windows' samples, RMS and mean error are enough to say which stretches a model change
+    improved or broke.
+    """
+    out = {key: value for key, value in local.items() if key != "windows"}
+    windows = local.get("windows")
+    if isinstance(windows, Mapping):
+        out["windows"] = {
+            key: windows[key] for key in ("labels", "n", "rms", "mean_error") if key in windows
         }
     return out

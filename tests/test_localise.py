@@ -47,9 +47,11 @@ def write_trip(folder: Path, *, stretch: bool, fast: bool) -> None:
         modelled[speed > FAST_KMH] += 8.0
     lines = ["time,speed,power,heater"]
     heater = (t < 300.0).astype(float)
-    lines += [f"{a:.1f},{b:.6f},{c:.6f},{h:g}" for a, b, c, h in zip(t, speed, power, heater)]
+    lines += [
+        f"{a:.1f},{b:.6f},{c:.6f},{h:g}" for a, b, c, h in zip(t, speed, power, heater, strict=True)
+    ]
     (folder / "measured.csv").write_text("\n".join(lines) + "\n")
-    lines = ["time,power"] + [f"{a:.1f},{c:.6f}" for a, c in zip(t, modelled)]
+    lines = ["time,power"] + [f"{a:.1f},{c:.6f}" for a, c in zip(t, modelled, strict=True)]
     (folder / "model.csv").write_text("\n".join(lines) + "\n")
 
 
@@ -127,7 +129,10 @@ def test_a_condition_loosens_the_windows_where_it_holds(tmp_path: Path) -> None:
 
 def test_share_lets_a_few_windows_miss(tmp_path: Path) -> None:
     write_trip(tmp_path, stretch=True, fast=False)
-    spec = SPEC.replace("gate: {thresholds: {mae: 0.97}}\nregions", "gate: {thresholds: {mae: 0.97}, share: 0.95}\nregions")
+    spec = SPEC.replace(
+        "gate: {thresholds: {mae: 0.97}}\nregions",
+        "gate: {thresholds: {mae: 0.97}, share: 0.95}\nregions",
+    )
     evaluation = _evaluate(tmp_path, spec)
     assert evaluation.result.signals[0].local_failures == []  # type: ignore[attr-defined]
 
@@ -159,11 +164,19 @@ def test_the_json_result_round_trips(tmp_path: Path) -> None:
         ("local: {windows: 30}", "local.windows", "unknown key"),
         ("local: {window_s: -1}", "local.window_s", "greater than 0"),
         ("local: {gate: {share: 0.9}}", "local.gate.thresholds", "is required"),
-        ("local: {gate: {thresholds: {emergent: 0.9}}}", "local.gate.thresholds.emergent", "not scored over windows"),
+        (
+            "local: {gate: {thresholds: {emergent: 0.9}}}",
+            "local.gate.thresholds.emergent",
+            "not scored over windows",
+        ),
         ("regions: {by: []}", "regions.by", "one or two operating variables"),
         ("regions: {by: [a, b], bins: [3]}", "regions.bins", "one entry per variable"),
         ("regions: {by: [a], bins: [[3, 1]]}", "regions.bins[0]", "must increase"),
-        ("local: {conditions: {cold: {thresholds: {mae: 0.5}}}}", "local.conditions.cold.when", "is required"),
+        (
+            "local: {conditions: {cold: {thresholds: {mae: 0.5}}}}",
+            "local.conditions.cold.when",
+            "is required",
+        ),
     ],
 )
 def test_bad_local_keys_are_spec_errors(fragment: str, key: str, problem: str) -> None:
@@ -198,7 +211,9 @@ def test_one_pass_fine_sums_merge_to_the_window_sums(
     n = ref.shape[0]
     window = np.arange(n) // size
     cell = np.arange(n) % cells
-    fine = labelled_sums(ref, sim, window * cells + cell, int(window[-1] + 1) * cells, compiled=False)
+    fine = labelled_sums(
+        ref, sim, window * cells + cell, int(window[-1] + 1) * cells, compiled=False
+    )
     windows = int(window[-1]) + 1
     merged = merge_groups(fine, np.arange(windows * cells) // cells, windows)
     starts = np.arange(windows) * size
@@ -265,7 +280,7 @@ def test_hevval_run_writes_windows_and_regions_to_json(
     code = cli.main(["run", "trip.hevval.yaml", "--no-history", "--quiet", "--json", "out.json"])
     assert code == 1
     data = json.loads((tmp_path / "out.json").read_text())
-    (spec,) = data["results"] if "results" in data else [data]
+    (spec,) = data.get("results", [data])
     local = spec["signals"][0]["local"]
     assert set(local) >= {"windows", "concentration", "phases", "conditions", "regions"}
     assert spec["signals"][0]["local_failures"][0]["where"] == ["1200–1230 s", "1230–1260 s"] or (
@@ -287,3 +302,39 @@ def test_html_report_draws_the_strip_and_the_maps(tmp_path: Path) -> None:
     assert "coverage: samples per cell" in page
     assert "Never visited: speed 140–160" in page
     assert page.count('stroke="#000" stroke-width="2"') == 2  # the two cells that missed
+
+
+# -- history and compare --------------------------------------------------------------------
+
+
+def test_compare_names_the_windows_and_cells_a_model_change_fixed(tmp_path: Path) -> None:
+    from pytest_hevval.history.compare import compare
+    from pytest_hevval.history.records import make_record
+    from pytest_hevval.history.render import comparison_table
+
+    before_dir, after_dir = tmp_path / "before", tmp_path / "after"
+    before_dir.mkdir()
+    after_dir.mkdir()
+    write_trip(before_dir, stretch=True, fast=False)
+    write_trip(after_dir, stretch=False, fast=True)
+    before = _evaluate(before_dir).result.to_dict()  # type: ignore[attr-defined]
+    after = _evaluate(after_dir).result.to_dict()  # type: ignore[attr-defined]
+    from datetime import datetime, timezone
+
+    record = make_record([before], model_version="v1", started_utc=datetime.now(timezone.utc))
+    kept = record["specs"][0]["signals"][0]["local"]
+    assert "lambdas" not in kept["windows"]  # history keeps the windows' errors, not their λ
+    assert kept["regions"]["lambdas"]["mae"]
+    comparison = compare([after], record, pair_single=True)
+    (signal,) = comparison.specs[0].signals
+    assert {c.label for c in signal.better if c.grouping == "windows"} == {
+        "1200–1230 s",
+        "1230–1260 s",
+    }
+    assert {c.label for c in signal.worse if c.grouping == "regions"} == {
+        "speed 100–120",
+        "speed 120–140",
+    }
+    text = comparison_table(comparison)
+    assert "better in: 1200–1230 s" in text or "better in: 1230–1260 s" in text
+    assert "worse in:" in text

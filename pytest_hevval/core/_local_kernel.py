@@ -11,20 +11,6 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-#: Columns of the kernel's output table, one row per group.
-COLUMNS = (
-    "n",
-    "shifted_sum",
-    "shifted_sq",
-    "abs_error",
-    "ref_sum",
-    "sim_sum",
-    "ref_sq",
-    "sim_sq",
-    "cross",
-    "sign_matches",
-)
-
 
 @numba.njit(cache=True, nogil=True)
 def _grouped(
@@ -99,7 +85,7 @@ def grouped_table(
     groups: int,
     shift: float,
 ) -> npt.NDArray[np.float64]:
-    """The (groups, len(COLUMNS)) table of sums, in one compiled pass."""
-    out = np.zeros((groups, len(COLUMNS)), dtype=np.float64)
+    """The (groups, 10) table of sums in the order of ``core.local.SUM_COLUMNS``."""
+    out = np.zeros((groups, 10), dtype=np.float64)
     _grouped(r, s, labels, shift, out)
     return out
