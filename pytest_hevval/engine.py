@@ -6,7 +6,6 @@ never prints, and it writes nothing.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import threading
 from collections.abc import Callable, Iterable, Mapping
@@ -24,6 +23,7 @@ from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
+from .digest import DEFAULT_HASH, file_digest
 from .errors import (
     CharacteristicError,
     DataError,
@@ -55,20 +55,11 @@ def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
     return read_record
 
 
-def file_digest(path: str) -> str:
-    """SHA-256 of a data file (hex), so history can tell when the measurements changed."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 22), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _digest_or_empty(path: str) -> str:
+def _digest_or_empty(path: str, algorithm: str) -> dict[str, str]:
     try:
-        return file_digest(path)
+        return file_digest(path, algorithm)
     except OSError:
-        return ""
+        return {}
 
 
 class DataCache:
@@ -78,11 +69,13 @@ class DataCache:
     a file then reads all declared columns in one go.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, data_hash: str = DEFAULT_HASH) -> None:
+        #: How data files are identified in results (see :mod:`pytest_hevval.digest`).
+        self.data_hash = data_hash
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
         self._declared: dict[tuple[str, str], set[str]] = {}
-        self._digests: dict[str, Future[str]] = {}
+        self._digests: dict[str, Future[dict[str, str]]] = {}
         self._hasher: ThreadPoolExecutor | None = None
         #: How many times each file was actually read (tests and benchmarks check it).
         self.reads: dict[str, int] = {}
@@ -128,15 +121,16 @@ class DataCache:
             self._start_digest(key[0])
             return record
 
-    def _start_digest(self, path: str) -> Future[str]:
-        # hashlib releases the GIL, so hashing overlaps with reading the model and scoring.
+    def _start_digest(self, path: str) -> Future[dict[str, str]]:
+        # hashlib and xxhash release the GIL, so hashing overlaps with reading and scoring.
         if path not in self._digests:
             if self._hasher is None:
-                self._hasher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hevval-sha")
-            self._digests[path] = self._hasher.submit(_digest_or_empty, path)
+                self._hasher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hevval-hash")
+            self._digests[path] = self._hasher.submit(_digest_or_empty, path, self.data_hash)
         return self._digests[path]
 
-    def digest(self, path: str) -> str:
+    def digest(self, path: str) -> dict[str, str]:
+        """``{"hash": …, "digest": …}`` of a data file (empty if it could not be read)."""
         with self._lock:
             future = self._start_digest(path)
         return future.result()
@@ -160,7 +154,7 @@ def _load_model(
     model = spec.model
     if model.kind == "file":
         record = cache.read(model, spec.model_columns())
-        return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "file"}
+        return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "file"}
     if model.kind == "callable":
         from .data.models import run_callable
 
@@ -197,7 +191,7 @@ def _load_model(
         step_size=model.step_size,
         parameters={k: float(v) for k, v in model.params.items()},
     )
-    return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "fmu"}
+    return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "fmu"}
 
 
 def _columns_of(expression: Expression, record: Record) -> tuple[str, ...]:
@@ -682,7 +676,7 @@ def _spec_result(
         data={
             "reference": {
                 "path": spec.reference.path,
-                "sha256": cache.digest(str(spec.reference.path)),
+                **cache.digest(str(spec.reference.path)),
             },
             "model": model_info,
             **(

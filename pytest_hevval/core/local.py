@@ -23,17 +23,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
+from . import kernel
 from .registry import FUSED_CHARACTERISTICS
 
 __all__ = [
     "HOT_FACTOR",
-    "KERNEL_MIN_SAMPLES",
     "LOCAL_CHARACTERISTICS",
     "MIN_GROUP_SAMPLES",
     "PHASES",
@@ -375,20 +375,8 @@ def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums
 # -- every grouping in one pass ------------------------------------------------------------
 
 
-#: From this many samples on, :func:`labelled_sums` uses the compiled pass when numba is
-#: installed: below it the numpy path is fast enough and a first compile would cost more.
-KERNEL_MIN_SAMPLES = 100_000
 #: The shift of the spread sums is the mean error of this many first samples.
 SHIFT_SAMPLES = 1024
-
-
-def _kernel() -> Any:
-    """The compiled grouped pass, or None where numba is missing or unusable."""
-    try:
-        from . import _local_kernel
-    except Exception:  # numba absent, or too old or new for this numpy: numpy does the work
-        return None
-    return _local_kernel
 
 
 #: Columns of a :class:`SumTable`, one row per group. Every column adds up across groups;
@@ -456,23 +444,22 @@ def labelled_table(
 
     Callers combine several groupings (window × phase × conditions × region cell) into one fine
     label, so each signal is read once and every grouping is then a sum over the small fine
-    table. ``compiled``: None uses the numba pass from :data:`KERNEL_MIN_SAMPLES` samples on
-    when it is installed; True or False force a path.
+    table. ``compiled``: None lets :func:`pytest_hevval.core.kernel.kernel_for` choose (the
+    compiled pass for long records or a warm cache, ``HEVVAL_KERNEL`` to force); True or False
+    force a path.
     """
     r, s = _check_pair(ref, sim)
     labels = np.asarray(labels, dtype=np.int64)
     # Any value near the mean error keeps the shifted sums exact enough; the first samples'
     # mean costs nothing and is the same on both paths.
     shift = float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
-    kernel = None
+    module = None
     if compiled is None:
-        kernel = _kernel() if r.shape[0] >= KERNEL_MIN_SAMPLES else None
+        module = kernel.kernel_for(r.shape[0], ("grouped_sums",))
     elif compiled:
-        kernel = _kernel()
-        if kernel is None:
-            raise DegenerateSignalError("the compiled pass needs numba (pip install numba)")
-    if kernel is not None:
-        return SumTable(kernel.grouped_table(r, s, labels, groups, shift), shift)
+        module = kernel.load_or_raise()
+    if module is not None:
+        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift), shift)
     signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
     if (labels < 0).any():  # samples in no group, as the compiled pass skips them
         keep = labels >= 0

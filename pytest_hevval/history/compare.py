@@ -30,6 +30,7 @@ from ..core.registry import (
     order_names,
 )
 from ..defaults import REGION_MIN_SAMPLES
+from ..digest import identity
 from ..errors import did_you_mean
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
@@ -305,6 +306,16 @@ class SpecComparison:
     removed_signals: tuple[str, ...]
     before_key: str | None = None
     matched_by: MatchedBy = "path"
+    #: Data sides (reference, model) whose files differ: digests by the same algorithm
+    #: differ. Digests by different algorithms say nothing and are not compared.
+    data_changed: tuple[str, ...] = ()
+
+    @property
+    def data_note(self) -> str | None:
+        """A sentence naming the data files that changed between the runs, else ``None``."""
+        if not self.data_changed:
+            return None
+        return f"{self.key}: data changed ({', '.join(self.data_changed)})"
 
     @property
     def pairing(self) -> str | None:
@@ -330,6 +341,7 @@ class SpecComparison:
             "signals": [s.to_dict() for s in self.signals],
             "added_signals": list(self.added_signals),
             "removed_signals": list(self.removed_signals),
+            "data_changed": list(self.data_changed),
         }
 
 
@@ -350,6 +362,12 @@ class Comparison:
     def pairings(self) -> tuple[str, ...]:
         """One sentence per pair of different specs compared with each other."""
         return tuple(p for p in (s.pairing for s in self.specs) if p is not None)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """The pairings, then one sentence per spec whose data files changed."""
+        changed = tuple(n for n in (s.data_note for s in self.specs) if n is not None)
+        return self.pairings + changed
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -536,7 +554,28 @@ def _compare_spec(
         removed_signals=tuple(p for p in before_signals if p not in after_signals),
         before_key=before_key,
         matched_by=matched_by,
+        data_changed=_data_changed(before, after),
     )
+
+
+def _data_changed(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[str, ...]:
+    """Sides whose data digests differ under the same hash algorithm."""
+    sides_before = before.get("data")
+    sides_after = after.get("data")
+    if not isinstance(sides_before, Mapping) or not isinstance(sides_after, Mapping):
+        return ()
+    changed = []
+    for side in ("reference", "model"):
+        old = sides_before.get(side)
+        new = sides_after.get(side)
+        if not isinstance(old, Mapping) or not isinstance(new, Mapping):
+            continue
+        old_id = identity(old)
+        new_id = identity(new)
+        same_hash = old_id is not None and new_id is not None and old_id[0] == new_id[0]
+        if same_hash and old_id != new_id:
+            changed.append(side)
+    return tuple(changed)
 
 
 # -- regressions ----------------------------------------------------------------------------
