@@ -1,0 +1,97 @@
+"""Sprague–Geers and Russell: magnitude and phase errors, and their combination.
+
+With m the measurement (reference), c the computation (model) and sums over the common grid
+(the time step cancels):
+
+* **Sprague–Geers** (Sprague & Geers 2004, *Int. J. Numer. Meth. Engng* 60; Schwer 2007,
+  *Engineering with Computers* 23, eq. 1–3): ψ_mm = Σm², ψ_cc = Σc², ψ_mc = Σmc;
+  M = √(ψ_cc/ψ_mm) − 1, P = arccos(ψ_mc/√(ψ_mm ψ_cc))/π, C = √(M² + P²).
+  The magnitude keeps its square root: c = k·m gives M = k − 1 exactly, and P = 0
+  (Sprague & Geers: the magnitude error is insensitive to phase, the phase error to magnitude).
+* **Russell** (Russell 1997, *Shock and Vibration Symposium*; Schwer 2007 eq. 4–7):
+  m_r = (ψ_cc − ψ_mm)/√(ψ_cc ψ_mm), RM = sign(m_r)·log₁₀(1 + |m_r|), RP = P (the same angle),
+  RC = √(π/4 · (RM² + RP²)).
+
+Neither defines a [0, 1] rating, so hevval scores 1 − C and 1 − RC, clipped to [0, 1]; C = 1
+(score 0) is a 100 % magnitude error or a phase opposition. Both are invariant under a change of
+units, not under an offset.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..registry import CharacteristicValue
+from ._inputs import FloatArray, checked_pair, degenerate
+
+__all__ = [
+    "MagnitudePhase",
+    "russell",
+    "russell_characteristic",
+    "sprague_geers",
+    "sprague_geers_characteristic",
+]
+
+
+@dataclass(frozen=True)
+class MagnitudePhase:
+    magnitude: float
+    phase: float
+    combined: float
+
+
+def _products(reference: FloatArray, simulated: FloatArray, metric: str) -> tuple[float, float, float]:
+    ref, sim = checked_pair(reference, simulated, metric=metric)
+    # Scaled by the reference's peak: the errors are ratios, and squares must not overflow.
+    scale = float(np.max(np.abs(ref)))
+    m, c = ref / scale, sim / scale
+    mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
+    if cc == 0.0:
+        raise degenerate(
+            metric,
+            "the simulated signal is zero everywhere, so the phase error is undefined",
+            "check the model output's column and scale",
+        )
+    return mm, cc, mc
+
+
+def _phase(mm: float, cc: float, mc: float) -> float:
+    return math.acos(max(-1.0, min(1.0, mc / math.sqrt(mm * cc)))) / math.pi
+
+
+def sprague_geers(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
+    mm, cc, mc = _products(reference, simulated, "sprague_geers")
+    magnitude = math.sqrt(cc / mm) - 1.0
+    phase = _phase(mm, cc, mc)
+    return MagnitudePhase(magnitude, phase, math.hypot(magnitude, phase))
+
+
+def russell(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
+    mm, cc, mc = _products(reference, simulated, "russell")
+    relative = (cc - mm) / math.sqrt(cc * mm)
+    magnitude = math.copysign(math.log10(1.0 + abs(relative)), relative)
+    phase = _phase(mm, cc, mc)
+    return MagnitudePhase(magnitude, phase, math.sqrt(math.pi / 4.0 * (magnitude**2 + phase**2)))
+
+
+def _score(error: float) -> float:
+    return min(1.0, max(0.0, 1.0 - error))
+
+
+def sprague_geers_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
+    """The registry's ``sprague_geers``: 1 − C, with M, P and C as components."""
+    e = sprague_geers(reference, simulated)
+    return CharacteristicValue(_score(e.combined), {"M": e.magnitude, "P": e.phase, "C": e.combined})
+
+
+def russell_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+    """The registry's ``russell``: 1 − RC, with RM, RP and RC as components."""
+    e = russell(reference, simulated)
+    return CharacteristicValue(
+        _score(e.combined), {"RM": e.magnitude, "RP": e.phase, "RC": e.combined}
+    )
