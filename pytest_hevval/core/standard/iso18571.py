@@ -47,8 +47,8 @@ __all__ = [
     "iso18571_rating",
 ]
 
-#: Cells of the warping band computed exactly (int8 back-pointers: 32 MB).
-EXACT_DTW_CELLS = 32_000_000
+#: Cells of the warping band computed exactly (int8 back-pointers: 64 MB).
+EXACT_DTW_CELLS = 64_000_000
 # Correlations closer than this are a tie (FFT round-off must not break the standard's ties).
 _CORRELATION_TIE = 1e-12
 _MIN_SAMPLES = 10
