@@ -49,6 +49,18 @@ def checked_pair(
     return ref, sim
 
 
+# A mean below this fraction of the peak is round-off: a signal that swings about zero.
+_ZERO_MEAN = 1e-12
+
+
+def reference_mean(ref: FloatArray, metric: str, hint: str) -> float:
+    """The reference's mean, refused when it is 0 up to round-off (the metric divides by it)."""
+    mean = float(ref.mean())
+    if abs(mean) <= _ZERO_MEAN * float(np.max(np.abs(ref))):
+        raise degenerate(metric, "the reference's mean is 0, so the metric divides by zero", hint)
+    return mean
+
+
 def degenerate(metric: str, problem: str, hint: str) -> DegenerateSignalError:
     """The error for an input on which ``metric``'s formula divides by zero."""
     return DegenerateSignalError(f"{metric}: {problem}", hint=hint)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair, degenerate
+from ._inputs import FloatArray, checked_pair, reference_mean
 
 __all__ = [
     "GUIDELINE14_HOURLY",
@@ -65,13 +65,9 @@ def calibration_errors(reference: FloatArray, simulated: FloatArray) -> Calibrat
     ref, sim = checked_pair(reference, simulated, metric="cvrmse/nmbe")
     scale = float(np.max(np.abs(ref)))
     y, y_hat = ref / scale, sim / scale
-    mean = float(y.mean())
-    if mean == 0.0:
-        raise degenerate(
-            "cvrmse/nmbe",
-            "the reference's mean is 0, so CV(RMSE) and NMBE are undefined",
-            "these metrics are for quantities with a natural zero (energy, power); use theil",
-        )
+    mean = reference_mean(
+        y, "cvrmse/nmbe", "these metrics are for quantities with a natural zero; use theil"
+    )
     residual = y - y_hat
     dof = y.shape[0] - _PARAMETERS
     cv = float(np.sqrt(np.sum(residual**2) / dof)) / abs(mean) * 100.0

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair, degenerate
+from ._inputs import FloatArray, checked_pair, degenerate, reference_mean
 
 __all__ = [
     "KlingGupta",
@@ -68,13 +68,8 @@ def kge(reference: FloatArray, simulated: FloatArray, *, form: int = 2009) -> Kl
     ref, sim = checked_pair(reference, simulated, metric=metric)
     scale = float(np.max(np.abs(ref)))
     o, s = ref / scale, sim / scale
-    mu_o, mu_s = float(o.mean()), float(s.mean())
-    if mu_o == 0.0:
-        raise degenerate(
-            metric,
-            "the reference's mean is 0, so the bias ratio β = μ_s/μ_o is undefined",
-            "use nse or theil for signals that swing about zero",
-        )
+    mu_o = reference_mean(o, metric, "use nse or theil for signals that swing about zero")
+    mu_s = float(s.mean())
     sigma_o, sigma_s = float(o.std()), float(s.std())
     if sigma_s == 0.0:
         raise degenerate(

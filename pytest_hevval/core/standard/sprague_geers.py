@@ -43,37 +43,36 @@ class MagnitudePhase:
     combined: float
 
 
-def _products(reference: FloatArray, simulated: FloatArray, metric: str) -> tuple[float, float, float]:
+def _energy_ratio_and_phase(
+    reference: FloatArray, simulated: FloatArray, metric: str
+) -> tuple[float, float]:
+    """√(ψ_cc/ψ_mm) and P; each signal scaled by its own peak, so no square under- or overflows."""
     ref, sim = checked_pair(reference, simulated, metric=metric)
-    # Scaled by the reference's peak: the errors are ratios, and squares must not overflow.
-    scale = float(np.max(np.abs(ref)))
-    m, c = ref / scale, sim / scale
-    mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
-    if cc == 0.0:
+    ref_peak = float(np.max(np.abs(ref)))
+    sim_peak = float(np.max(np.abs(sim)))
+    if sim_peak == 0.0:
         raise degenerate(
             metric,
             "the simulated signal is zero everywhere, so the phase error is undefined",
             "check the model output's column and scale",
         )
-    return mm, cc, mc
-
-
-def _phase(mm: float, cc: float, mc: float) -> float:
-    return math.acos(max(-1.0, min(1.0, mc / math.sqrt(mm * cc)))) / math.pi
+    m, c = ref / ref_peak, sim / sim_peak
+    mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
+    cosine = max(-1.0, min(1.0, mc / math.sqrt(mm * cc)))
+    return (sim_peak / ref_peak) * math.sqrt(cc / mm), math.acos(cosine) / math.pi
 
 
 def sprague_geers(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
-    mm, cc, mc = _products(reference, simulated, "sprague_geers")
-    magnitude = math.sqrt(cc / mm) - 1.0
-    phase = _phase(mm, cc, mc)
+    ratio, phase = _energy_ratio_and_phase(reference, simulated, "sprague_geers")
+    magnitude = ratio - 1.0
     return MagnitudePhase(magnitude, phase, math.hypot(magnitude, phase))
 
 
 def russell(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
-    mm, cc, mc = _products(reference, simulated, "russell")
-    relative = (cc - mm) / math.sqrt(cc * mm)
+    ratio, phase = _energy_ratio_and_phase(reference, simulated, "russell")
+    # (ψ_cc − ψ_mm)/√(ψ_cc ψ_mm) = q − 1/q with q = √(ψ_cc/ψ_mm).
+    relative = ratio - 1.0 / ratio
     magnitude = math.copysign(math.log10(1.0 + abs(relative)), relative)
-    phase = _phase(mm, cc, mc)
     return MagnitudePhase(magnitude, phase, math.sqrt(math.pi / 4.0 * (magnitude**2 + phase**2)))
 
 
