@@ -127,7 +127,9 @@ def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:
         if not described.standard:
             continue
         parts = ", ".join(f"{k} {v:.4g}" for k, v in signal.components.get(name, {}).items())
-        lines.append(f"      {indent}{described.label} {value:.4f}" + (f" ({parts})" if parts else ""))
+        lines.append(
+            f"      {indent}{described.label} {value:.4f}" + (f" ({parts})" if parts else "")
+        )
     return lines
 
 

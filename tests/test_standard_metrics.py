@@ -140,7 +140,8 @@ def test_iso18571_banded_approximation_stays_near_the_exact_score(
     assert not exact.banded
     # The band a 360,000-sample record gets from EXACT_DTW_CELLS: 88 samples each side.
     banded = iso18571_rating(ref, sim, max_cells=ref.size * 177)
-    assert banded.banded and banded.band == 88
+    assert banded.banded
+    assert banded.band == 88
     assert abs(banded.rating - exact.rating) < 2e-3  # docs/metrics.md: measured 0.0011
 
 
@@ -280,7 +281,7 @@ def test_constant_bias_gives_guideline14_errors() -> None:
 
 
 def test_guideline14_hourly_criteria_are_thresholds() -> None:
-    assert GUIDELINE14_HOURLY_THRESHOLDS == pytest.approx({"nmbe": 0.90, "cvrmse": 0.70})
+    assert pytest.approx({"nmbe": 0.90, "cvrmse": 0.70}) == GUIDELINE14_HOURLY_THRESHOLDS
     assert get_characteristic("cvrmse").default_weight == 0.0
     assert get_characteristic("nmbe").default_weight == 0.0
 
@@ -292,7 +293,8 @@ def test_standard_metrics_are_off_by_default_and_on_when_named() -> None:
     defaults = {c.name for c in default_characteristics()}
     assert not defaults & set(STANDARD_CHARACTERISTICS)
     chosen = {c.name for c in select_characteristics(["iso18571", "theil"])}
-    assert {"iso18571", "theil"} <= chosen and "kge" not in chosen
+    assert {"iso18571", "theil"} <= chosen
+    assert "kge" not in chosen
 
 
 @settings(max_examples=40, deadline=None)
@@ -367,5 +369,6 @@ def test_spec_with_standard_metrics_end_to_end(pytester: pytest.Pytester, xdist:
     assert set(signal["components"]["theil"]) == {"U", "U_M", "U_S", "U_C"}
     assert signal["thresholds"]["iso18571"] == 0.5
     html = (report / "report.html").read_text()
-    assert "standard metrics" in html and "U_M" in html
+    assert "standard metrics" in html
+    assert "U_M" in html
     assert "Standard metrics of pack" in (report / "report.md").read_text()

@@ -196,6 +196,7 @@ _BUILTINS: tuple[Characteristic, ...] = (
     ),
 )
 
+
 @dataclass(frozen=True)
 class _StandardCompute:
     """A standard metric's compute, imported on first use: the registry imports no numpy."""

@@ -83,13 +83,17 @@ def _components(e: CalibrationErrors) -> dict[str, float]:
     }
 
 
-def cvrmse_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def cvrmse_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``cvrmse``: 1 − CV(RMSE), with both errors and the criteria met."""
     e = calibration_errors(reference, simulated)
     return CharacteristicValue(min(1.0, max(0.0, 1.0 - e.cv_rmse / 100.0)), _components(e))
 
 
-def nmbe_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def nmbe_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``nmbe``: 1 − |NMBE|, with both errors and the criteria met."""
     e = calibration_errors(reference, simulated)
     return CharacteristicValue(min(1.0, max(0.0, 1.0 - abs(e.nmbe) / 100.0)), _components(e))

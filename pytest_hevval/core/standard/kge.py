@@ -93,13 +93,17 @@ def kge(reference: FloatArray, simulated: FloatArray, *, form: int = 2009) -> Kl
     return KlingGupta(value, r, variability, beta)
 
 
-def nse_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def nse_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``nse``: 1/(2 − NSE), with NSE as the component."""
     value = nse(reference, simulated)
     return CharacteristicValue(bounded_efficiency(value), {"NSE": value})
 
 
-def kge_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def kge_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``kge``: 1/(2 − KGE) of the 2009 form, with KGE, r, α and β."""
     k = kge(reference, simulated, form=2009)
     return CharacteristicValue(

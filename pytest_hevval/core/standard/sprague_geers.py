@@ -85,10 +85,14 @@ def sprague_geers_characteristic(
 ) -> CharacteristicValue:
     """The registry's ``sprague_geers``: 1 − C, with M, P and C as components."""
     e = sprague_geers(reference, simulated)
-    return CharacteristicValue(_score(e.combined), {"M": e.magnitude, "P": e.phase, "C": e.combined})
+    return CharacteristicValue(
+        _score(e.combined), {"M": e.magnitude, "P": e.phase, "C": e.combined}
+    )
 
 
-def russell_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def russell_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``russell``: 1 − RC, with RM, RP and RC as components."""
     e = russell(reference, simulated)
     return CharacteristicValue(

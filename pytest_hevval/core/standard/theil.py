@@ -61,7 +61,9 @@ def theil_u(reference: FloatArray, simulated: FloatArray) -> TheilU:
     return TheilU(min(1.0, u), bias / total, variance / total, covariance / total)
 
 
-def theil_characteristic(reference: FloatArray, simulated: FloatArray, dt: float) -> CharacteristicValue:
+def theil_characteristic(
+    reference: FloatArray, simulated: FloatArray, dt: float
+) -> CharacteristicValue:
     """The registry's ``theil``: 1 − U, with U, U_M, U_S and U_C as components."""
     t = theil_u(reference, simulated)
     return CharacteristicValue(
