@@ -249,16 +249,17 @@ def _overlap_correlation(
 def _warped_magnitude_error(x: FloatArray, y: FloatArray, band: int) -> float:
     """ε_mag = ‖x_w − y_w‖₁ / ‖y_w‖₁ along the DTW path of x (rows) onto y (columns)."""
     rows, cols = _dtw_path(x, y, band)
-    warped_x = x[rows]
-    warped_y = y[cols]
-    norm = float(np.sum(np.abs(warped_y)))
+    return _relative_l1(x[rows], y[cols], "the shifted reference is zero everywhere")
+
+
+def _relative_l1(candidate: FloatArray, reference: FloatArray, when_zero: str) -> float:
+    """‖candidate − reference‖₁ / ‖reference‖₁, the form of ε_mag and ε_slope."""
+    norm = float(np.sum(np.abs(reference)))
     if norm == 0.0:
         raise degenerate(
-            "iso18571",
-            "the shifted reference is zero everywhere, so the magnitude error is undefined",
-            "compare a longer stretch of the signal",
+            "iso18571", f"{when_zero}, so the error is undefined", "compare a signal that varies"
         )
-    return float(np.sum(np.abs(warped_x - warped_y))) / norm
+    return float(np.sum(np.abs(candidate - reference))) / norm
 
 
 def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.ndarray]:
@@ -331,12 +332,6 @@ def _smoothed_slope(values: FloatArray) -> FloatArray:
 
 
 def _slope_error(ref: FloatArray, sim: FloatArray) -> float:
-    ref_slope = _smoothed_slope(ref)
-    norm = float(np.sum(np.abs(ref_slope)))
-    if norm == 0.0:
-        raise degenerate(
-            "iso18571",
-            "the shifted reference has no slope, so the slope error is undefined",
-            "compare a signal that varies",
-        )
-    return float(np.sum(np.abs(_smoothed_slope(sim) - ref_slope))) / norm
+    return _relative_l1(
+        _smoothed_slope(sim), _smoothed_slope(ref), "the shifted reference has no slope"
+    )

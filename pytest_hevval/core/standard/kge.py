@@ -101,21 +101,20 @@ def nse_characteristic(
     return CharacteristicValue(bounded_efficiency(value), {"NSE": value})
 
 
+def _kge_value(k: KlingGupta, variability: str) -> CharacteristicValue:
+    parts = {"KGE": k.kge, "r": k.r, variability: k.variability, "beta": k.beta}
+    return CharacteristicValue(bounded_efficiency(k.kge), parts)
+
+
 def kge_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``kge``: 1/(2 − KGE) of the 2009 form, with KGE, r, α and β."""
-    k = kge(reference, simulated, form=2009)
-    return CharacteristicValue(
-        bounded_efficiency(k.kge), {"KGE": k.kge, "r": k.r, "alpha": k.variability, "beta": k.beta}
-    )
+    return _kge_value(kge(reference, simulated, form=2009), "alpha")
 
 
 def kge2012_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``kge2012``: 1/(2 − KGE′), with KGE′, r, γ and β."""
-    k = kge(reference, simulated, form=2012)
-    return CharacteristicValue(
-        bounded_efficiency(k.kge), {"KGE": k.kge, "r": k.r, "gamma": k.variability, "beta": k.beta}
-    )
+    return _kge_value(kge(reference, simulated, form=2012), "gamma")

@@ -76,25 +76,21 @@ def russell(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
     return MagnitudePhase(magnitude, phase, math.sqrt(math.pi / 4.0 * (magnitude**2 + phase**2)))
 
 
-def _score(error: float) -> float:
-    return min(1.0, max(0.0, 1.0 - error))
+def _scored(e: MagnitudePhase, prefix: str) -> CharacteristicValue:
+    """1 − combined error, clipped to [0, 1], with the three errors as components."""
+    parts = {f"{prefix}M": e.magnitude, f"{prefix}P": e.phase, f"{prefix}C": e.combined}
+    return CharacteristicValue(min(1.0, max(0.0, 1.0 - e.combined)), parts)
 
 
 def sprague_geers_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``sprague_geers``: 1 − C, with M, P and C as components."""
-    e = sprague_geers(reference, simulated)
-    return CharacteristicValue(
-        _score(e.combined), {"M": e.magnitude, "P": e.phase, "C": e.combined}
-    )
+    return _scored(sprague_geers(reference, simulated), "")
 
 
 def russell_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``russell``: 1 − RC, with RM, RP and RC as components."""
-    e = russell(reference, simulated)
-    return CharacteristicValue(
-        _score(e.combined), {"RM": e.magnitude, "RP": e.phase, "RC": e.combined}
-    )
+    return _scored(russell(reference, simulated), "R")
