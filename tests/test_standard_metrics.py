@@ -307,6 +307,26 @@ def test_perfect_agreement_scores_one(pair: tuple[np.ndarray, np.ndarray]) -> No
         assert scored.value == pytest.approx(1.0), name
 
 
+@settings(max_examples=30, deadline=None)
+@given(signal_pairs(min_size=12, max_size=120), st.integers(-30, 30))
+def test_every_standard_metric_ignores_a_change_of_units(
+    pair: tuple[np.ndarray, np.ndarray], exponent: int
+) -> None:
+    # A power of two changes every value exactly, so even the warping path's ties stay put.
+    ref, sim = pair
+    k = 2.0**exponent
+    for name in STANDARD_CHARACTERISTICS:
+        characteristic = get_characteristic(name)
+        try:
+            plain = compute_characteristic(characteristic, ref, sim, 0.1)
+        except DegenerateSignalError:
+            with pytest.raises(DegenerateSignalError):
+                compute_characteristic(characteristic, k * ref, k * sim, 0.1)
+            continue
+        scaled = compute_characteristic(characteristic, k * ref, k * sim, 0.1)
+        assert scaled.value == pytest.approx(plain.value, rel=1e-9, abs=1e-12), name
+
+
 @pytest.mark.parametrize("name", STANDARD_CHARACTERISTICS)
 @pytest.mark.parametrize(
     ("ref", "sim", "says"),
