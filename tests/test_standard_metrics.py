@@ -392,3 +392,16 @@ def test_spec_with_standard_metrics_end_to_end(pytester: pytest.Pytester, xdist:
     assert "standard metrics" in html
     assert "U_M" in html
     assert "Standard metrics of pack" in (report / "report.md").read_text()
+
+
+def test_a_standard_metric_below_its_threshold_fails_the_signal(tmp_path: Path) -> None:
+    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.spec.load import parse_spec_text
+
+    write_data(tmp_path, fault="leaf")
+    text = SPEC.replace("iso18571: 0.5", "theil: 0.99")
+    result = evaluate_spec(parse_spec_text(text, tmp_path / "pack.hevval.yaml")).result
+    current = result.signal("P/I")
+    assert [f.characteristic for f in current.failures] == ["theil"]
+    assert current.components["theil"]["U_M"] > 0.5  # the injected fault is mostly an offset
+    assert "1−U Theil's U = " in "\n".join(current.failure_lines())
