@@ -35,7 +35,7 @@ def _timed(call: Callable[..., Any], *args: Any) -> tuple[float, Any]:
 
 
 def _package(ref: np.ndarray, sim: np.ndarray) -> float:
-    from objective_rating_metrics.rating import ISO18571  # type: ignore[import-untyped]
+    from objective_rating_metrics.rating import ISO18571
 
     t = np.arange(ref.size) * DT
     return float(ISO18571(np.c_[t, ref], np.c_[t, sim], dt=DT).overall_rating(-1))
