@@ -278,22 +278,28 @@ def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.n
     # Row r of the block sits at rows[r + 1], band cell k at column k + 1, with inf padding on
     # both sides; rows[0] is the last row of the previous block.
     rows = np.full((_DTW_BLOCK + 1, width + 2), np.inf)
+    # Band cell k of row i pairs x_i with y_{i+k−band}; cells off the grid cost 0 and are
+    # never written, so a row's prefix sums over the whole band equal those over its cells.
+    padded = np.concatenate((np.full(band, np.nan), y, np.full(band, np.nan)))
+    windows = np.lib.stride_tricks.sliding_window_view(padded, width)
     for first in range(0, n, _DTW_BLOCK):
         last = min(n, first + _DTW_BLOCK)
+        cost = np.subtract(x[first:last, None], windows[first:last])
+        np.square(cost, out=cost)
+        cost[np.isnan(cost)] = 0.0
+        total = np.cumsum(cost, axis=1)
+        before = total - cost  # Σ of the row's costs left of each cell
         for i in range(first, last):
             lo = max(0, band - i)
             hi = min(width, n - i + band)
-            previous = rows[i - first]
+            r = i - first
+            previous = rows[r]
             reach = np.minimum(previous[lo + 2 : hi + 2], previous[lo + 1 : hi + 1])
             if i == 0:
                 reach[0] = 0.0
-            cost = np.subtract(x[i], y[i + lo - band : i + hi - band])
-            np.square(cost, out=cost)
-            total = np.cumsum(cost)
-            reach += cost
-            reach -= total
+            reach -= before[r, lo:hi]
             np.minimum.accumulate(reach, out=reach)
-            np.add(reach, total, out=rows[i - first + 1, lo + 1 : hi + 1])
+            np.add(reach, total[r, lo:hi], out=rows[r + 1, lo + 1 : hi + 1])
         count = last - first
         up = rows[:count, 2:]
         diagonal = rows[:count, 1:-1]
