@@ -108,6 +108,7 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                     f"{signal.lambdas[n]:{max(6, len(describe(n).symbol))}.4f}" for n in names
                 )
                 lines.append(f"  {label:<30}{values}{origin}")
+                lines.extend(_standard_metric_lines(signal, indent))
             else:
                 failed = ", ".join(
                     [f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures]
@@ -120,6 +121,20 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
         if not details and result.passed:
             lines.append(f"  all {len(result.signals)} signals pass")
         lines.extend(quality_lines(result))
+    return lines
+
+
+def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:
+    """One line per standard metric of ``signal`` with its raw values (``--hevval-details``)."""
+    lines = []
+    for name, value in signal.lambdas.items():
+        described = describe(name)
+        if not described.standard:
+            continue
+        parts = ", ".join(f"{k} {v:.4g}" for k, v in signal.components.get(name, {}).items())
+        lines.append(
+            f"      {indent}{described.label} {value:.4f}" + (f" ({parts})" if parts else "")
+        )
     return lines
 
 
