@@ -956,9 +956,11 @@ def diagnose_residual(
         min_share=min_share,
         window_s=window_s,
         scale=s_sig,
+        offset_name=_free_name("offset", names),
     )
     summary = _summary(
-        ordered,
+        effects,
+        echoes,
         lag_s=lag_s,
         timing_significant=timing_significant,
         gain=head.gain,
@@ -1416,7 +1418,8 @@ def _p_value(beta: float, se: float, df: int) -> float:
 
 
 def _summary(
-    findings: Sequence[CandidateFinding],
+    effects: Sequence[Effect],
+    echoes: Sequence[Response],
     *,
     lag_s: float,
     timing_significant: bool,
@@ -1425,32 +1428,40 @@ def _summary(
     remaining: Whiteness,
 ) -> str:
     parts: list[str] = []
-    for f in findings:
-        if not (f.selected and f.significant):
+    for e in effects:
+        if not e.relevant:
             continue
-        half = (f.interval[1] - f.interval[0]) / 2.0
-        if f.kind == "offset":
+        half = (e.interval[1] - e.interval[0]) / 2.0
+        if e.kind == "offset":
             parts.append(
-                f"offset {f.coefficient:+.3g} ± {half:.2g} carries "
-                f"{_format_pct(f.explained_fraction)} of the residual's mean square"
+                f"offset {e.coefficient:+.3g} ± {half:.2g} carries "
+                f"{_format_pct(e.share)} of the residual's mean square"
             )
         else:
             parts.append(
-                f"{f.name} explains {_format_pct(f.explained_fraction)} of the residual "
-                f"(coef {f.coefficient:.3g} ± {half:.2g})"
+                f"{e.name} explains {_format_pct(e.share)} of the residual "
+                f"(coef {e.coefficient:.3g} ± {half:.2g})"
             )
     if timing_significant:
         direction = "lags" if lag_s < 0 else "leads"
         parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
     if gain_significant:
         parts.append(f"gain error {100.0 * (gain - 1.0):+.1f} %")
+    minor = [e.name for e in effects if e.significant and not e.relevant]
     if not parts:
         text = "no significant effect found: the residual is indistinguishable from noise"
-        if not remaining.white:
+        if minor:
+            text = "no relevant effect found"
+        elif not remaining.white:
             text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
-        return text
-    if not remaining.white:
+        parts.append(text)
+    elif not remaining.white:
         parts.append("the remaining residual is still autocorrelated")
+    if minor:
+        parts.append("minor: " + ", ".join(minor))
+    if echoes:
+        names = ", ".join(e.name for e in echoes)
+        parts.append(f"moves with the measured signal, probably a consequence: {names}")
     return "; ".join(parts)
 
 
@@ -1567,9 +1578,8 @@ def _effects(
     min_share: float,
     window_s: float,
     scale: float,
-) -> tuple[
-    tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None
-]:
+    offset_name: str,
+) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
     """The selected candidates and the intercept, fitted jointly, as effects one can act on.
 
     The candidates enter uncentred (gain and lag centred, as in the headline fit), so the
@@ -1582,12 +1592,12 @@ def _effects(
     chosen = [kept[i] for i in selected]
     centres = [s.mean if s.kind in ("gain", "lag") else 0.0 for s in chosen]
     design = np.column_stack(
-        [np.ones_like(r_g), *((s.grid - c) / s.std for s, c in zip(chosen, centres))]
+        [np.ones_like(r_g), *((s.grid - c) / s.std for s, c in zip(chosen, centres, strict=True))]
     )
     joint = _hac_fit(r_g, design, order)
     se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
     raw: list[tuple[str, str, float, tuple[float, float], float, bool, FloatArray, float]] = []
-    for pos, (s, centre) in enumerate(zip(chosen, centres), start=1):
+    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
         b_std, se_std, df = float(joint.beta[pos]), float(se[pos]), int(joint.df[pos])
         coef = b_std / s.std
         p = _p_value(b_std, se_std, df)
@@ -1614,7 +1624,7 @@ def _effects(
     )
     raw.append(
         (
-            "offset",
+            offset_name,
             "offset",
             intercept / scale,
             _scaled(interval0, 1.0 / scale),
@@ -1644,7 +1654,7 @@ def _effects(
                 hot_share=None if hot is None else _removed_share(r[hot], term[hot]),
             )
         )
-    relevant_terms = [term for (*_, term, _), e in zip(raw, effects) if e.relevant]
+    relevant_terms = [term for (*_, term, _), e in zip(raw, effects, strict=True) if e.relevant]
     predicted = (
         _lambdas(ref, sim + np.sum(relevant_terms, axis=0), reference_range)
         if relevant_terms
