@@ -66,9 +66,12 @@ RESPONSE_MIN_R2 = 0.1
 #: ... and the residual adds less than this fraction of that share on top of it.
 RESPONSE_RESIDUAL_RATIO = 0.25
 #: A channel whose cross-correlation with the measured signal peaks with the channel ahead by
-#: at least one sample, within this window, is treated as an input (the driver acts, then the
-#: power follows), however well the measured signal explains it.
+#: at least RESPONSE_MIN_LEAD_S, within ±RESPONSE_LEAD_WINDOW_S, is treated as an input (the
+#: driver acts, then the power follows), however well the measured signal explains it. A
+#: shorter lead is within the timing jitter of CAN logging (frames at 10–100 Hz) and says
+#: nothing about direction.
 RESPONSE_LEAD_WINDOW_S = 2.0
+RESPONSE_MIN_LEAD_S = 0.2
 #: Windows over which the diagnosis says where the residual concentrates.
 LOCAL_WINDOW_S = 30.0
 #: The characteristics the diagnosis predicts after a fix.
@@ -192,19 +195,20 @@ class Effect:
         From the joint model, in the signal's units per unit of the candidate (for the
         offset: in the signal's units).
     share:
-        Share of the residual's mean square removed by adding this effect alone to the model:
-        1 − Σ(r − term)² / Σr².
+        Share of the residual's mean square this effect explains beyond all the others (the
+        others refitted without it), at the original sample rate.
     offset_explained:
-        The mean shift this effect carries, in the signal's units (coefficient × mean of the
-        candidate for channels, expressions and derivatives; 0 for gain and lag, whose mean
-        goes to the offset, as in the headline fit).
+        The mean shift this effect is credited with, in the signal's units: coefficient × mean
+        of the candidate when that brings the offset left over closer to zero, else 0 (always
+        0 for gain and lag, whose mean goes to the offset, as in the headline fit).
     significant:
         The coefficient passed its family-wise level (Holm level at selection; α/2 and
         material for the offset).
     relevant:
         Significant and ``share`` ≥ the minimum share.
     predicted:
-        λ3 and λ4 of the signal if this effect alone were added to the model.
+        λ3 and λ4 of the signal if this effect alone were added to the model, with the
+        coefficient above.
     hot_share:
         Share of the residual's squared error inside the hot windows that this effect removes;
         ``None`` when the error does not concentrate.
@@ -1480,7 +1484,8 @@ def _split_responses(
 
     A channel x is a response when the spec says so, or when (1) the measured signal alone
     explains at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
-    :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the measured signal.
+    :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the measured signal
+    by :data:`RESPONSE_MIN_LEAD_S` or more.
     A missing cause enters the residual and the measured signal alike, so the residual tells
     about it what the measured signal cannot; an echo of the measured signal (the bus voltage
     sagging with the power, the state of charge falling with it) is explained by the measured
@@ -1499,7 +1504,9 @@ def _split_responses(
         lead = search_lag(ref, values, lead_window).lag if ref_varies else 0
         declared = name in declared_responses
         follows = (
-            measured >= RESPONSE_MIN_R2 and added < RESPONSE_RESIDUAL_RATIO * measured and lead <= 0
+            measured >= RESPONSE_MIN_R2
+            and added < RESPONSE_RESIDUAL_RATIO * measured
+            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
         )
         if declared or follows:
             echoes.append(
@@ -1534,6 +1541,70 @@ def _removed_share(r: FloatArray, term: FloatArray) -> float:
         return 0.0
     left = r - term
     return 1.0 - _dot(left, left) / total
+
+
+def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]:
+    """Where each selected term is zero: 0 (it carries the mean it implies) or its mean.
+
+    In the order the terms entered, a channel, expression or derivative is credited with the
+    mean shift coefficient × mean(channel) when that brings the offset left over closer to
+    zero: a missing heater load explains the mean shift it causes. A term whose mean would
+    only have to be cancelled by a larger opposite offset (the throttle position, whose zero
+    is far from its working range) keeps its mean out, as gain and lag always do.
+    """
+    columns = [(s.grid - s.mean) / s.std for s in chosen]
+    design = np.column_stack([np.ones_like(r_g), *columns])
+    beta, *_ = np.linalg.lstsq(design, r_g, rcond=_RCOND)
+    left = float(np.mean(r_g))
+    centres: list[float] = []
+    for pos, s in enumerate(chosen, start=1):
+        carried = float(beta[pos]) / s.std * s.mean
+        if s.kind not in ("gain", "lag") and abs(left - carried) < abs(left):
+            centres.append(0.0)
+            left -= carried
+        else:
+            centres.append(s.mean)
+    return centres
+
+
+def _least_squares_fit(r: FloatArray, columns: Sequence[FloatArray]) -> FloatArray:
+    """The least-squares combination of ``columns`` closest to r (no intercept of its own)."""
+    design = np.column_stack(columns)
+    gram = np.einsum("ti,tj->ij", design, design)
+    coef = np.linalg.pinv(gram, rcond=_RCOND) @ np.einsum("ti,t->i", design, r)
+    return np.asarray(design @ coef, dtype=np.float64)
+
+
+def _unique_shares(r: FloatArray, columns: Sequence[FloatArray]) -> list[float]:
+    """What each term alone adds to the fit of r on [columns, 1], as a share of Σr².
+
+    Share_j = (SS of r left without j, the others refitted − SS left with all) / Σr², the last
+    entry for the intercept. A term that only compensates another (a gain error and an offset
+    that cancel in the mean) adds little once the other is there, so it cannot claim the
+    residual; a channel that carries the mean keeps the intercept from needing to.
+    """
+    design = [*columns, np.ones_like(r)]
+    k = len(design)
+    gram = np.empty((k, k))
+    cross = np.empty(k)
+    for i in range(k):
+        cross[i] = _dot(design[i], r)
+        for j in range(i, k):
+            gram[i, j] = gram[j, i] = _dot(design[i], design[j])
+    total = _dot(r, r)
+    if total <= 0.0:
+        return [0.0] * k
+
+    def explained(keep: list[int]) -> float:
+        sub = np.ix_(keep, keep)
+        coef = np.linalg.pinv(gram[sub], rcond=_RCOND) @ cross[keep]
+        return float(coef @ cross[keep])
+
+    everything = explained(list(range(k)))
+    return [
+        min(max((everything - explained([i for i in range(k) if i != j])) / total, 0.0), 1.0)
+        for j in range(k)
+    ]
 
 
 def _hot_mask(where: Localisation, n: int, dt: float, start_s: float) -> npt.NDArray[np.bool_]:
@@ -1582,15 +1653,15 @@ def _effects(
 ) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
     """The selected candidates and the intercept, fitted jointly, as effects one can act on.
 
-    The candidates enter uncentred (gain and lag centred, as in the headline fit), so the
-    intercept is the offset left once the candidates have taken the mean shift they carry: a
-    missing load with a nonzero mean is one effect, not a load and an offset.
+    A candidate credited with the mean shift it carries enters uncentred (see
+    :func:`_credited_centres`), so the intercept is the offset left over: a missing load with
+    a nonzero mean is one effect, not a load and an offset.
     """
     r = ref - sim
     n = r.shape[0]
     reference_range = float(np.ptp(ref))
     chosen = [kept[i] for i in selected]
-    centres = [s.mean if s.kind in ("gain", "lag") else 0.0 for s in chosen]
+    centres = _credited_centres(r_g, chosen)
     design = np.column_stack(
         [np.ones_like(r_g), *((s.grid - c) / s.std for s, c in zip(chosen, centres, strict=True))]
     )
@@ -1611,7 +1682,7 @@ def _effects(
                 p,
                 p <= holm_levels[pos - 1],
                 term,
-                coef * (0.0 if s.kind in ("gain", "lag") else float(np.mean(s.full))) / scale,
+                coef * (float(np.mean(s.full)) - centre) / scale,
             )
         )
     intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
@@ -1636,9 +1707,11 @@ def _effects(
     )
     where = _localise(ref, sim, dt, start_s, window_s)
     hot = _hot_mask(where, n, dt, start_s) if where is not None and where.windows else None
+    shares = _unique_shares(r, [s.full - c for s, c in zip(chosen, centres, strict=True)])
     effects: list[Effect] = []
-    for name, kind, coef_out, interval_out, p, significant, term, mean_shift in raw:
-        share = _removed_share(r, term)
+    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), share in zip(
+        raw, shares, strict=True
+    ):
         effects.append(
             Effect(
                 name=name,
@@ -1654,9 +1727,12 @@ def _effects(
                 hot_share=None if hot is None else _removed_share(r[hot], term[hot]),
             )
         )
+    # The joint coefficients share the residual between correlated terms; fixing only the
+    # relevant ones is predicted with their own least-squares fit, so that a minor term that
+    # compensated one of them in the joint model does not spoil the prediction.
     relevant_terms = [term for (*_, term, _), e in zip(raw, effects, strict=True) if e.relevant]
     predicted = (
-        _lambdas(ref, sim + np.sum(relevant_terms, axis=0), reference_range)
+        _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
         if relevant_terms
         else {}
     )
