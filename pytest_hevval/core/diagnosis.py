@@ -60,8 +60,8 @@ MIN_EXPLAINED_INCREASE = 0.005
 #: mean square. 5 % lowers the RMS error by 2.5 % (√0.95): anything smaller cannot move λ4 by
 #: more than a fortieth of its distance to 1, so it is listed as minor rather than as a cause.
 MIN_SHARE = 0.05
-#: A channel is a response (an echo of the scored signal) when the measured signal alone
-#: explains at least this share of its variance ...
+#: A channel is a response (an echo of the scored signal) when the measured signal and its
+#: running sum explain at least this share of its variance ...
 RESPONSE_MIN_R2 = 0.1
 #: ... and the residual adds less than this fraction of that share on top of it.
 RESPONSE_RESIDUAL_RATIO = 0.25
@@ -238,7 +238,7 @@ class Response:
     reason:
         ``"declared"`` (the spec lists it under ``responses:``) or ``"follows"`` (the rule).
     measured_r2:
-        Share of the channel's variance the measured signal explains alone.
+        Share of the channel's variance the measured signal and its running sum explain.
     residual_r2:
         What the residual adds to that share.
     lead_s:
@@ -1482,8 +1482,8 @@ def _split_responses(
 ) -> tuple[_UserSeries, tuple[Response, ...]]:
     """The user's candidates that may be causes, and those that echo the scored signal.
 
-    A channel x is a response when the spec says so, or when (1) the measured signal alone
-    explains at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
+    A channel x is a response when the spec says so, or when (1) the measured signal and its
+    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
     :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the measured signal
     by :data:`RESPONSE_MIN_LEAD_S` or more.
     A missing cause enters the residual and the measured signal alike, so the residual tells
@@ -1495,13 +1495,20 @@ def _split_responses(
     echoes: list[Response] = []
     lead_window = max(1, round(RESPONSE_LEAD_WINDOW_S / dt))
     ref_varies = _varies(ref)
+    # What the measured signal drives: its value (a voltage sagging under load) and its
+    # running sum (a state of charge, a temperature that rises with the energy drawn).
+    running = np.cumsum(ref - float(np.mean(ref))) * dt
     for name, kind, values in user:
         if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
             kept.append((name, kind, values))
             continue
-        measured = _full_rate_r2(values, [ref])
-        added = _full_rate_r2(values, [ref, residual]) - measured
-        lead = search_lag(ref, values, lead_window).lag if ref_varies else 0
+        measured = _full_rate_r2(values, [ref, running])
+        added = _full_rate_r2(values, [ref, running, residual]) - measured
+        # The direction of the peak |correlation|: a voltage falls as the power rises.
+        sign = (
+            1.0 if _dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
+        )
+        lead = search_lag(ref, sign * values, lead_window).lag if ref_varies else 0
         declared = name in declared_responses
         follows = (
             measured >= RESPONSE_MIN_R2
