@@ -196,7 +196,8 @@ class Effect:
         offset: in the signal's units).
     share:
         Share of the residual's mean square this effect explains beyond all the others (the
-        others refitted without it), at the original sample rate.
+        others refitted without it, the offset held at the value left over), at the original
+        sample rate.
     offset_explained:
         The mean shift this effect is credited with, in the signal's units: coefficient × mean
         of the candidate when that brings the offset left over closer to zero, else 0 (always
@@ -1582,36 +1583,39 @@ def _least_squares_fit(r: FloatArray, columns: Sequence[FloatArray]) -> FloatArr
     return np.asarray(design @ coef, dtype=np.float64)
 
 
-def _unique_shares(r: FloatArray, columns: Sequence[FloatArray]) -> list[float]:
-    """What each term alone adds to the fit of r on [columns, 1], as a share of Σr².
+def _unique_shares(r: FloatArray, columns: Sequence[FloatArray], offset: float) -> list[float]:
+    """What each term alone adds to the fit of r, as a share of Σr²; the intercept last.
 
-    Share_j = (SS of r left without j, the others refitted − SS left with all) / Σr², the last
-    entry for the intercept. A term that only compensates another (a gain error and an offset
-    that cancel in the mean) adds little once the other is there, so it cannot claim the
-    residual; a channel that carries the mean keeps the intercept from needing to.
+    A term's share is the rise of the sum of squares left when it is dropped and the other
+    terms are refitted, with the offset held at the value left over: a channel credited with
+    the mean shift it causes keeps that credit, instead of the intercept taking it over. The
+    intercept's share is the same rise for the intercept itself. A term that only compensates
+    another (a gain error and an offset that cancel in the mean) adds little once the other is
+    there, so it cannot claim the residual.
     """
-    design = [*columns, np.ones_like(r)]
-    k = len(design)
-    gram = np.empty((k, k))
-    cross = np.empty(k)
-    for i in range(k):
-        cross[i] = _dot(design[i], r)
-        for j in range(i, k):
-            gram[i, j] = gram[j, i] = _dot(design[i], design[j])
     total = _dot(r, r)
+    k = len(columns)
     if total <= 0.0:
-        return [0.0] * k
+        return [0.0] * (k + 1)
 
-    def explained(keep: list[int]) -> float:
-        sub = np.ix_(keep, keep)
-        coef = np.linalg.pinv(gram[sub], rcond=_RCOND) @ cross[keep]
-        return float(coef @ cross[keep])
+    def explained(target: FloatArray, design: Sequence[FloatArray], keep: list[int]) -> float:
+        if not keep:
+            return 0.0
+        gram = np.array([[_dot(design[a], design[b]) for b in keep] for a in keep])
+        cross = np.array([_dot(design[a], target) for a in keep])
+        coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
+        return float(coef @ cross)
 
-    everything = explained(list(range(k)))
-    return [
-        min(max((everything - explained([i for i in range(k) if i != j])) / total, 0.0), 1.0)
-        for j in range(k)
+    held = r - offset
+    every = list(range(k))
+    full = explained(held, columns, every)
+    shares = [
+        (full - explained(held, columns, [i for i in every if i != j])) / total for j in every
     ]
+    with_intercept = [*columns, np.ones_like(r)]
+    everything = explained(r, with_intercept, [*every, k])
+    shares.append((everything - explained(r, with_intercept, every)) / total)
+    return [min(max(share, 0.0), 1.0) for share in shares]
 
 
 def _hot_mask(where: Localisation, n: int, dt: float, start_s: float) -> npt.NDArray[np.bool_]:
@@ -1714,7 +1718,9 @@ def _effects(
     )
     where = _localise(ref, sim, dt, start_s, window_s)
     hot = _hot_mask(where, n, dt, start_s) if where is not None and where.windows else None
-    shares = _unique_shares(r, [s.full - c for s, c in zip(chosen, centres, strict=True)])
+    shares = _unique_shares(
+        r, [s.full - c for s, c in zip(chosen, centres, strict=True)], float(intercept)
+    )
     effects: list[Effect] = []
     for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), share in zip(
         raw, shares, strict=True
