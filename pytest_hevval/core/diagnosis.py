@@ -1484,9 +1484,9 @@ def _split_responses(
     """The user's candidates that may be causes, and those that echo the scored signal.
 
     A channel x is a response when the spec says so, or when (1) the measured signal and its
-    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
-    :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the measured signal
-    by :data:`RESPONSE_MIN_LEAD_S` or more.
+    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds
+    less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the
+    measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
     A missing cause enters the residual and the measured signal alike, so the residual tells
     about it what the measured signal cannot; an echo of the measured signal (the bus voltage
     sagging with the power, the state of charge falling with it) is explained by the measured
