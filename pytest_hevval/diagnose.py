@@ -18,13 +18,21 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
+from .core.diagnosis import MIN_SHARE, Candidate, Diagnosis, diagnose_residual
 from .core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from .data.record import Record
 from .engine import Evaluation
 from .errors import DataError, HevvalError
 
-__all__ = ["candidates_for", "diagnose_main", "diagnose_origin", "diagnose_signal"]
+__all__ = [
+    "candidates_for",
+    "derivative_name",
+    "diagnose_main",
+    "diagnose_origin",
+    "diagnose_pair",
+    "diagnose_signal",
+    "effect_text",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -123,6 +131,28 @@ def derivative_name(channel: str) -> str:
     return f"d/dt {channel}"
 
 
+def diagnose_pair(
+    evaluation: Evaluation,
+    reference: FloatArray,
+    simulated: FloatArray,
+    candidates: Sequence[Candidate],
+) -> Diagnosis:
+    """Diagnose one aligned pair of the evaluation with the spec's diagnosis settings."""
+    assert evaluation.aligned is not None
+    settings = evaluation.spec.diagnosis
+    return diagnose_residual(
+        reference,
+        simulated,
+        dt=evaluation.aligned.grid.dt,
+        candidates=candidates,
+        max_lag_s=evaluation.spec.alignment.max_lag_s,
+        responses=_with_derivatives(settings.responses),
+        # A channel the model reads is an input; the spec can name more causes.
+        causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
+        min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
+    )
+
+
 def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True) -> dict[str, Any]:
     """The full diagnosis of one signal as JSON-safe data (see docs/diagnosis.md)."""
     if evaluation.aligned is None or path not in evaluation.arrays:
@@ -134,17 +164,8 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         )
     reference, simulated = evaluation.arrays[path]
     result = evaluation.result.signal(path)
-    settings = evaluation.spec.diagnosis
-    diagnosis = diagnose_residual(
-        reference,
-        simulated,
-        dt=evaluation.aligned.grid.dt,
-        candidates=candidates_for(evaluation, channels=channels),
-        max_lag_s=evaluation.spec.alignment.max_lag_s,
-        responses=_with_derivatives(settings.responses),
-        # A channel the model reads is an input; the spec can name more causes.
-        causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
-        min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
+    diagnosis = diagnose_pair(
+        evaluation, reference, simulated, candidates_for(evaluation, channels=channels)
     )
     by_path = {s.path: s for s in evaluation.result.signals}
     origin_path = result.origins[0] if result.origins else path
@@ -262,7 +283,8 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
             f"{where['window_s']:g} s: {spans}{more}"
         )
         if relevant and relevant[0].get("hot_share") is not None:
-            text += f"; {relevant[0]['name']} removes {100 * relevant[0]['hot_share']:.0f} % of it there"
+            first = relevant[0]
+            text += f"; {first['name']} removes {100 * first['hot_share']:.0f} % of it there"
         lines.append(text)
     return lines
 
