@@ -23,7 +23,7 @@ output. The effects:
 * ``gain``: (g − 1) × simulated; ``offset``: a constant; ``lag``: the simulated signal delayed
   or advanced by 0.3–2 s;
 * two of these at once (different kinds);
-* ``control``: no effect.
+* ``control``: no effect (``--controls`` per draw, 5 by default).
 
 Each effect's size is drawn so that it makes 20–60 % of the residual's mean square (15–40 %
 each for two; the lag is drawn by its delay). The candidates are those a user gets
@@ -146,7 +146,7 @@ def _matches(first: tuple[str, str] | None, expected: str) -> bool:
     return name == expected if expected not in ("gain", "offset", "lag") else kind == expected
 
 
-def run(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
+def run(draws: int, controls: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
     from pytest_hevval.diagnose import diagnose_pair
 
     rng = np.random.default_rng(seed)
@@ -158,7 +158,7 @@ def run(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
         trip = Trip(spec)
         log(f"{trip.name}: {trip.simulated.shape[0]} samples, {len(trip.candidates)} candidates")
         for _ in range(draws):
-            for case in [[], *cases]:
+            for case in [*([] for _ in range(controls)), *cases]:
                 shift = int(
                     rng.integers(int(0.2 * len(trip.residual)), int(0.8 * len(trip.residual)))
                 )
@@ -222,6 +222,7 @@ def table(result: dict[str, Any]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--draws", type=int, default=10, help="draws per case and trip")
+    parser.add_argument("--controls", type=int, default=5, help="controls per draw and trip")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--misses", action="store_true", help="list every wrong first finding")
@@ -233,11 +234,12 @@ def main() -> None:
     def log(text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
-    result = run(args.draws, args.seed, log)
+    result = run(args.draws, args.controls, args.seed, log)
     print(table(result))
     print(
         f"\n{sum(n for _, n in result['tally'].values())} diagnoses in "
-        f"{result['seconds']:.0f} s (draws {args.draws}, seed {args.seed})"
+        f"{result['seconds']:.0f} s (draws {args.draws}, controls {args.controls}, "
+        f"seed {args.seed})"
     )
     if args.misses:
         for miss in result["misses"]:
