@@ -86,9 +86,11 @@ class Trip:
         from pytest_hevval.run import RunOptions, run_specs
         from pytest_hevval.spec.load import load_spec
 
-        (evaluation,) = run_specs(
-            [load_spec(spec)], RunOptions(rootdir=Path.cwd(), keep_arrays=True)
-        )
+        (outcome,) = run_specs([load_spec(spec)], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
+        if isinstance(outcome, Exception):
+            raise outcome
+        evaluation = outcome
+        assert evaluation.aligned is not None
         self.name = Path(spec).name.split(".")[0]
         self.evaluation = evaluation
         measured, simulated = evaluation.arrays[SIGNAL]
@@ -105,7 +107,7 @@ class Trip:
 def _scaled(unit: FloatArray, share: float, noise_ms: float) -> FloatArray:
     """``unit`` scaled so that it makes ``share`` of (its mean square + the noise's)."""
     ms = float(np.mean(unit**2))
-    return unit * np.sqrt(share / (1.0 - share) * noise_ms / ms)
+    return np.asarray(unit * np.sqrt(share / (1.0 - share) * noise_ms / ms), dtype=np.float64)
 
 
 def _effect(
