@@ -1,6 +1,6 @@
 """How often the diagnosis names an injected effect first, on the example's real i3 trips.
 
-    python benchmarks/bench_diagnosis_accuracy.py               # the published table
+    python benchmarks/bench_diagnosis_accuracy.py               # the published table, ~5 min
     python benchmarks/bench_diagnosis_accuracy.py --draws 2     # a quick look
     python benchmarks/bench_diagnosis_accuracy.py --json out.json
 
@@ -223,7 +223,7 @@ def table(result: dict[str, Any]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--draws", type=int, default=10, help="draws per case and trip")
+    parser.add_argument("--draws", type=int, default=20, help="draws per case and trip")
     parser.add_argument("--controls", type=int, default=5, help="controls per draw and trip")
     parser.add_argument("--seed", type=int, default=2026)
     parser.add_argument("--json", type=Path, default=None)
