@@ -225,6 +225,7 @@ def _lambda_change(before: Mapping[str, Any], after: Mapping[str, Any]) -> str:
 
 def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     effects = found.get("effects") or []
+    unit = f" {found['unit']}" if found.get("unit") else ""
     share = float(found.get("min_share", MIN_SHARE))
     before = found.get("lambdas") or {}
     relevant = [e for e in effects if e["relevant"]]
@@ -238,7 +239,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     for i, e in enumerate(relevant, start=1):
         mean = float(e.get("offset_explained") or 0.0)
         carries = (
-            f"; carries {mean:+.3g} of the mean shift"
+            f"; carries {mean:+.3g}{unit} of the mean shift"
             if e["kind"]
             not in (
                 "gain",
@@ -284,7 +285,12 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
         )
         if relevant and relevant[0].get("hot_share") is not None:
             first = relevant[0]
-            text += f"; {first['name']} removes {100 * first['hot_share']:.0f} % of it there"
+            hot = 100 * first["hot_share"]
+            text += (
+                f"; {first['name']} removes {hot:.0f} % of it there"
+                if hot >= 0
+                else f"; {first['name']} does not explain it there (it would add {-hot:.0f} %)"
+            )
         lines.append(text)
     return lines
 

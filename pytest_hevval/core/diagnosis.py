@@ -243,8 +243,11 @@ class Response:
     residual_r2:
         What the residual adds to that share.
     lead_s:
-        Lead of the channel over the measured signal at the peak of their cross-correlation
+        Lead of the channel over the measured signal at the peak of their |cross-correlation|
         within ±2 s (negative: the channel follows).
+    explains:
+        Share of the residual's variance the channel explains alone: what it would have been
+        offered as, had it not been set apart.
     """
 
     name: str
@@ -253,6 +256,7 @@ class Response:
     measured_r2: float
     residual_r2: float
     lead_s: float
+    explains: float
 
 
 @dataclass(frozen=True)
@@ -1464,8 +1468,10 @@ def _summary(
         parts.append("the remaining residual is still autocorrelated")
     if minor:
         parts.append("minor: " + ", ".join(minor))
-    if echoes:
-        names = ", ".join(e.name for e in echoes)
+    # Only the echoes that would have been offered as an effect are worth a word here.
+    loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    if loud:
+        names = ", ".join(e.name for e in loud)
         parts.append(f"moves with the measured signal, probably a consequence: {names}")
     return "; ".join(parts)
 
@@ -1525,6 +1531,7 @@ def _split_responses(
                     measured_r2=measured,
                     residual_r2=max(added, 0.0),
                     lead_s=lead * dt,
+                    explains=_full_rate_r2(residual, [values]),
                 )
             )
         else:
