@@ -31,6 +31,7 @@ from .expressions import Expression, parse_signal
 from .model import (
     AlignmentSpec,
     ConditionSpec,
+    DiagnosisSpec,
     Interpolation,
     LocalGate,
     LocalSpec,
@@ -60,11 +61,13 @@ _TOP_KEYS = (
     "correlation",
     "emergent",
     "candidates",
+    "diagnosis",
     "data_quality",
     "local",
     "regions",
     "sets",
 )
+_DIAGNOSIS_KEYS = ("min_share", "responses", "causes")
 _SOURCE_KEYS = (
     "path",
     "time",
@@ -308,6 +311,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
     candidates = _candidates(context, top)
+    diagnosis = _diagnosis(context, top)
     data_quality = _data_quality(context, top)
     sets_value = top["sets"]
     sets_line = top.line_of("sets")
@@ -353,6 +357,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
+        diagnosis=diagnosis,
         data_quality=data_quality,
         local=local,
         regions=regions,
@@ -733,6 +738,47 @@ def _candidates(context: _Context, top: LineDict) -> dict[str, Expression]:
         str(name): _expression(context, value, table.line_of(name), _join("candidates", name))
         for name, value in table.items()
     }
+
+
+def _diagnosis(context: _Context, top: LineDict) -> DiagnosisSpec:
+    if "diagnosis" not in top or top["diagnosis"] is None:
+        return DiagnosisSpec()
+    mapping = context.mapping(top["diagnosis"], top.line_of("diagnosis"), "diagnosis")
+    context.check_keys(mapping, _DIAGNOSIS_KEYS, "diagnosis")
+    min_share = context.get(mapping, "min_share", "diagnosis", context.unit_interval, None)
+    if min_share is not None and min_share >= 1.0:
+        raise context.error(
+            mapping.line_of("min_share"),
+            "diagnosis.min_share",
+            "must be below 1 (the share of the residual a relevant effect explains)",
+            got=min_share,
+            hint="0.05, the default, lists effects that remove at least 5 % of the residual",
+        )
+    names: dict[str, tuple[str, ...]] = {}
+    for key in ("responses", "causes"):
+        value = mapping.get(key)
+        line = mapping.line_of(key)
+        if value is None:
+            names[key] = ()
+            continue
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise context.error(
+                line,
+                f"diagnosis.{key}",
+                "must be a list of channel or candidate names",
+                got=value,
+                hint=f'write e.g. {key}: ["Battery Temperature [°C]"]',
+            )
+        names[key] = tuple(value)
+    both = sorted(set(names["responses"]) & set(names["causes"]))
+    if both:
+        raise context.error(
+            mapping.line_of("causes"),
+            "diagnosis.causes",
+            f"{both[0]!r} is declared both a response and a cause",
+            hint="keep it in one of the two lists",
+        )
+    return DiagnosisSpec(min_share=min_share, responses=names["responses"], causes=names["causes"])
 
 
 def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:

@@ -15,6 +15,7 @@ from .expressions import Expression
 __all__ = [
     "AlignmentSpec",
     "ConditionSpec",
+    "DiagnosisSpec",
     "Interpolation",
     "LocalGate",
     "LocalSpec",
@@ -53,6 +54,19 @@ class SourceSpec:
         if self.kind == "callable":
             return f"callable {self.callable}"
         return str(self.path)
+
+
+@dataclass(frozen=True)
+class DiagnosisSpec:
+    """The spec's ``diagnosis:`` settings (docs/spec.md, docs/diagnosis.md)."""
+
+    #: A significant effect is relevant when it removes at least this share of the residual;
+    #: None: the diagnosis default (``core.diagnosis.MIN_SHARE``).
+    min_share: float | None = None
+    #: Candidate names that echo the scored signal and are never offered as the missing effect.
+    responses: tuple[str, ...] = ()
+    #: Candidate names that are causes, whatever the response rule says.
+    causes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -183,6 +197,7 @@ class Spec:
     correlation: Literal["xcorr", "pearson"] = "xcorr"
     emergent: Literal["V1", "V2"] = "V2"
     candidates: Mapping[str, Expression] = field(default_factory=dict)
+    diagnosis: DiagnosisSpec = field(default_factory=lambda: DiagnosisSpec())
     #: Limits and action of the data-quality gate on the reference channels.
     data_quality: QualityLimits = field(default_factory=QualityLimits)
     #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
