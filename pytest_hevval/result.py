@@ -81,6 +81,8 @@ class SignalResult:
     children: list[str] = field(default_factory=list)
     figures: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
+    #: A campaign recording's distribution of u = F_model(measured) on core.upooling.U_GRID.
+    u_distribution: list[float] | None = None
 
     @property
     def passed(self) -> bool:
@@ -152,6 +154,8 @@ class SignalResult:
             out["figures"] = self.figures
         if self.diagnosis is not None:
             out["diagnosis"] = self.diagnosis
+        if self.u_distribution is not None:
+            out["u_distribution"] = list(self.u_distribution)
         return out
 
     @classmethod
@@ -185,6 +189,7 @@ class SignalResult:
             children=list(data.get("children", [])),
             figures=data.get("figures"),
             diagnosis=data.get("diagnosis"),
+            u_distribution=data.get("u_distribution"),
         )
 
     def failure_lines(self) -> list[str]:
@@ -219,6 +224,10 @@ class SpecResult:
     signals: list[SignalResult]
     data: dict[str, Any]
     alignment: dict[str, Any]
+    #: One recording of a campaign: its id, its role and the campaign's gate (see campaign.py).
+    recording: str | None = None
+    role: str = "validation"
+    campaign: dict[str, Any] | None = None
 
     @property
     def phi_passed(self) -> bool:
@@ -264,6 +273,11 @@ class SpecResult:
             "data": self.data,
             "alignment": self.alignment,
             "signals": [s.to_dict() for s in self.signals],
+            **(
+                {"recording": self.recording, "role": self.role, "campaign": self.campaign}
+                if self.recording is not None
+                else {}
+            ),
         }
 
     @classmethod
@@ -283,6 +297,9 @@ class SpecResult:
             signals=[SignalResult.from_dict(s) for s in data["signals"]],
             data=dict(data.get("data", {})),
             alignment=dict(data.get("alignment", {})),
+            recording=data.get("recording"),
+            role=str(data.get("role", "validation")),
+            campaign=data.get("campaign"),
         )
 
 
