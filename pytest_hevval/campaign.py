@@ -201,16 +201,17 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
         phi_quantile=(float(quantile[0]), float(quantile[1])) if quantile else None,
         phi=Distribution.of([r.phi for r in counted]),
         lambdas={n: Distribution.of([_mean_lambda(r, n) for r in counted]) for n in names},
-        signal_pass_rates={
-            path: sum(r.signal(path).passed for r in counted) / len(counted)
-            if counted
-            else math.nan
-            for path in paths
-        },
+        signal_pass_rates={path: _pass_rate(counted, path) for path in paths},
         pooled_area=_pooled_areas(counted, paths),
     )
     found.failures = _gate_failures(found)
     return found
+
+
+def _pass_rate(results: Sequence[SpecResult], path: str) -> float:
+    if not results:
+        return math.nan
+    return sum(r.signal(path).passed for r in results) / len(results)
 
 
 def _pooled_areas(results: Sequence[SpecResult], paths: Sequence[str]) -> dict[str, float]:
