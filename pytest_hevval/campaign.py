@@ -18,6 +18,7 @@ import numpy as np
 from .core.registry import describe
 from .core.upooling import area_to_uniform, pool
 from .result import SpecResult
+from .spec.model import split_key
 
 __all__ = [
     "WORST_SHOWN",
@@ -41,7 +42,7 @@ SUMMARY_QUANTILES = (0.1, 0.5, 0.9)
 
 def campaign_of(spec_key: str) -> str:
     """The campaign's spec path in a recording's result key (``spec.yaml::TripB03``)."""
-    return spec_key.split("::", 1)[0]
+    return split_key(spec_key)[0]
 
 
 def phi_quantile(phis: Sequence[float], q: float) -> float:

@@ -147,7 +147,7 @@ class HevvalSession:
 
     # -- evaluation -------------------------------------------------------------------------
     def register(self, spec: Spec) -> None:
-        self.specs[self.relative(str(spec.path))] = spec
+        self.specs[self.relative(spec.key)] = spec
         self.cache.declare(spec.reference, spec.reference_columns())
         self.cache.declare(spec.model, spec.model_columns())
 
@@ -174,11 +174,11 @@ class HevvalSession:
         except HevvalError as exc:
             raise pytest.UsageError(f"--hevval-dask={options.dask}: {exc}") from None
         for spec, outcome in zip(specs, outcomes, strict=True):
-            self.evaluations[str(spec.path)] = outcome
+            self.evaluations[spec.key] = outcome
 
     def evaluate(self, spec: Spec) -> Evaluation:
         """Evaluate a spec once per process; later items of the same spec reuse it."""
-        key = str(spec.path)
+        key = spec.key
         options = self.run_options()
         if key not in self.evaluations and options.dask:
             self.prefetch_on_dask()
@@ -244,6 +244,8 @@ class HevvalSession:
         diagnosis = getattr(report, "hevval_diagnosis", None)
         if diagnosis is not None:
             self.receive_diagnosis(diagnosis)
+        for recording in getattr(report, "hevval_campaign", None) or ():
+            self.receive(recording)
 
     def spec_results(self) -> list[SpecResult]:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
@@ -354,6 +356,12 @@ class HevvalSession:
             spec = self.specs.get(result["spec"])
             if spec is None:
                 continue
+            if spec.campaign is not None:
+                # One sidecar per spec file cannot hold each recording's own thresholds.
+                note = f"ratchet: {self.relative(str(spec.path))}: a campaign, not ratcheted"
+                if note not in self.notes:
+                    self.notes.append(note)
+                continue
             written = {
                 "/".join(path): {**spec.thresholds, **node.thresholds}
                 for _, path, node in spec.walk()
@@ -398,6 +406,12 @@ class HevvalSession:
         terminalreporter.write_sep("=", "hevval validation summary")
         for line in tree_summary(results, details=bool(self.option("details"))):
             terminalreporter.write_line(line)
+        if any(r.recording is not None for r in results):
+            from .campaign import campaign_verdicts, verdict_lines
+
+            for found in campaign_verdicts(results):
+                for line in verdict_lines(found):
+                    terminalreporter.write_line(line)
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)

@@ -13,6 +13,7 @@ from pathlib import Path, PurePath
 from typing import Any
 
 from .. import __version__
+from ..spec.model import split_key
 from . import model
 
 __all__ = [
@@ -241,7 +242,7 @@ def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path 
     out: list[str] = []
     for spec in spec_results:
         name = str(spec.get("name", ""))
-        file = _escape_property(_relative(str(spec.get("spec", "")), rootdir))
+        file = _escape_property(_relative(split_key(str(spec.get("spec", "")))[0], rootdir))
         phi, min_phi = spec.get("phi"), spec.get("min_phi")
         if (
             model.is_finite_number(phi)

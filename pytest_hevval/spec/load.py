@@ -37,11 +37,18 @@ from .model import (
     SignalSpec,
     SourceSpec,
     Spec,
+    split_key,
 )
 from .sidecar import load_sidecar
 from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 
-__all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
+__all__ = [
+    "THRESHOLD_ALIASES",
+    "characteristic_name",
+    "load_spec",
+    "load_specs",
+    "parse_spec_text",
+]
 
 #: ``lambda1`` … ``lambda7`` name the seven characteristics in paper order.
 THRESHOLD_ALIASES: dict[str, str] = LAMBDA_ALIASES
@@ -255,6 +262,26 @@ def load_spec(path: str | Path) -> Spec:
     # Thresholds tightened by --hevval-ratchet live beside the spec; only stricter ones apply.
     sidecar = load_sidecar(spec_path)
     return dataclasses.replace(spec, ratchet=sidecar) if sidecar else spec
+
+
+def load_specs(target: str | Path) -> tuple[Spec, ...]:
+    """The specs a command-line target names: a spec file (every recording of a campaign), or
+    ``file::recording`` for one recording of a campaign."""
+    path, recording = split_key(str(target))
+    specs = load_spec(path).per_recording()
+    if recording is None:
+        return specs
+    chosen = [s for s in specs if s.recording == recording]
+    if not chosen:
+        known = tuple(str(s.recording) for s in specs if s.recording is not None)
+        raise SpecError(
+            f"no recording {recording!r} in this spec"
+            + ("" if known else " (it is not a campaign)"),
+            file=path,
+            hint=did_you_mean(recording, known)
+            or ("its recordings: " + ", ".join(known) if known else "name the spec file alone"),
+        )
+    return tuple(chosen)
 
 
 def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec:

@@ -23,6 +23,7 @@ __all__ = [
     "SignalSpec",
     "SourceSpec",
     "Spec",
+    "split_key",
 ]
 
 Interpolation = Literal["linear", "previous"]
@@ -31,6 +32,14 @@ NanPolicy = Literal["raise", "omit"]
 #: Calibration recordings fitted the model, so they never count toward a campaign's gate.
 Role = Literal["calibration", "validation"]
 ROLES: tuple[Role, ...] = ("validation", "calibration")
+#: Between a campaign spec's path and a recording id in a result's key and on the command line.
+RECORDING_SEPARATOR = "::"
+
+
+def split_key(key: str) -> tuple[str, str | None]:
+    """(spec path, recording id or None) of a key such as ``specs/i3.hevval.yaml::TripB03``."""
+    path, separator, recording = key.partition(RECORDING_SEPARATOR)
+    return path, (recording if separator else None)
 
 
 @dataclass(frozen=True)
@@ -156,7 +165,9 @@ class Spec:
     @property
     def key(self) -> str:
         """What names this spec's result: its path, plus ``::recording`` in a campaign."""
-        return str(self.path) if self.recording is None else f"{self.path}::{self.recording}"
+        if self.recording is None:
+            return str(self.path)
+        return f"{self.path}{RECORDING_SEPARATOR}{self.recording}"
 
     def per_recording(self) -> tuple[Spec, ...]:
         """One spec per recording of the campaign (the spec itself when it has one file)."""
