@@ -26,6 +26,7 @@ __all__ = [
     "Distribution",
     "RecordingOutcome",
     "campaign_of",
+    "campaign_payloads",
     "campaign_verdicts",
     "phi_quantile",
     "verdict",
@@ -195,7 +196,7 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
     quantile = campaign.get("phi_quantile")
     found = CampaignVerdict(
         spec=campaign_of(first.spec),
-        name=first.name,
+        name=str(campaign.get("name", first.name)),
         recordings=outcomes,
         missing=[r for r in declared if r not in by_id],
         min_pass_rate=campaign.get("min_pass_rate"),
@@ -308,6 +309,11 @@ def verdict_lines(found: CampaignVerdict) -> list[str]:
         )
     lines.extend(f"  gate: {failure}" for failure in found.failures)
     return lines
+
+
+def campaign_payloads(dicts: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Every campaign's verdict as plain data: the reports' campaign section."""
+    return [found.to_dict() for found in verdicts_from_dicts(dicts)]
 
 
 def verdicts_from_dicts(dicts: Iterable[Mapping[str, Any]]) -> list[CampaignVerdict]:

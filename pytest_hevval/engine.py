@@ -634,9 +634,11 @@ def _add_campaign_facts(
 ) -> None:
     """A campaign recording's result names its recording and keeps what pools over them."""
     assert spec.campaign is not None
+    result.name = f"{spec.name} · {spec.recording}"
     result.recording = spec.recording
     result.role = spec.role
     result.campaign = {
+        "name": spec.name,
         "recordings": [r.id for r in spec.campaign.recordings],
         "min_pass_rate": spec.campaign.min_pass_rate,
         "phi_quantile": list(spec.campaign.phi_quantile) if spec.campaign.phi_quantile else None,

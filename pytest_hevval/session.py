@@ -341,10 +341,12 @@ class HevvalSession:
         if self.baseline is None or not self.option("compare"):
             return
         from .history import compare, comparison_table, regressions
+        from .history.compare import campaign_change_lines
 
         comparison = compare(dicts, self.baseline, after_label=self.model_version)
         found = regressions(comparison, self.compare_rules) if self.compare_rules else None
         self.notes.append(comparison_table(comparison, found))
+        self.notes.extend(campaign_change_lines(comparison))
 
     def _ratchet(self, dicts: list[dict[str, Any]]) -> bool:
         if self.ratchet_margin is None:

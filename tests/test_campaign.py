@@ -333,3 +333,33 @@ def test_pool_rejects_bad_input() -> None:
         pool([np.zeros(3)])
     with pytest.raises(ValueError, match="weights"):
         pool([U_GRID], weights=[0.0])
+
+
+# -- reports and comparison -------------------------------------------------------------------
+
+
+def test_reports_have_a_campaign_section(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    project.runpytest("--hevval", "--hevval-no-history", "--hevval-report=html,json,md")
+    folder = next(project.path.glob("**/report.json")).parent
+    (campaign,) = json.loads((folder / "report.json").read_text())["campaigns"]
+    assert campaign["excluded"] == ["Trip01"]
+    assert campaign["failures"][0].startswith("pass rate 67% < min_pass_rate 90%")
+    assert 0.0 <= campaign["pooled_area"]["P"] <= 0.5
+    markdown = (folder / "report.md").read_text()
+    assert "**❌ campaign fleet** (`fleet.hevval.yaml`)" in markdown
+    assert "Excluded from the gate (calibration): `Trip01`" in markdown
+    assert '<section class="card" id="campaign-1">' in (folder / "report.html").read_text()
+
+
+def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4)
+    project.runpytest("--hevval", "--hevval-model-version=v1")
+    write_campaign(project.path, gain=1.0)
+    result = project.runpytest("--hevval", "--hevval-model-version=v2", "--hevval-compare=latest")
+    result.stdout.fnmatch_lines(
+        [
+            "campaign fleet.hevval.yaml (v1 → v2): Φ better on Trip03 (+0.1*); worse on none;"
+            " unchanged on Trip01, Trip02, Trip04"
+        ]
+    )

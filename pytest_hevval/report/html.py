@@ -17,6 +17,7 @@ from typing import Any
 from .. import __version__
 from ..errors import MissingExtraError
 from . import model, plots, svg
+from .text import campaigns_of
 
 __all__ = ["render_html"]
 
@@ -157,6 +158,7 @@ def render_html(
         summary=model.summary(spec_results),
         specs=specs,
         worst=worst,
+        campaigns=campaigns_of(spec_results),
         characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,
         short_labels=model.SHORT_LABELS,
