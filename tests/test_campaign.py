@@ -136,6 +136,9 @@ def test_same_outcomes_under_xdist_and_selection(project: pytest.Pytester) -> No
     parallel.stdout.fnmatch_lines(["campaign fleet.hevval.yaml (fleet): FAIL, 2 of 3*"])
     selected = project.runpytest("--hevval", "--hevval-no-history", "-k", "Trip03")
     selected.assert_outcomes(passed=1, failed=2)
+    # --lf reruns the failed recording's items and the failed campaign item, nothing else.
+    rerun = project.runpytest("--hevval", "--hevval-no-history", "--lf")
+    rerun.assert_outcomes(failed=3)
 
 
 def test_cli_run_gives_the_campaign_verdict(project: pytest.Pytester) -> None:
@@ -363,3 +366,16 @@ def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> 
             " unchanged on Trip01, Trip02, Trip04"
         ]
     )
+
+
+def test_a_recording_is_scored_alone_as_file_and_id(project: pytest.Pytester) -> None:
+    """The form a Dask worker receives a campaign recording in."""
+    from pytest_hevval.distributed import evaluate_spec_file
+
+    write_campaign(project.path)
+    payload = evaluate_spec_file(
+        str(project.path / "fleet.hevval.yaml") + "::Trip02", str(project.path)
+    )
+    assert (payload["recording"], payload["role"]) == ("Trip02", "validation")
+    assert payload["campaign"]["recordings"] == list(TRIPS)
+    assert len(payload["signals"][0]["u_distribution"]) == U_GRID.size
