@@ -235,7 +235,9 @@ def _gate_failures(found: CampaignVerdict) -> list[str]:
     failures: list[str] = []
     if found.missing:
         failures.append(
-            "no result for " + ", ".join(found.missing) + " (see that recording's error above)"
+            "no result for "
+            + ", ".join(found.missing)
+            + " (deselected in this run, or their data or model failed: see their errors)"
         )
     gated = found.min_pass_rate is not None or found.phi_quantile is not None
     if gated and not counted:
@@ -271,11 +273,17 @@ def campaign_verdicts(results: Iterable[SpecResult]) -> list[CampaignVerdict]:
 
 
 def verdict_lines(found: CampaignVerdict) -> list[str]:
-    """The campaign section of the terminal summary and the Markdown report."""
+    """The campaign section of the terminal summary and of ``hevval run``."""
     counted = found.counted
     lines = [
         f"campaign {found.spec} ({found.name}): "
         + ("PASS" if found.passed else "FAIL")
+        + (
+            f" ({len(found.recordings)} of {len(found.recordings) + len(found.missing)} "
+            "recordings scored)"
+            if found.missing
+            else ""
+        )
         + f", {sum(r.passed for r in counted)} of {len(counted)} validation recordings pass"
         + (f" (min_pass_rate {found.min_pass_rate:.0%})" if found.min_pass_rate is not None else "")
     ]

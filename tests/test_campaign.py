@@ -136,6 +136,9 @@ def test_same_outcomes_under_xdist_and_selection(project: pytest.Pytester) -> No
     parallel.stdout.fnmatch_lines(["campaign fleet.hevval.yaml (fleet): FAIL, 2 of 3*"])
     selected = project.runpytest("--hevval", "--hevval-no-history", "-k", "Trip03")
     selected.assert_outcomes(passed=1, failed=2)
+    selected.stdout.fnmatch_lines(
+        ["campaign fleet.hevval.yaml (fleet): FAIL (1 of 4 recordings scored)*"]
+    )
     # --lf reruns the failed recording's items and the failed campaign item, nothing else.
     rerun = project.runpytest("--hevval", "--hevval-no-history", "--lf")
     rerun.assert_outcomes(failed=3)

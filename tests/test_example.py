@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -13,7 +14,7 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "example_project"
 
 
 @pytest.fixture(scope="module")
-def run_payload(tmp_path_factory: pytest.TempPathFactory) -> dict:
+def run_payload(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     out = tmp_path_factory.mktemp("example") / "run.json"
     run = subprocess.run(
         [sys.executable, "-m", "pytest_hevval", "run", "specs", "--json", str(out),
@@ -28,7 +29,7 @@ def run_payload(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 
 @pytest.fixture(scope="module")
-def results(run_payload: dict) -> dict[str, dict]:
+def results(run_payload: dict[str, Any]) -> dict[str, dict[str, Any]]:
     return {spec["name"]: spec for spec in run_payload["specs"]}
 
 
@@ -67,7 +68,9 @@ def test_camry_cold_start_costs_more_than_hot(results: dict[str, dict]) -> None:
     assert cold_cum["mae"] > hot_cum["mae"]
 
 
-def test_i3_campaign_scores_every_trip_and_excludes_the_fit_trip(run_payload: dict) -> None:
+def test_i3_campaign_scores_every_trip_and_excludes_the_fit_trip(
+    run_payload: dict[str, Any],
+) -> None:
     (campaign,) = run_payload["campaigns"]
     recordings = {r["id"]: r for r in campaign["recordings"]}
     assert len(recordings) == 10
