@@ -13,12 +13,12 @@ campaign: 0 when the model's distributions match, at most 0.5 when every observa
 everything it predicts.
 
 Applied here (a choice of this project, not of the paper): for a time series the model's
-prediction over a recording is the distribution of the values it
-produces over that recording (its duty cycle), and the observations are the measured samples.
-So u = F_model(y_measured) per sample, with mid-ranks for ties. A recording's u values are kept
-as their empirical distribution function on :data:`U_GRID`, which pools exactly: the pooled
-function is the weighted mean of the recordings' functions. Each recording weighs the same, so a
-long trip does not outvote a short one made at another operating point.
+prediction over a recording is the distribution of the values it produces over that recording
+(its duty cycle), and the observations are the measured samples. So u = F_model(y_measured) per
+sample, with mid-ranks for ties. A recording's u values are kept as their empirical distribution
+function on :data:`U_GRID`, which pools exactly: the pooled function is the weighted mean of the
+recordings' functions. Each recording weighs the same, so a long trip does not outvote a short
+one made at another operating point.
 """
 
 from __future__ import annotations
