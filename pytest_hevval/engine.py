@@ -21,7 +21,7 @@ import numpy.typing as npt
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
-from .core.upooling import u_distribution, u_values
+from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
@@ -648,8 +648,8 @@ def _add_campaign_facts(
         ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
         finite = np.isfinite(ref)
         if finite.any() and np.isfinite(sim).any():
-            u = u_values(ref[finite], sim[np.isfinite(sim)])
-            signal.u_distribution = [float(x) for x in u_distribution(u)]
+            distribution = u_distribution_of(ref[finite], sim[np.isfinite(sim)])
+            signal.u_distribution = [float(x) for x in distribution]
 
 
 def _tree_of(node: SignalSpec) -> TreeNode:

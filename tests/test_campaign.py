@@ -13,7 +13,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from pytest_hevval.core.upooling import U_GRID, area_to_uniform, pool, u_distribution, u_values
+from pytest_hevval.core.upooling import (
+    U_GRID,
+    area_to_uniform,
+    pool,
+    u_distribution,
+    u_distribution_of,
+    u_values,
+)
 from pytest_hevval.errors import SpecError
 from pytest_hevval.spec.load import load_specs, parse_spec_text
 
@@ -330,6 +337,19 @@ def test_u_pooling_properties(
     # u depends only on ranks: scaling both sides alike (exactly, by 2) changes nothing.
     shifted = u_values(2.0 * observed_a, 2.0 * predicted_a)
     assert np.allclose(shifted, u_values(observed_a, predicted_a))
+
+
+few_values = hnp.arrays(
+    np.float64, st.integers(1, 60), elements=st.sampled_from([-1.5, 0.0, 2.0, 7.0])
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(samples, few_values), st.one_of(samples, few_values))
+def test_fast_distribution_is_the_definition(observed: np.ndarray, predicted: np.ndarray) -> None:
+    """The engine's shortcut gives, bit for bit, the distribution of u sample by sample."""
+    expected = u_distribution(u_values(observed, predicted))
+    assert np.array_equal(u_distribution_of(observed, predicted), expected)
 
 
 def test_pool_rejects_bad_input() -> None:
