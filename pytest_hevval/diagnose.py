@@ -22,7 +22,7 @@ from .core.diagnosis import MIN_SHARE, Candidate, Diagnosis, diagnose_residual
 from .core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from .data.record import Record
 from .engine import Evaluation
-from .errors import DataError, HevvalError
+from .errors import DataError, HevvalError, SpecError
 
 __all__ = [
     "candidates_for",
@@ -378,9 +378,16 @@ def diagnose_main(argv: Sequence[str]) -> int:
 def run_diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .run import RunOptions, run_specs
-    from .spec.load import load_spec
+    from .spec.load import load_specs
 
-    spec = load_spec(args.spec)
+    specs = load_specs(args.spec)
+    if len(specs) > 1:
+        raise SpecError(
+            f"the spec is a campaign of {len(specs)} recordings; diagnose one at a time",
+            file=args.spec,
+            hint=f"name one: hevval diagnose '{args.spec}::{specs[0].recording}'",
+        )
+    (spec,) = specs
     (outcome,) = run_specs([spec], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
     if isinstance(outcome, HevvalError):
         raise outcome

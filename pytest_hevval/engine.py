@@ -20,6 +20,7 @@ import numpy.typing as npt
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
@@ -351,6 +352,8 @@ def _evaluate(
     result.local = spec_local_summary(
         spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
     )
+    if spec.campaign is not None:
+        _add_campaign_facts(spec, result, values, node_specs)
     return Evaluation(
         spec=spec,
         result=result,
@@ -666,7 +669,7 @@ def _spec_result(
     phi = global_metric(((s.alpha, s.lambdas) for s in signals), weights)
     return SpecResult(
         name=spec.name,
-        spec=str(spec.path),
+        spec=spec.key,
         spec_hash=spec.text_hash,
         phi=phi,
         min_phi=spec.min_phi,
@@ -707,6 +710,32 @@ def _spec_result(
             ),
         },
     )
+
+
+def _add_campaign_facts(
+    spec: Spec,
+    result: SpecResult,
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+    node_specs: Mapping[NodePath, SignalSpec],
+) -> None:
+    """A campaign recording's result names its recording and keeps what pools over them."""
+    assert spec.campaign is not None
+    result.name = f"{spec.name} · {spec.recording}"
+    result.recording = spec.recording
+    result.role = spec.role
+    result.campaign = {
+        "name": spec.name,
+        "recordings": [r.id for r in spec.campaign.recordings],
+        "min_pass_rate": spec.campaign.min_pass_rate,
+        "phi_quantile": list(spec.campaign.phi_quantile) if spec.campaign.phi_quantile else None,
+        "line": spec.campaign.line,
+    }
+    for signal in result.signals:
+        ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
+        finite = np.isfinite(ref)
+        if finite.any() and np.isfinite(sim).any():
+            distribution = u_distribution_of(ref[finite], sim[np.isfinite(sim)])
+            signal.u_distribution = [float(x) for x in distribution]
 
 
 def _tree_of(node: SignalSpec) -> TreeNode:
