@@ -908,20 +908,14 @@ def main(argv: list[str] | None = None) -> int:
         "num_regression": [],
     }
     print("machine:", json.dumps(report["machine"]))
-    if args.paths:
-        report["paths"] = []
-        for n in args.samples:
-            run_paths(n, args, report)
-        if args.json:
-            args.json.write_text(json.dumps(report, indent=2, default=str))
-        return 0
-    if args.stages:
-        report["stages"] = []
-        for n in args.samples:
-            run_stages(n, args, report)
-        if args.json:
-            args.json.write_text(json.dumps(report, indent=2, default=str))
-        return 0
+    for part, run_part in (("paths", run_paths), ("stages", run_stages)):
+        if getattr(args, part):
+            report[part] = []
+            for n in args.samples:
+                run_part(n, args, report)
+            if args.json:
+                args.json.write_text(json.dumps(report, indent=2, default=str))
+            return 0
     for n in args.samples:
         for kind in args.signals:
             run_size(kind, n, args, report)

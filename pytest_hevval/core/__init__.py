@@ -21,14 +21,7 @@ from .tree import (
 )
 
 if TYPE_CHECKING:
-    from .diagnosis import (
-        Candidate,
-        CandidateFinding,
-        Diagnosis,
-        Whiteness,
-        diagnose_residual,
-        ljung_box,
-    )
+    from .diagnosis import *  # noqa: F403
 
 # Diagnosis needs scipy.signal and scipy.stats (over a second to import); scoring does not.
 _DIAGNOSIS = {
@@ -52,23 +45,18 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "CHARACTERISTICS",
     "CHARACTERISTIC_LABELS",
-    "Candidate",
-    "CandidateFinding",
-    "Diagnosis",
     "LagSearch",
     "ScoredNode",
     "SignalCharacteristics",
     "TreeNode",
-    "Whiteness",
     "correlation_curve",
-    "diagnose_residual",
     "emergent",
     "error_origins",
     "global_metric",
     "iter_nodes",
-    "ljung_box",
     "normalised_error",
     "score_tree",
     "search_lag",
     "signal_characteristics",
+    *sorted(_DIAGNOSIS),
 ]

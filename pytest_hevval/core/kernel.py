@@ -46,10 +46,11 @@ KernelPath = Literal["auto", "numpy", "numba"]
 
 #: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
 KERNEL_ENV = "HEVVAL_KERNEL"
-#: On the auto path with a cold cache, records shorter than this stay on numpy. A first
-#: compile costs about as much as the kernel saves on 10^8 samples (see docs/performance.md),
-#: so only records long enough to be costly on numpy wait for it.
-KERNEL_MIN_SAMPLES = 1 << 24
+#: On the auto path with a cold cache, records shorter than this stay on numpy. The compile
+#: (5.4 s, once per environment: it is cached) is then at most a few times what numpy spends
+#: on one such record (1.1 s at 5·10^7 samples, docs/performance.md), never a surprise on
+#: short records.
+KERNEL_MIN_SAMPLES = 1 << 26
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
