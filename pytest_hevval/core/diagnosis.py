@@ -195,9 +195,9 @@ class Effect:
         From the joint model, in the signal's units per unit of the candidate (for the
         offset: in the signal's units).
     share:
-        Share of the residual's mean square this effect explains beyond all the others (the
-        others refitted without it, the offset held at the value left over), at the original
-        sample rate.
+        Share of the residual's mean square this effect explains: the smaller of what it
+        explains beyond all the others (the others refitted without it, the offset held at the
+        value left over) and what adding it alone removes, at the original sample rate.
     offset_explained:
         The mean shift this effect is credited with, in the signal's units: coefficient × mean
         of the candidate when that brings the offset left over closer to zero, else 0 (always
@@ -1729,9 +1729,13 @@ def _effects(
         r, [s.full - c for s, c in zip(chosen, centres, strict=True)], float(intercept)
     )
     effects: list[Effect] = []
-    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), share in zip(
+    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), unique in zip(
         raw, shares, strict=True
     ):
+        # An effect must explain its share both beyond the others and on its own: a term that
+        # only helps together with one that compensates it (a throttle term and a gain error
+        # that cancel) makes the fit worse when added alone.
+        share = min(unique, _removed_share(r, term))
         effects.append(
             Effect(
                 name=name,
