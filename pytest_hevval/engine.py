@@ -21,6 +21,7 @@ import numpy.typing as npt
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
@@ -31,6 +32,15 @@ from .errors import (
     DegenerateSignalError,
     ExpressionError,
     HevvalError,
+)
+from .localise import (
+    Labels,
+    LocalFailure,
+    LocalResult,
+    label_samples,
+    local_failures,
+    score_local,
+    spec_local_summary,
 )
 from .result import Failure, SignalResult, SpecResult
 from .spec.expressions import Expression
@@ -336,9 +346,15 @@ def _evaluate(
     dt = aligned.grid.dt
     fused = _fused_characteristics(spec, unique, values, dt, workers)
     registered = _registered_characteristics(spec, unique, values, dt)
+    labels = _labels(spec, aligned)
+    local = _local_results(spec, labels, unique, values, fused, workers)
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
+    missed_locally = {
+        path: local_failures(spec, node, labels, local.get(_signature(node)))
+        for path, node in node_specs.items()
+    }
     signals: list[SignalResult] = []
     arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
     characteristics: dict[str, SignalCharacteristics] = {}
@@ -356,12 +372,19 @@ def _evaluate(
                 {name: parts for name, (_, parts) in registered[signature].items() if parts},
                 failures,
                 _figures(ref, sim, chars, aligned) if figures else None,
+                local.get(signature),
+                missed_locally,
             )
         )
         characteristics[signals[-1].path] = chars
         if keep_arrays:
             arrays[signals[-1].path] = (ref, sim)
     result = _spec_result(spec, signals, aligned, model_info, cache)
+    result.local = spec_local_summary(
+        spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
+    )
+    if spec.campaign is not None:
+        _add_campaign_facts(spec, result, values, node_specs)
     return Evaluation(
         spec=spec,
         result=result,
@@ -383,6 +406,8 @@ def _align(
     for _, _, node in nodes:
         ref_columns.update(_columns_of(node.ref, reference))
         model_columns.update(_columns_of(node.sim, model_record))
+    for expression in _local_expressions(spec):
+        ref_columns.update(_columns_of(expression, reference))
     alignment = spec.alignment
     findings = assess(reference, sorted(ref_columns), spec.data_quality)
     if spec.data_quality.action == "error":
@@ -406,6 +431,72 @@ def _align(
         bad = mask_on_grid(findings, aligned.time)
         aligned.gap_mask = bad if aligned.gap_mask is None else aligned.gap_mask | bad
     return aligned
+
+
+def _local_expressions(spec: Spec) -> list[Expression]:
+    """The reference expressions that cut a record into phases, conditions and cells."""
+    expressions: list[Expression] = []
+    if spec.local is not None:
+        if spec.local.phases is not None:
+            expressions.append(spec.local.phases)
+        expressions.extend(c.expression for c in spec.local.conditions)
+    if spec.regions is not None:
+        expressions.extend(spec.regions.by)
+    return expressions
+
+
+def _reference_values(aligned: AlignedData, expression: Expression, key: str) -> FloatArray:
+    """A reference column or expression on the grid (phases, conditions, region variables)."""
+    record = aligned.reference
+    names = _columns_of(expression, record)
+    method = record.meta.get("interpolation", "linear")
+    try:
+        columns = aligned.columns("reference", names, method)
+        if expression.is_column or names == (expression.source,):
+            return np.asarray(columns[names[0]], dtype=np.float64)
+        return np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
+    except ExpressionError as exc:
+        raise exc.with_context(key=key) from None
+
+
+def _labels(spec: Spec, aligned: AlignedData) -> Labels | None:
+    keep = None
+    if aligned.gap_mask is not None and aligned.gap_mask.any():
+        keep = ~aligned.gap_mask
+    try:
+        return label_samples(
+            spec,
+            aligned.time,
+            keep,
+            lambda expression, key: _reference_values(aligned, expression, key),
+        )
+    except DegenerateSignalError as exc:
+        raise exc.with_context(key="regions") from None
+
+
+def _local_results(
+    spec: Spec,
+    labels: Labels | None,
+    unique: dict[Signature, SignalSpec],
+    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    fused: Mapping[Signature, SignalCharacteristics],
+    workers: int | None,
+) -> dict[Signature, LocalResult]:
+    """Each distinct signal over windows, phases, conditions and cells (one pass each)."""
+    if labels is None:
+        return {}
+    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+
+    def score(signature: Signature) -> tuple[Signature, LocalResult]:
+        ref, sim = values[signature]
+        chars = fused[signature]
+        return signature, score_local(labels, ref, sim, chars.reference_range, spec.correlation)
+
+    if n_workers > 1 and len(unique) > 1:
+        # The compiled pass and numpy's loops release the GIL: signals run side by side.
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            return dict(pool.map(score, unique))
+    return dict(map(score, unique))
 
 
 def _signal_arrays(
@@ -565,11 +656,13 @@ def _signal_result(
     components: dict[str, dict[str, float]],
     failures: Mapping[NodePath, list[Failure]],
     figures: dict[str, Any] | None,
+    local: LocalResult | None,
+    missed_locally: Mapping[NodePath, list[LocalFailure]],
 ) -> SignalResult:
     path = scored_node.path
 
     def failed(candidate: ScoredNode) -> bool:
-        return bool(failures[candidate.path])
+        return bool(failures[candidate.path] or missed_locally[candidate.path])
 
     origins = error_origins(scored_node, failed)
     return SignalResult(
@@ -587,10 +680,12 @@ def _signal_result(
         failures=failures[path],
         unit=node.unit,
         description=node.description,
-        origin=bool(failures[path]) and origins == (scored_node,),
+        origin=failed(scored_node) and origins == (scored_node,),
         origins=["/".join(o.path) for o in origins],
         children=["/".join(c.path) for c in scored_node.children],
         figures=figures,
+        local=local,
+        local_failures=missed_locally[path],
     )
 
 
@@ -605,7 +700,7 @@ def _spec_result(
     phi = global_metric(((s.alpha, s.lambdas) for s in signals), weights)
     return SpecResult(
         name=spec.name,
-        spec=str(spec.path),
+        spec=spec.key,
         spec_hash=spec.text_hash,
         phi=phi,
         min_phi=spec.min_phi,
@@ -646,6 +741,32 @@ def _spec_result(
             ),
         },
     )
+
+
+def _add_campaign_facts(
+    spec: Spec,
+    result: SpecResult,
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+    node_specs: Mapping[NodePath, SignalSpec],
+) -> None:
+    """A campaign recording's result names its recording and keeps what pools over them."""
+    assert spec.campaign is not None
+    result.name = f"{spec.name} · {spec.recording}"
+    result.recording = spec.recording
+    result.role = spec.role
+    result.campaign = {
+        "name": spec.name,
+        "recordings": [r.id for r in spec.campaign.recordings],
+        "min_pass_rate": spec.campaign.min_pass_rate,
+        "phi_quantile": list(spec.campaign.phi_quantile) if spec.campaign.phi_quantile else None,
+        "line": spec.campaign.line,
+    }
+    for signal in result.signals:
+        ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
+        finite = np.isfinite(ref)
+        if finite.any() and np.isfinite(sim).any():
+            distribution = u_distribution_of(ref[finite], sim[np.isfinite(sim)])
+            signal.u_distribution = [float(x) for x in distribution]
 
 
 def _tree_of(node: SignalSpec) -> TreeNode:

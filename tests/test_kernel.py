@@ -125,7 +125,7 @@ def test_auto_path_keeps_short_records_on_numpy_while_the_cache_is_cold(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
-    monkeypatch.setattr(kernel, "cache_warm", lambda: False)
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
     assert kernel.kernel_for(kernel.KERNEL_MIN_SAMPLES - 1) is None
     monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
     assert kernel.kernel_for(10 * kernel.KERNEL_MIN_SAMPLES) is None

@@ -235,3 +235,64 @@ def interpolate(values, index, right, offset, step, exact):  # type: ignore[no-u
         else:
             out[i] = (values[right[i]] - left) / step[i] * offset[i] + left
     return out
+
+
+# -- sums per group (windows, phases, conditions, region cells) ---------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _flush(out, row, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9):  # type: ignore[no-untyped-def]
+    """Adds one run's sums to its group's row."""
+    out[row, 0] += a0
+    out[row, 1] += a1
+    out[row, 2] += a2
+    out[row, 3] += a3
+    out[row, 4] += a4
+    out[row, 5] += a5
+    out[row, 6] += a6
+    out[row, 7] += a7
+    out[row, 8] += a8
+    out[row, 9] += a9
+
+
+@numba.njit(cache=True, nogil=True)
+def grouped_sums(r, s, labels, shift, out):  # type: ignore[no-untyped-def]
+    """Adds the ``core.local.SUM_COLUMNS`` of every labelled sample to its group's row."""
+    # Labels come in long runs (a window, a stretch in one cell), so the sums stay in
+    # registers for a run and go to the table when the label changes.
+    n = r.shape[0]
+    if n == 0:
+        return
+    current = labels[0]
+    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
+    for i in range(n):
+        g = labels[i]
+        if g != current:
+            if current >= 0:
+                _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
+            a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
+            current = g
+        if g < 0:
+            continue
+        ri = r[i]
+        si = s[i]
+        e = ri - si
+        d = e - shift
+        a0 += 1.0
+        a1 += d
+        a2 += d * d
+        a3 += abs(e)
+        a4 += ri
+        a5 += si
+        a6 += ri * ri
+        a7 += si * si
+        a8 += ri * si
+        if 0 < i < n - 1:
+            dr = r[i + 1] - r[i - 1]
+            ds = s[i + 1] - s[i - 1]
+            if ((dr > 0) - (dr < 0)) == ((ds > 0) - (ds < 0)):
+                a9 += 1.0
+        else:
+            a9 += 1.0
+    if current >= 0:
+        _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)

@@ -40,6 +40,7 @@ __all__ = [
     "active_path",
     "describe",
     "kernel_for",
+    "load_or_raise",
 ]
 
 KernelPath = Literal["auto", "numpy", "numba"]
@@ -82,7 +83,8 @@ _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
 _failure: dict[str, str] = {}
-_warm_found = threading.Event()
+# Sets of compiled functions found in the cache: numba only adds to it, so found stays found.
+_warm_found: set[tuple[str, ...]] = set()
 
 FloatArray = npt.NDArray[np.float64]
 AnyFloatArray = npt.NDArray[np.floating]
@@ -123,19 +125,18 @@ def _cache_folders() -> list[Path]:
     return folders
 
 
-def cache_warm() -> bool:
+def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     """Whether numba's on-disk cache already holds the kernel for this Python.
 
     A stale entry (another numba version or an edited source) costs one compile, after which
     the cache is warm again.
     """
-    if _warm_found.is_set():
-        return True  # numba only adds to its cache
+    if names in _warm_found:
+        return True
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    names = ("main_pass", "lag_window", "interpolate")
     for folder in _cache_folders():
         if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
-            _warm_found.set()
+            _warm_found.add(names)
             return True
     return False
 
@@ -144,22 +145,32 @@ def _numba_installed() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
-def kernel_for(samples: int) -> ModuleType | None:
-    """The compiled module if it should score a record of ``samples`` samples, else None."""
+def load_or_raise() -> ModuleType:
+    """The compiled module, or a clear error where numba cannot be loaded."""
+    module = _load()
+    if module is None:
+        raise MissingExtraError(
+            f"the compiled kernel cannot be loaded ({_failure.get('reason', 'unknown reason')})",
+            key=KERNEL_ENV,
+            hint=f'install the extra (pip install "pytest-hevval[fast]") or unset {KERNEL_ENV}',
+        )
+    return module
+
+
+def kernel_for(
+    samples: int, functions: tuple[str, ...] = ("main_pass", "lag_window")
+) -> ModuleType | None:
+    """The compiled module if it should score a record of ``samples`` samples, else None.
+
+    ``functions`` are the compiled functions the caller will run: on the auto path a short
+    record takes the kernel only when all of them are already in numba's cache.
+    """
     path = requested_path()
     if path == "numpy":
         return None
     if path == "numba":
-        module = _load()
-        if module is None:
-            raise MissingExtraError(
-                f"{KERNEL_ENV}=numba, but the compiled kernel cannot be loaded "
-                f"({_failure.get('reason', 'unknown reason')})",
-                key=KERNEL_ENV,
-                hint=f'install the extra (pip install "pytest-hevval[fast]") or unset {KERNEL_ENV}',
-            )
-        return module
-    if samples < KERNEL_MIN_SAMPLES and not cache_warm():
+        return load_or_raise()
+    if samples < KERNEL_MIN_SAMPLES and not cache_warm(functions):
         return None
     if not _numba_installed():
         return None
@@ -289,4 +300,28 @@ def interpolate(
     """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
     _threads(workers, index.shape[0])
     out: FloatArray = _launch(module.interpolate, values, index, right, offset, step, exact)
+    return out
+
+
+def grouped_sums(
+    module: ModuleType,
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    labels: npt.NDArray[np.int64],
+    groups: int,
+    shift: float,
+) -> npt.NDArray[np.float64]:
+    """The (groups, 10) table of ``core.local.SUM_COLUMNS``, in one sequential compiled pass.
+
+    Sequential per signal, so the table is bit-for-bit repeatable; signals run side by side on
+    the engine's threads (the loop releases the GIL).
+    """
+    out = np.zeros((groups, 10), dtype=np.float64)
+    module.grouped_sums(
+        np.ascontiguousarray(ref, dtype=np.float64),
+        np.ascontiguousarray(sim, dtype=np.float64),
+        np.ascontiguousarray(labels, dtype=np.int64),
+        float(shift),
+        out,
+    )
     return out

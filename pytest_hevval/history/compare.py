@@ -29,12 +29,15 @@ from ..core.registry import (
     keyed_lambdas,
     order_names,
 )
+from ..defaults import REGION_MIN_SAMPLES
 from ..digest import identity
 from ..errors import did_you_mean
+from ..spec.model import split_key
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
     "BaselineDecision",
+    "CampaignChange",
     "Comparison",
     "FieldDelta",
     "MatchedBy",
@@ -42,6 +45,8 @@ __all__ = [
     "Rule",
     "SignalComparison",
     "SpecComparison",
+    "campaign_change_lines",
+    "campaign_changes",
     "compare",
     "is_ci",
     "missing_baseline",
@@ -156,6 +161,94 @@ class FieldDelta:
         return {"before": self.before, "after": self.after, "delta": self.delta}
 
 
+#: A window, phase, condition or cell counts as better or worse when its RMS error changed
+#: by more than this share; smaller changes are noise at the scale of one group.
+LOCAL_CHANGE = 0.10
+#: Groups with fewer samples on either side are not compared.
+LOCAL_MIN_SAMPLES = REGION_MIN_SAMPLES
+
+
+@dataclass(frozen=True)
+class GroupChange:
+    """One window, driving phase, condition or region cell whose RMS error changed."""
+
+    grouping: str
+    label: str
+    rms_before: float
+    rms_after: float
+
+    @property
+    def ratio(self) -> float:
+        return self.rms_after / self.rms_before if self.rms_before > 0 else math.inf
+
+    def text(self, unit: str | None) -> str:
+        suffix = f" {unit}" if unit else ""
+        if self.grouping in ("windows", "regions"):
+            where = self.label
+        elif self.grouping == "phases":
+            where = f"phase {self.label}"
+        else:
+            where = f"{self.grouping} {self.label}"
+        return f"{where} (RMS {self.rms_before:.3g} → {self.rms_after:.3g}{suffix})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "grouping": self.grouping,
+            "label": self.label,
+            "rms": {"before": self.rms_before, "after": self.rms_after},
+        }
+
+
+def _tables(local: Any) -> dict[str, Mapping[str, Any]]:
+    if not isinstance(local, Mapping):
+        return {}
+    tables = {
+        name: local[name]
+        for name in ("windows", "phases", "regions")
+        if isinstance(local.get(name), Mapping)
+    }
+    for name, table in dict(local.get("conditions") or {}).items():
+        if isinstance(table, Mapping):
+            tables[str(name)] = table
+    return tables
+
+
+def _group_rows(table: Mapping[str, Any]) -> dict[str, tuple[int, Any]]:
+    labels, counts, rms = (list(table.get(key) or []) for key in ("labels", "n", "rms"))
+    if not len(labels) == len(counts) == len(rms):
+        return {}
+    return {str(a): (int(b), c) for a, b, c in zip(labels, counts, rms, strict=True)}
+
+
+def local_changes(
+    before: Mapping[str, Any], after: Mapping[str, Any]
+) -> tuple[tuple[GroupChange, ...], tuple[GroupChange, ...]]:
+    """The groups (by label) whose RMS error fell, and those where it rose, largest first."""
+    better: list[GroupChange] = []
+    worse: list[GroupChange] = []
+    after_tables = _tables(after.get("local"))
+    for grouping, old in _tables(before.get("local")).items():
+        new = after_tables.get(grouping)
+        if new is None:
+            continue
+        old_rows = _group_rows(old)
+        for label, (n, rms) in _group_rows(new).items():
+            if label not in old_rows:
+                continue
+            n_old, rms_old = old_rows[label]
+            a, b = _number(rms), _number(rms_old)
+            if a is None or b is None or min(int(n), int(n_old)) < LOCAL_MIN_SAMPLES:
+                continue
+            change = GroupChange(grouping, str(label), b, a)
+            if a < (1.0 - LOCAL_CHANGE) * b:
+                better.append(change)
+            elif a > (1.0 + LOCAL_CHANGE) * b:
+                worse.append(change)
+    better.sort(key=lambda c: c.ratio)
+    worse.sort(key=lambda c: -c.ratio)
+    return tuple(better), tuple(worse)
+
+
 @dataclass(frozen=True)
 class SignalComparison:
     """λ1–λ7 and the physical errors of one signal present in both runs."""
@@ -167,6 +260,9 @@ class SignalComparison:
     errors: tuple[FieldDelta, ...]
     passed_before: bool | None
     passed_after: bool | None
+    #: Windows, phases, conditions and cells where the RMS error fell or rose.
+    better: tuple[GroupChange, ...] = ()
+    worse: tuple[GroupChange, ...] = ()
 
     def field(self, name: str) -> FieldDelta:
         for delta in (*self.lambdas, *self.errors):
@@ -182,6 +278,16 @@ class SignalComparison:
             "lambdas": {d.field: d.to_dict() for d in self.lambdas},
             "errors": {d.field: d.to_dict() for d in self.errors},
             "passed": {"before": self.passed_before, "after": self.passed_after},
+            **(
+                {
+                    "where": {
+                        "better": [c.to_dict() for c in self.better],
+                        "worse": [c.to_dict() for c in self.worse],
+                    }
+                }
+                if self.better or self.worse
+                else {}
+            ),
         }
 
 
@@ -275,7 +381,66 @@ class Comparison:
             "specs": [s.to_dict() for s in self.specs],
             "added_specs": list(self.added_specs),
             "removed_specs": list(self.removed_specs),
+            **(
+                {"campaigns": [c.to_dict() for c in changes]}
+                if (changes := campaign_changes(self))
+                else {}
+            ),
         }
+
+
+@dataclass(frozen=True)
+class CampaignChange:
+    """Which recordings of one campaign got better and which got worse, by their Φ."""
+
+    spec: str
+    #: (recording, change of Φ), largest change first.
+    better: tuple[tuple[str, float], ...]
+    worse: tuple[tuple[str, float], ...]
+    unchanged: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.spec,
+            "better": [{"recording": r, "phi_delta": d} for r, d in self.better],
+            "worse": [{"recording": r, "phi_delta": d} for r, d in self.worse],
+            "unchanged": list(self.unchanged),
+        }
+
+
+def campaign_changes(comparison: Comparison) -> list[CampaignChange]:
+    """Per campaign, the recordings whose Φ rose and those whose Φ fell between the runs."""
+    deltas: dict[str, list[tuple[str, float | None]]] = {}
+    for spec in comparison.specs:
+        path, recording = split_key(spec.key)
+        if recording is not None:
+            deltas.setdefault(path, []).append((recording, spec.phi.delta))
+    changes = []
+    for path, found in deltas.items():
+        known = [(r, d) for r, d in found if d is not None]
+        changes.append(
+            CampaignChange(
+                spec=path,
+                better=tuple(sorted(((r, d) for r, d in known if d > 0), key=lambda x: -x[1])),
+                worse=tuple(sorted(((r, d) for r, d in known if d < 0), key=lambda x: x[1])),
+                unchanged=tuple(r for r, d in found if d is None or d == 0),
+            )
+        )
+    return changes
+
+
+def campaign_change_lines(comparison: Comparison) -> list[str]:
+    """One line per campaign: the recordings that got better, then those that got worse."""
+
+    def listed(items: Sequence[tuple[str, float]]) -> str:
+        return ", ".join(f"{r} ({d:+.4f})" for r, d in items) or "none"
+
+    return [
+        f"campaign {c.spec} ({comparison.before_label} → {comparison.after_label}): "
+        f"Φ better on {listed(c.better)}; worse on {listed(c.worse)}"
+        + (f"; unchanged on {', '.join(c.unchanged)}" if c.unchanged else "")
+        for c in campaign_changes(comparison)
+    ]
 
 
 def specs_of(document: Sequence[Mapping[str, Any]] | Mapping[str, Any]) -> list[Mapping[str, Any]]:
@@ -424,6 +589,7 @@ def _compare_spec(
         sig_before = before_signals.get(path)
         if sig_before is None:
             continue
+        better, worse = local_changes(sig_before, sig_after)
         signals.append(
             SignalComparison(
                 path=path,
@@ -436,6 +602,8 @@ def _compare_spec(
                 ),
                 passed_before=_flag(sig_before.get("passed")),
                 passed_after=_flag(sig_after.get("passed")),
+                better=better,
+                worse=worse,
             )
         )
     return SpecComparison(
