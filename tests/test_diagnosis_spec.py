@@ -1,4 +1,4 @@
-"""The spec's ``diagnosis:`` block, and what its settings change in the diagnosis."""
+"""The spec's ``diagnosis:`` block, what its settings change, and the shares of effects."""
 
 from __future__ import annotations
 
@@ -6,9 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import signal as sps
 
-from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
+from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, _unique_shares, diagnose_residual
 from pytest_hevval.errors import SpecError
 from pytest_hevval.spec.load import parse_spec_text
 from pytest_hevval.spec.model import DiagnosisSpec
@@ -126,3 +128,25 @@ def test_min_share_moves_an_effect_between_relevant_and_minor() -> None:
     assert MIN_SHARE == 0.05
     with pytest.raises(SpecError):
         diagnose_residual(ref, sim, dt=DT, min_share=1.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.floats(1e-3, 1e3),
+    offset=st.floats(-5.0, 5.0),
+)
+def test_unique_shares_are_bounded_scale_free_and_zero_for_a_duplicate(
+    seed: int, scale: float, offset: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    n = 500
+    a, b = rng.standard_normal(n) + 1.0, rng.standard_normal(n)
+    r = 0.7 * a - 0.3 * b + offset + 0.5 * rng.standard_normal(n)
+    shares = _unique_shares(r, [a, b], offset)
+    assert all(0.0 <= s <= 1.0 for s in shares)
+    assert _unique_shares(r, [scale * a, b], offset) == pytest.approx(shares, abs=1e-9)
+    # A column that repeats another explains nothing beyond it, nor does the other beyond it.
+    twice = _unique_shares(r, [a, a, b], offset)
+    assert twice[0] == pytest.approx(0.0, abs=1e-9)
+    assert twice[1] == pytest.approx(0.0, abs=1e-9)

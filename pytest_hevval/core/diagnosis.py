@@ -1739,7 +1739,10 @@ def _effects(
         # An effect must explain its share both beyond the others and on its own: a term that
         # only helps together with one that compensates it (a throttle term and a gain error
         # that cancel) makes the fit worse when added alone.
-        share = min(unique, _removed_share(r, term))
+        # Over one record, the mean shift of a gain error and an offset are the same thing; a
+        # gain injected with an opposite offset must not look harmful alone for its mean.
+        alone = term - float(np.mean(term)) if kind == "gain" else term
+        share = min(unique, _removed_share(r, alone))
         effects.append(
             Effect(
                 name=name,
