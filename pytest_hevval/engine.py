@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -49,6 +49,8 @@ from .spec.model import SignalSpec, SourceSpec, Spec
 __all__ = ["DataCache", "Evaluation", "evaluate_spec", "file_digest"]
 
 FloatArray = npt.NDArray[np.float64]
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
@@ -485,18 +487,13 @@ def _local_results(
     """Each distinct signal over windows, phases, conditions and cells (one pass each)."""
     if labels is None:
         return {}
-    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
 
     def score(signature: Signature) -> tuple[Signature, LocalResult]:
         ref, sim = values[signature]
         chars = fused[signature]
         return signature, score_local(labels, ref, sim, chars.reference_range, spec.correlation)
 
-    if n_workers > 1 and len(unique) > 1:
-        # The compiled pass and numpy's loops release the GIL: signals run side by side.
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            return dict(pool.map(score, unique))
-    return dict(map(score, unique))
+    return dict(_per_signal(score, list(unique), _scoring_threads(workers)))
 
 
 def _signal_arrays(
@@ -523,6 +520,22 @@ def _signal_arrays(
     return unique, values
 
 
+def _scoring_threads(workers: int | None) -> int:
+    """Threads a spec's signals are scored on: as asked, else up to two."""
+    return workers if workers is not None else min(2, os.cpu_count() or 1)
+
+
+def _per_signal(score: Callable[[T], R], items: list[T], threads: int) -> list[R]:
+    """``score`` of every item, on ``threads`` threads when there is more than one item.
+
+    numpy's loops and the compiled kernel release the GIL, so signals score side by side.
+    """
+    if threads > 1 and len(items) > 1:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            return list(pool.map(score, items))
+    return [score(item) for item in items]
+
+
 def _fused_characteristics(
     spec: Spec,
     unique: dict[Signature, SignalSpec],
@@ -531,7 +544,7 @@ def _fused_characteristics(
     workers: int | None,
 ) -> dict[Signature, SignalCharacteristics]:
     """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass."""
-    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+    n_workers = _scoring_threads(workers)
 
     def score(item: tuple[Signature, SignalSpec]) -> tuple[Signature, Any]:
         signature, node = item
@@ -550,13 +563,7 @@ def _fused_characteristics(
             result = exc.with_context(line=node.line, key=node.key)
         return signature, result
 
-    items = list(unique.items())
-    if n_workers > 1 and len(items) > 1:
-        # numpy releases the GIL in its loops, so signals score in parallel on threads.
-        with ThreadPoolExecutor(max_workers=n_workers) as pool:
-            scored = dict(pool.map(score, items))
-    else:
-        scored = dict(map(score, items))
+    scored = dict(_per_signal(score, list(unique.items()), n_workers))
     for outcome in scored.values():
         if isinstance(outcome, HevvalError):
             raise outcome

@@ -2,7 +2,7 @@
 
 The samples of a spec's record are labelled once (time window × driving phase × conditions ×
 region cell, one *fine* label per sample, shared by every signal); each signal's sums over the
-fine labels come from one pass of :func:`pytest_hevval.core.local.labelled_sums`, and every
+fine labels come from one pass of :func:`pytest_hevval.core.local.labelled_table`, and every
 table (windows, phases, conditions, cells) is a merge of that small fine table. The tables, the
 concentration of the error and the window and cell gates end up in each signal's result; the
 grid, the coverage and Φ per window and per cell in the spec's.

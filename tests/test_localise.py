@@ -12,9 +12,7 @@ from hypothesis import strategies as st
 
 from pytest_hevval import cli
 from pytest_hevval.core.local import (
-    LOCAL_CHARACTERISTICS,
-    labelled_sums,
-    merge_groups,
+    labelled_table,
     segment_sums,
 )
 from pytest_hevval.engine import evaluate_spec
@@ -211,11 +209,9 @@ def test_one_pass_fine_sums_merge_to_the_window_sums(
     n = ref.shape[0]
     window = np.arange(n) // size
     cell = np.arange(n) % cells
-    fine = labelled_sums(
-        ref, sim, window * cells + cell, int(window[-1] + 1) * cells, compiled=False
-    )
     windows = int(window[-1]) + 1
-    merged = merge_groups(fine, np.arange(windows * cells) // cells, windows)
+    fine = labelled_table(ref, sim, window * cells + cell, windows * cells, compiled=False)
+    merged = fine.merged((windows, cells), 0).sums()
     starts = np.arange(windows) * size
     direct = segment_sums(ref, sim, starts, np.minimum(starts + size, n))
     scale = float(np.max(np.abs(np.concatenate([ref, sim])))) + 1.0
@@ -239,12 +235,11 @@ def test_the_compiled_pass_matches_numpy() -> None:
     labels = (np.arange(n) // 700) * 4 + rng.integers(0, 4, n)
     labels[::97] = -1
     groups = int(labels.max()) + 1
-    fast = labelled_sums(ref, sim, labels, groups, compiled=True)
-    plain = labelled_sums(ref, sim, labels, groups, compiled=False)
+    fast = labelled_table(ref, sim, labels, groups, compiled=True).sums()
+    plain = labelled_table(ref, sim, labels, groups, compiled=False).sums()
     for name in ("n", "error_sum", "abs_error", "sq_error", "error_m2", "ref_sq", "cross"):
         np.testing.assert_allclose(getattr(fast, name), getattr(plain, name), rtol=1e-12)
     assert np.array_equal(fast.sign_matches, plain.sign_matches)
-    assert LOCAL_CHARACTERISTICS
 
 
 # -- through pytest and the command line ----------------------------------------------------

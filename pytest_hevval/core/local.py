@@ -47,9 +47,7 @@ __all__ = [
     "driving_phases",
     "fixed_windows",
     "group_lambdas",
-    "labelled_sums",
     "labelled_table",
-    "merge_groups",
     "region_grid",
     "region_sums",
     "runs",
@@ -483,66 +481,3 @@ def labelled_table(
         total(signs_match),
     )
     return SumTable(np.column_stack(columns), shift)
-
-
-def labelled_sums(
-    ref: FloatArray,
-    sim: FloatArray,
-    labels: IntArray,
-    groups: int,
-    *,
-    compiled: bool | None = None,
-) -> GroupSums:
-    """The sums of every label in [0, ``groups``), in one pass (see :func:`labelled_table`)."""
-    return labelled_table(ref, sim, labels, groups, compiled=compiled).sums()
-
-
-def merge_groups(fine: GroupSums, mapping: IntArray, groups: int) -> GroupSums:
-    """Sums of coarse groups made of fine ones: fine group k goes to ``mapping[k]`` (−1: none).
-
-    Σ(e − ē)² merges by the parallel-variance rule, exactly.
-    """
-    mapping = np.asarray(mapping, dtype=np.int64)
-    keep = mapping >= 0
-    m = mapping[keep]
-    n_fine = fine.n[keep].astype(np.float64)
-    columns = (
-        n_fine,
-        fine.error_sum[keep],
-        fine.abs_error[keep],
-        fine.sq_error[keep],
-        fine.error_m2[keep],
-        fine.ref_sum[keep],
-        fine.sim_sum[keep],
-        fine.ref_sq[keep],
-        fine.sim_sq[keep],
-        fine.cross[keep],
-        fine.sign_matches[keep].astype(np.float64),
-    )
-    width = len(columns)
-    # One weighted count over (coarse group, column) pairs sums every column at once.
-    index = (m[:, None] * width + np.arange(width)).ravel()
-    table = np.asarray(
-        np.bincount(index, weights=np.column_stack(columns).ravel(), minlength=groups * width),
-        dtype=np.float64,
-    ).reshape(groups, width)
-    n = np.rint(table[:, 0]).astype(np.int64)
-    error_sum = table[:, 1]
-    fine_mean = columns[1] / np.maximum(n_fine, 1.0)
-    coarse_mean = error_sum / np.maximum(n, 1)
-    spread = np.bincount(
-        m, weights=n_fine * (fine_mean - coarse_mean[m]) ** 2, minlength=groups
-    ).astype(np.float64)
-    return GroupSums(
-        n=n,
-        error_sum=error_sum,
-        abs_error=table[:, 2],
-        sq_error=table[:, 3],
-        error_m2=table[:, 4] + spread,
-        ref_sum=table[:, 5],
-        sim_sum=table[:, 6],
-        ref_sq=table[:, 7],
-        sim_sq=table[:, 8],
-        cross=table[:, 9],
-        sign_matches=np.rint(table[:, 10]).astype(np.int64),
-    )
