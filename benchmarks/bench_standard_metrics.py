@@ -3,6 +3,7 @@
     python benchmarks/bench_standard_metrics.py                    # n = 1,000 and 4,000
     python benchmarks/bench_standard_metrics.py --samples 4000 --repeat 5
     python benchmarks/bench_standard_metrics.py --long 14130 360000   # ours alone, long records
+    python benchmarks/bench_standard_metrics.py --samples --banded 88   # banded vs exact, i3
 
 ISO/TS 18571: ``objective-rating-metrics`` (``ISO18571(...).overall_rating()``, its numba
 compilation done once before timing) against ``iso18571_rating``, on the drive-cycle pair of
@@ -46,15 +47,25 @@ def main() -> None:
     parser.add_argument("--samples", type=int, nargs="*", default=[1000, 4000])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--long", type=int, nargs="*", default=[], help="ours alone at these n")
+    parser.add_argument(
+        "--banded",
+        type=int,
+        nargs="*",
+        default=[],
+        help="warping half-bands: banded against exact rating on every signal of two i3 trips",
+    )
     args = parser.parse_args()
 
     from pytest_hevval.core.registry import STANDARD_CHARACTERISTICS, get_characteristic
     from pytest_hevval.core.standard import iso18571_rating
 
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    warm_ref, warm_sim = make_pair("drive", 64)
-    t_jit, _ = _timed(_package, warm_ref, warm_sim)
-    print(f"objective-rating-metrics first call (numba compilation, not counted): {t_jit:.2f} s")
+    if args.samples:
+        warm_ref, warm_sim = make_pair("drive", 64)
+        t_jit, _ = _timed(_package, warm_ref, warm_sim)
+        print(
+            f"objective-rating-metrics first call (numba compilation, not counted): {t_jit:.2f} s"
+        )
     for n in args.samples:
         ref, sim = make_pair("drive", n)
         ratios, theirs, ours = [], [], []
@@ -79,6 +90,29 @@ def main() -> None:
         t_ours, rating = _timed(iso18571_rating, ref, sim)
         mode = f"banded to ±{rating.band}" if rating.banded else f"exact band ±{rating.band}"
         print(f"ISO/TS 18571 n = {n:6d}: ours {t_ours:.2f} s, {mode}, rating {rating.rating:.4f}")
+
+    for band in args.banded:
+        banded_deviation(band)
+
+
+def banded_deviation(band: int) -> None:
+    """The rating with the warping band narrowed to ±band against the exact one, i3 trips."""
+    from pytest_hevval.core.standard import iso18571_rating
+    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.spec.load import load_spec
+
+    example = Path(__file__).resolve().parent.parent / "example_project"
+    for name in ("i3-A02-motorway-v2", "i3-B03-winter-v2"):
+        spec = load_spec(example / "specs" / f"{name}.hevval.yaml")
+        arrays = evaluate_spec(spec, rootdir=example, keep_arrays=True).arrays
+        for path, (ref, sim) in arrays.items():
+            exact = iso18571_rating(ref, sim)
+            narrow = iso18571_rating(ref, sim, max_cells=ref.size * (2 * band + 1))
+            print(
+                f"{name} {path:24s} n = {ref.size}: exact ±{exact.band} {exact.rating:.4f}, "
+                f"±{narrow.band} {narrow.rating:.4f} ({narrow.rating - exact.rating:+.5f}; "
+                f"magnitude {narrow.magnitude - exact.magnitude:+.5f})"
+            )
 
 
 if __name__ == "__main__":
