@@ -35,6 +35,7 @@ def signal_failure_report(
         f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
         f"(λ1 at zero lag {signal.lambdas['lag_correlation']:.4f})"
     )
+    lines.extend(f"  {text}" for text in signal.where_lines())
     by_path = {s.path: s for s in result.signals}
     if signal.origins == [signal.path]:
         if signal.children:
@@ -99,7 +100,7 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
             if not details and signal.passed:
                 continue
             indent = "  " * signal.level
-            mark = "✗" if signal.failures else "✓"
+            mark = "✓" if signal.passed else "✗"
             origin = "  ← error appears here" if signal.origin else ""
             label = f"{indent}{mark} {signal.name}"
             if details:
@@ -110,7 +111,11 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                 lines.extend(_standard_metric_lines(signal, indent))
             else:
                 failed = ", ".join(
-                    f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures
+                    [f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures]
+                    + [
+                        f"{f.characteristic} <{f.threshold:g} in {len(f.where)} {f.scope}"
+                        for f in signal.local_failures
+                    ]
                 )
                 lines.append(f"  {label} [{signal.path}] {failed}{origin}")
         if not details and result.passed:

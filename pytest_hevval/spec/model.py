@@ -14,8 +14,12 @@ from .expressions import Expression
 
 __all__ = [
     "AlignmentSpec",
+    "ConditionSpec",
     "Interpolation",
+    "LocalGate",
+    "LocalSpec",
     "ModelKind",
+    "RegionSpec",
     "SignalSpec",
     "SourceSpec",
     "Spec",
@@ -66,6 +70,70 @@ class AlignmentSpec:
 
 
 @dataclass(frozen=True)
+class LocalGate:
+    """A gate over parts of a record: every window (or cell) must meet ``thresholds``.
+
+    ``share`` is the share of judged windows that must pass (1: every one). A node's own
+    ``local_thresholds`` / ``region_thresholds`` override the spec's, as for the record gate.
+    """
+
+    thresholds: Mapping[str, float]
+    share: float = 1.0
+    line: int = 1
+
+
+@dataclass(frozen=True)
+class ConditionSpec:
+    """A named condition on the reference: the segments where it holds are scored apart.
+
+    A gated window in which the condition holds for most samples is judged against
+    ``thresholds`` instead of the gate's own (a condition-dependent tolerance).
+    """
+
+    name: str
+    expression: Expression
+    line: int
+    thresholds: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LocalSpec:
+    """``local:``: characteristics over time windows, driving phases and conditions."""
+
+    window_s: float
+    line: int
+    #: Speed (km/h) on the reference, from which driving phases are found.
+    phases: Expression | None = None
+    conditions: tuple[ConditionSpec, ...] = ()
+    gate: LocalGate | None = None
+
+    def columns(self) -> set[str]:
+        columns: set[str] = set(self.phases.columns) if self.phases else set()
+        for condition in self.conditions:
+            columns.update(condition.expression.columns)
+        return columns
+
+
+@dataclass(frozen=True)
+class RegionSpec:
+    """``regions:``: samples binned by one or two operating variables of the reference."""
+
+    by: tuple[Expression, ...]
+    #: Per variable: bin edges (the declared operating space) or a count of equal bins over
+    #: the measured range.
+    bins: tuple[tuple[float, ...] | int, ...]
+    min_samples: int
+    line: int
+    gate: LocalGate | None = None
+
+    def columns(self) -> set[str]:
+        columns: set[str] = set()
+        for expression in self.by:
+            columns.update(expression.columns)
+        return columns
+
+
+@dataclass(frozen=True)
 class SignalSpec:
     """One validation signal γ(i, j, k) as written in the spec."""
 
@@ -88,6 +156,9 @@ class SignalSpec:
     sim_scale: float = 1.0
     sim_offset: float = 0.0
     children: tuple[SignalSpec, ...] = ()
+    #: Overrides of the spec's window and region gate thresholds for this node.
+    local_thresholds: Mapping[str, float] = field(default_factory=dict)
+    region_thresholds: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -116,6 +187,9 @@ class Spec:
     data_quality: QualityLimits = field(default_factory=QualityLimits)
     #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
     ratchet: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    #: Where and when the model is wrong: windows, phases, conditions and region cells.
+    local: LocalSpec | None = None
+    regions: RegionSpec | None = None
 
     def walk(self) -> Iterator[tuple[int, tuple[str, ...], SignalSpec]]:
         """(set index from 1, path of names, node) for every signal, parents first."""
@@ -138,6 +212,16 @@ class Spec:
                 merged[name] = value
         return merged
 
+    def local_thresholds_for(self, node: SignalSpec) -> dict[str, float]:
+        """Window-gate thresholds of one node: the spec's ``local.gate`` < the node's own."""
+        gate = self.local.gate if self.local else None
+        return {**(gate.thresholds if gate else {}), **node.local_thresholds}
+
+    def region_thresholds_for(self, node: SignalSpec) -> dict[str, float]:
+        """Cell-gate thresholds of one node: the spec's ``regions.gate`` < the node's own."""
+        gate = self.regions.gate if self.regions else None
+        return {**(gate.thresholds if gate else {}), **node.region_thresholds}
+
     def characteristics(self) -> tuple[Characteristic, ...]:
         """What this spec scores: the default characteristics plus its ``metrics``."""
         return select_characteristics(self.metrics)
@@ -156,6 +240,10 @@ class Spec:
         columns.update(self.model.fmu_inputs.values())
         if self.alignment.offset_from:
             columns.add(self.alignment.offset_from[0])
+        if self.local:
+            columns.update(self.local.columns())
+        if self.regions:
+            columns.update(self.regions.columns())
         return columns
 
     def model_columns(self) -> set[str]:
