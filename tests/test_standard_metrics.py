@@ -101,14 +101,14 @@ def _scores(ref: np.ndarray, sim: np.ndarray) -> tuple[float, ...]:
 
 
 @pytest.mark.parametrize("case", sorted(_iso_pairs()))
-def test_iso18571_equals_the_reference_package(case: str) -> None:
+def test_iso18571_equals_the_reference_package(case: str, kernel_path: str) -> None:
     ref, sim = _iso_pairs()[case]
     assert _scores(ref, sim) == pytest.approx(_package_scores(ref, sim), abs=1e-3)
 
 
 @pytest.mark.parametrize("signal", ["E_batt/P_batt", "E_batt/P_batt/U_batt"])
 def test_iso18571_equals_the_reference_package_on_a_real_i3_pair(
-    i3_pairs: dict[str, tuple[np.ndarray, np.ndarray]], signal: str
+    i3_pairs: dict[str, tuple[np.ndarray, np.ndarray]], signal: str, kernel_path: str
 ) -> None:
     # 150 s of the motorway trip at 10 Hz: the package's n × n distance matrix must fit.
     ref, sim = (a[6000:7500] for a in i3_pairs[signal])
@@ -133,7 +133,7 @@ def test_iso18571_phase_score_is_the_standards_linear_ramp(shift: int) -> None:
 
 
 def test_iso18571_banded_approximation_stays_near_the_exact_score(
-    i3_pairs: dict[str, tuple[np.ndarray, np.ndarray]],
+    i3_pairs: dict[str, tuple[np.ndarray, np.ndarray]], kernel_path: str
 ) -> None:
     ref, sim = i3_pairs["E_batt/P_batt"]
     exact = iso18571_rating(ref, sim)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as sps
 
+from .. import kernel
 from ..registry import CharacteristicValue
 from ._inputs import FloatArray, checked_pair, degenerate
 
@@ -270,10 +271,15 @@ def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.n
     S the row's cumulative cost, D[i, j] = S_j + min_{k ≤ j}(A_k − S_k), so each row is a few
     vector operations. Rows are kept in band coordinates (k = j − i + band) a block at a time;
     the backtracking steps of a whole block are then chosen at once, ties going up, then left,
-    then diagonal (as dtwalign backtracks). Memory: one byte per band cell.
+    then diagonal (as dtwalign backtracks). Memory: one byte per band cell. With the ``fast``
+    extra, bands the kernel takes (:func:`~pytest_hevval.core.kernel.kernel_for`, counted in
+    cells) run as one compiled loop with the same ties.
     """
     n = x.shape[0]
     width = 2 * band + 1
+    compiled = kernel.kernel_for(n * width, ("dtw_path",))
+    if compiled is not None:
+        return kernel.dtw_path(compiled, x, y, band)
     choice = np.empty((n, width), dtype=np.int8)
     # Row r of the block sits at rows[r + 1], band cell k at column k + 1, with inf padding on
     # both sides; rows[0] is the last row of the previous block.
