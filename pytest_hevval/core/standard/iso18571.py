@@ -109,7 +109,7 @@ def iso18571_rating(
     n = ref.shape[0]
     corridor = _corridor(ref, sim, p)
     shift = _phase_shift(ref, sim, p.phase_limit)
-    limit = n * round(p.phase_limit, 2)
+    limit = n * p.phase_limit
     if shift == 0:
         phase = 1.0
     elif abs(shift) >= limit:
@@ -198,7 +198,7 @@ def _corridor(ref: FloatArray, sim: FloatArray, p: Iso18571Parameters) -> float:
 def _phase_shift(ref: FloatArray, sim: FloatArray, phase_limit: float) -> int:
     """The shift of ``sim`` (samples; negative = sim lags) with the highest overlap correlation."""
     n = ref.shape[0]
-    shifts = math.floor(n * round(phase_limit, 2)) + 1
+    shifts = math.floor(n * phase_limit) + 1
     x = ref - ref.mean()
     y = sim - sim.mean()
     cross = sps.correlate(y, x, mode="full", method="fft" if n > 256 else "direct")
