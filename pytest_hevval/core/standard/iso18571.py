@@ -109,13 +109,7 @@ def iso18571_rating(
     n = ref.shape[0]
     corridor = _corridor(ref, sim, p)
     shift = _phase_shift(ref, sim, p.phase_limit)
-    limit = n * p.phase_limit
-    if shift == 0:
-        phase = 1.0
-    elif abs(shift) >= limit:
-        phase = 0.0
-    else:
-        phase = ((limit - abs(shift)) / limit) ** p.phase_exponent
+    phase = _ramp(abs(shift), n * p.phase_limit, p.phase_exponent)
     # A negative shift: the simulation lags, its later samples meet the reference's earlier ones.
     if shift < 0:
         ref_s, sim_s = ref[: n + shift], sim[-shift:]
@@ -129,21 +123,9 @@ def iso18571_rating(
     if banded:
         band = max(1, (max_cells // m - 1) // 2)
     magnitude_error = _warped_magnitude_error(sim_s, ref_s, band)
-    if magnitude_error == 0.0:
-        magnitude = 1.0
-    elif magnitude_error > p.magnitude_limit:
-        magnitude = 0.0
-    else:
-        magnitude = ((p.magnitude_limit - magnitude_error) / p.magnitude_limit) ** (
-            p.magnitude_exponent
-        )
+    magnitude = _ramp(magnitude_error, p.magnitude_limit, p.magnitude_exponent)
     slope_error = _slope_error(ref_s, sim_s)
-    if slope_error <= 0.0:
-        slope = 1.0
-    elif slope_error >= p.slope_limit:
-        slope = 0.0
-    else:
-        slope = (p.slope_limit - slope_error) / p.slope_limit
+    slope = _ramp(slope_error, p.slope_limit, 1.0)
     rating = (
         p.weight_corridor * corridor
         + p.weight_phase * phase
@@ -153,9 +135,9 @@ def iso18571_rating(
     return Iso18571Rating(
         rating=float(min(1.0, max(0.0, rating))),
         corridor=corridor,
-        phase=float(phase),
-        magnitude=float(magnitude),
-        slope=float(slope),
+        phase=phase,
+        magnitude=magnitude,
+        slope=slope,
         shift=shift,
         magnitude_error=magnitude_error,
         slope_error=slope_error,
@@ -182,6 +164,15 @@ def iso18571_characteristic(
             "banded": float(r.banded),
         },
     )
+
+
+def _ramp(error: float, limit: float, exponent: float) -> float:
+    """The standard's score of an error: 1 at 0, 0 from ``limit`` on, ((ε_lim − ε)/ε_lim)^k."""
+    if error <= 0.0:
+        return 1.0
+    if error >= limit:
+        return 0.0
+    return float(((limit - error) / limit) ** exponent)
 
 
 def _corridor(ref: FloatArray, sim: FloatArray, p: Iso18571Parameters) -> float:
