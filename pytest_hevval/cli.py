@@ -53,10 +53,10 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 def _run(args: argparse.Namespace) -> int:
     from .engine import Evaluation
     from .run import RunOptions, run_specs
-    from .spec.load import load_spec
+    from .spec.load import load_specs
     from .terminal import tree_summary
 
-    specs = [load_spec(p) for p in _expand(args.specs)]
+    specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
         return EXIT_USAGE
@@ -83,7 +83,13 @@ def _run(args: argparse.Namespace) -> int:
         results.append(outcome.result)
     for line in tree_summary(results, details=args.details):
         print(line)
-    passed = all(r.passed for r in results)
+    from .campaign import campaign_verdicts, verdict_lines
+
+    verdicts = campaign_verdicts(results)
+    for found in verdicts:
+        for line in verdict_lines(found):
+            print(line)
+    passed = all(r.passed for r in results) and all(v.passed for v in verdicts)
     from . import __version__
 
     payload = {
@@ -91,6 +97,7 @@ def _run(args: argparse.Namespace) -> int:
         "hevval_version": __version__,
         "passed": passed,
         "specs": [r.to_dict() for r in results],
+        **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
     }
     # The common single-spec case also exposes the spec's own fields at the top level.
     if len(results) == 1:

@@ -115,13 +115,14 @@ def evaluate_spec_file(
     """
     from .core.registry import load_entry_points
     from .run import RunOptions, evaluate_here
-    from .spec.load import load_spec
+    from .spec.load import load_specs
 
     try:
         # A Dask worker is its own process: it learns registered characteristics here.
         load_entry_points()
         with _PARSE_LOCK:
-            spec = load_spec(spec_path)
+            # A campaign's recording travels as ``file::recording``.
+            (spec,) = load_specs(spec_path)
     except HevvalError as exc:
         return error_payload(spec_path, exc)
     options = RunOptions(rootdir=Path(rootdir), figures=figures, workers=threads_per_spec)

@@ -7,6 +7,7 @@ never prints, and it writes nothing.
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -20,6 +21,7 @@ import numpy.typing as npt
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
@@ -55,6 +57,35 @@ def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
     return read_record
 
 
+#: glibc returns freed blocks above 128 KiB to the system at once, so every column-sized
+#: temporary (2.9 MB for an hour at 100 Hz) was page-faulted in afresh: 9 of 17 CPU seconds
+#: of the 600-signal hour were the kernel's. Blocks up to this size stay in the heap, and the
+#: heap keeps this much free memory for the next one (docs/performance.md, "Allocator").
+ALLOCATOR_KEEP_BYTES = 1 << 27
+_allocator_tuned = threading.Event()
+
+
+def _tune_allocator() -> None:
+    """Keep column-sized blocks in glibc's heap (once per process; Linux only, and never
+    against a MALLOC_MMAP_THRESHOLD_ or MALLOC_TRIM_THRESHOLD_ the user set)."""
+    if _allocator_tuned.is_set():
+        return
+    _allocator_tuned.set()
+    if not sys.platform.startswith("linux"):
+        return
+    if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
+        return
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+    except OSError:  # musl or another C library: leave it as it is
+        return
+    m_trim_threshold, m_mmap_threshold = -1, -3
+    libc.mallopt(m_mmap_threshold, ALLOCATOR_KEEP_BYTES)
+    libc.mallopt(m_trim_threshold, 2 * ALLOCATOR_KEEP_BYTES)
+
+
 def _digest_or_empty(path: str, algorithm: str) -> dict[str, str]:
     try:
         return file_digest(path, algorithm)
@@ -70,6 +101,7 @@ class DataCache:
     """
 
     def __init__(self, data_hash: str = DEFAULT_HASH) -> None:
+        _tune_allocator()
         #: How data files are identified in results (see :mod:`pytest_hevval.digest`).
         self.data_hash = data_hash
         self._lock = threading.Lock()
@@ -351,6 +383,8 @@ def _evaluate(
     result.local = spec_local_summary(
         spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
     )
+    if spec.campaign is not None:
+        _add_campaign_facts(spec, result, values, node_specs)
     return Evaluation(
         spec=spec,
         result=result,
@@ -666,7 +700,7 @@ def _spec_result(
     phi = global_metric(((s.alpha, s.lambdas) for s in signals), weights)
     return SpecResult(
         name=spec.name,
-        spec=str(spec.path),
+        spec=spec.key,
         spec_hash=spec.text_hash,
         phi=phi,
         min_phi=spec.min_phi,
@@ -707,6 +741,32 @@ def _spec_result(
             ),
         },
     )
+
+
+def _add_campaign_facts(
+    spec: Spec,
+    result: SpecResult,
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+    node_specs: Mapping[NodePath, SignalSpec],
+) -> None:
+    """A campaign recording's result names its recording and keeps what pools over them."""
+    assert spec.campaign is not None
+    result.name = f"{spec.name} · {spec.recording}"
+    result.recording = spec.recording
+    result.role = spec.role
+    result.campaign = {
+        "name": spec.name,
+        "recordings": [r.id for r in spec.campaign.recordings],
+        "min_pass_rate": spec.campaign.min_pass_rate,
+        "phi_quantile": list(spec.campaign.phi_quantile) if spec.campaign.phi_quantile else None,
+        "line": spec.campaign.line,
+    }
+    for signal in result.signals:
+        ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
+        finite = np.isfinite(ref)
+        if finite.any() and np.isfinite(sim).any():
+            distribution = u_distribution_of(ref[finite], sim[np.isfinite(sim)])
+            signal.u_distribution = [float(x) for x in distribution]
 
 
 def _tree_of(node: SignalSpec) -> TreeNode:

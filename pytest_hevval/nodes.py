@@ -1,5 +1,8 @@
 """pytest collectors and items: a spec file, one item per signal node, one ``Phi`` item.
 
+A campaign spec collects one :class:`Recording` per recording (``spec::TripB03::E_batt``), each
+holding that recording's signal and ``Phi`` items, and one ``campaign`` item for its gate.
+
 Items override only ``setup``/``runtest``/``repr_failure``/``reportinfo``. Unreadable data
 fails in ``setup`` so that pytest reports an ERROR; a missed threshold fails in ``runtest``,
 a FAILURE.
@@ -24,7 +27,7 @@ from .spec.model import Spec
 from .stash import session_key
 from .terminal import phi_report, signal_failure_report
 
-__all__ = ["PhiItem", "SignalItem", "SpecFile"]
+__all__ = ["CampaignItem", "PhiItem", "Recording", "SignalItem", "SpecFile"]
 
 
 def junit_property(name: str) -> str:
@@ -48,20 +51,41 @@ class SpecFile(pytest.File):
 
     spec: Spec
 
-    def collect(self) -> Iterator[pytest.Item]:
+    def collect(self) -> Iterator[pytest.Item | pytest.Collector]:
         state = self.config.stash[session_key]
         self.spec = load_spec(self.path)
         spec = self.spec
-        state.register(spec)
-        for _, path, node in spec.walk():
-            yield SignalItem.from_parent(self, name="/".join(path), spec=spec, line=node.line)
-        yield PhiItem.from_parent(self, name="Phi", spec=spec, line=spec.min_phi_line)
+        if spec.campaign is None:
+            state.register(spec)
+            yield from _spec_items(self, spec)
+            return
+        for recording in spec.per_recording():
+            state.register(recording)
+            yield Recording.from_parent(self, name=str(recording.recording), spec=recording)
+        yield CampaignItem.from_parent(self, name="campaign", spec=spec, line=spec.campaign.line)
 
     def repr_failure(  # type: ignore[override]
         self, excinfo: pytest.ExceptionInfo[BaseException]
     ) -> str | TerminalRepr:
         text = _hevval_repr(excinfo)
         return text if text is not None else super().repr_failure(excinfo)
+
+
+def _spec_items(parent: pytest.Collector, spec: Spec) -> Iterator[pytest.Item]:
+    for _, path, node in spec.walk():
+        yield SignalItem.from_parent(parent, name="/".join(path), spec=spec, line=node.line)
+    yield PhiItem.from_parent(parent, name="Phi", spec=spec, line=spec.min_phi_line)
+
+
+class Recording(pytest.Collector):
+    """One recording of a campaign: its signal items and its ``Phi`` item."""
+
+    def __init__(self, *, spec: Spec, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.spec = spec
+
+    def collect(self) -> Iterator[pytest.Item]:
+        yield from _spec_items(self, self.spec)
 
 
 class _SpecItem(pytest.Item):
@@ -149,3 +173,32 @@ def _raise_regressions(found: list[str], what: str) -> None:
             + "\n  next: fix the model, or, if the change is intended, record a new baseline "
             "(run without --hevval-compare-fail and keep the history)"
         )
+
+
+class CampaignItem(_SpecItem):
+    """The campaign's gate over its validation recordings (calibration ones never count)."""
+
+    def setup(self) -> None:
+        self.outcomes: dict[str, Evaluation | HevvalError] = {}
+        for recording in self.spec.per_recording():
+            try:
+                self.outcomes[str(recording.recording)] = self.state.evaluate(recording)
+            except HevvalError as exc:
+                self.outcomes[str(recording.recording)] = exc
+
+    def runtest(self) -> None:
+        from .campaign import verdict, verdict_lines
+
+        results = [o.result for o in self.outcomes.values() if isinstance(o, Evaluation)]
+        if not results:
+            raise ThresholdMissed(
+                "no recording of the campaign could be scored:\n"
+                + "\n".join(f"  {name}: {error}" for name, error in self.outcomes.items())
+            )
+        # Every recording's result reaches the controller, even those deselected with -k.
+        shipped = [self.state.ship(result) for result in results]
+        self.hevval_campaign = [payload for payload in shipped if payload is not None]
+        found = verdict(results)
+        self.user_properties.append(("pass_rate", f"{found.pass_rate:.6f}"))
+        if not found.passed:
+            raise ThresholdMissed("\n".join(verdict_lines(found)))

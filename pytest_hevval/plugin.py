@@ -67,6 +67,9 @@ def pytest_runtest_makereport(
         diagnosis = getattr(item, "hevval_diagnosis", None)
         if diagnosis is not None:
             report.hevval_diagnosis = diagnosis  # type: ignore[attr-defined]
+        campaign = getattr(item, "hevval_campaign", None)
+        if campaign:
+            report.hevval_campaign = campaign  # type: ignore[attr-defined]
     return report
 
 

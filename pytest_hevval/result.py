@@ -86,6 +86,8 @@ class SignalResult:
     local: LocalResult | None = None
     #: Window and cell gates missed.
     local_failures: list[LocalFailure] = field(default_factory=list)
+    #: A campaign recording's distribution of u = F_model(measured) on core.upooling.U_GRID.
+    u_distribution: list[float] | None = None
 
     @property
     def passed(self) -> bool:
@@ -161,6 +163,8 @@ class SignalResult:
             out["local"] = self.local.to_dict()
         if self.local_failures:
             out["local_failures"] = [f.to_dict() for f in self.local_failures]
+        if self.u_distribution is not None:
+            out["u_distribution"] = list(self.u_distribution)
         return out
 
     @classmethod
@@ -196,6 +200,7 @@ class SignalResult:
             diagnosis=data.get("diagnosis"),
             local=LocalResult.from_dict(data["local"]) if data.get("local") else None,
             local_failures=[LocalFailure.from_dict(f) for f in data.get("local_failures", [])],
+            u_distribution=data.get("u_distribution"),
         )
 
     def failure_lines(self) -> list[str]:
@@ -250,6 +255,10 @@ class SpecResult:
     alignment: dict[str, Any]
     #: The grid of windows and cells, coverage and Φ per window and per cell.
     local: dict[str, Any] | None = None
+    #: One recording of a campaign: its id, its role and the campaign's gate (see campaign.py).
+    recording: str | None = None
+    role: str = "validation"
+    campaign: dict[str, Any] | None = None
 
     @property
     def phi_passed(self) -> bool:
@@ -296,6 +305,11 @@ class SpecResult:
             "alignment": self.alignment,
             "signals": [s.to_dict() for s in self.signals],
             **({"local": self.local} if self.local is not None else {}),
+            **(
+                {"recording": self.recording, "role": self.role, "campaign": self.campaign}
+                if self.recording is not None
+                else {}
+            ),
         }
 
     @classmethod
@@ -316,6 +330,9 @@ class SpecResult:
             data=dict(data.get("data", {})),
             alignment=dict(data.get("alignment", {})),
             local=data.get("local"),
+            recording=data.get("recording"),
+            role=str(data.get("role", "validation")),
+            campaign=data.get("campaign"),
         )
 
 

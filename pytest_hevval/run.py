@@ -118,7 +118,7 @@ def _on_dask(
 
     assert options.dask is not None
     payloads = evaluate_on_dask(
-        [s.path for s in specs],
+        [Path(s.key) for s in specs],
         options.dask,
         rootdir=options.rootdir,
         figures=options.figures,

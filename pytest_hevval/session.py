@@ -147,7 +147,7 @@ class HevvalSession:
 
     # -- evaluation -------------------------------------------------------------------------
     def register(self, spec: Spec) -> None:
-        self.specs[self.relative(str(spec.path))] = spec
+        self.specs[self.relative(spec.key)] = spec
         self.cache.declare(spec.reference, spec.reference_columns())
         self.cache.declare(spec.model, spec.model_columns())
 
@@ -176,11 +176,11 @@ class HevvalSession:
         except HevvalError as exc:
             raise pytest.UsageError(f"--hevval-dask={options.dask}: {exc}") from None
         for spec, outcome in zip(specs, outcomes, strict=True):
-            self.evaluations[str(spec.path)] = outcome
+            self.evaluations[spec.key] = outcome
 
     def evaluate(self, spec: Spec) -> Evaluation:
         """Evaluate a spec once per process; later items of the same spec reuse it."""
-        key = str(spec.path)
+        key = spec.key
         options = self.run_options()
         if key not in self.evaluations and options.dask:
             self.prefetch_on_dask()
@@ -246,6 +246,8 @@ class HevvalSession:
         diagnosis = getattr(report, "hevval_diagnosis", None)
         if diagnosis is not None:
             self.receive_diagnosis(diagnosis)
+        for recording in getattr(report, "hevval_campaign", None) or ():
+            self.receive(recording)
 
     def spec_results(self) -> list[SpecResult]:
         return [SpecResult.from_dict(self.results[k]) for k in sorted(self.results)]
@@ -341,10 +343,12 @@ class HevvalSession:
         if self.baseline is None or not self.option("compare"):
             return
         from .history import compare, comparison_table, regressions
+        from .history.compare import campaign_change_lines
 
         comparison = compare(dicts, self.baseline, after_label=self.model_version)
         found = regressions(comparison, self.compare_rules) if self.compare_rules else None
         self.notes.append(comparison_table(comparison, found))
+        self.notes.extend(campaign_change_lines(comparison))
 
     def _ratchet(self, dicts: list[dict[str, Any]]) -> bool:
         if self.ratchet_margin is None:
@@ -355,6 +359,12 @@ class HevvalSession:
         for result in dicts:
             spec = self.specs.get(result["spec"])
             if spec is None:
+                continue
+            if spec.campaign is not None:
+                # One sidecar per spec file cannot hold each recording's own thresholds.
+                note = f"ratchet: {self.relative(str(spec.path))}: a campaign, not ratcheted"
+                if note not in self.notes:
+                    self.notes.append(note)
                 continue
             written = {
                 "/".join(path): {**spec.thresholds, **node.thresholds}
@@ -400,6 +410,12 @@ class HevvalSession:
         terminalreporter.write_sep("=", "hevval validation summary")
         for line in tree_summary(results, details=bool(self.option("details"))):
             terminalreporter.write_line(line)
+        if any(r.recording is not None for r in results):
+            from .campaign import campaign_verdicts, verdict_lines
+
+            for found in campaign_verdicts(results):
+                for line in verdict_lines(found):
+                    terminalreporter.write_line(line)
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)

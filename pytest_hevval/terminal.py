@@ -15,7 +15,10 @@ __all__ = ["phi_report", "signal_failure_report", "tree_summary"]
 
 
 def _location(spec: str, line: int) -> str:
-    return f"{spec}:{line}"
+    from .spec.model import split_key
+
+    file, recording = split_key(spec)
+    return f"{file}:{line}" + (f" (recording {recording})" if recording else "")
 
 
 def signal_failure_report(

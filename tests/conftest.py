@@ -25,6 +25,11 @@ with contextlib.suppress(ImportError):  # the parquet extra
 # and the next would pay its import again.
 with contextlib.suppress(Exception):
     _KEPT_LOADED.append(importlib.import_module("pytest_hevval.core._fused"))
+    # numba imports more of itself on its first compile (its typing registries); an inline
+    # run would unload those and the next compile would register them twice.
+    from numba.core.registry import cpu_target
+
+    cpu_target.target_context.refresh()
 
 
 def _kernel_unavailable() -> str | None:

@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -22,7 +23,7 @@ PAPER = {
 
 
 @pytest.fixture(scope="module")
-def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
+def run_payload(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     out = tmp_path_factory.mktemp("example") / "run.json"
     run = subprocess.run(
         [sys.executable, "-m", "pytest_hevval", "run", "specs", "--json", str(out),
@@ -33,7 +34,12 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> dict[str, dict]:
         timeout=600,
     )  # fmt: skip
     assert run.returncode in (0, 1), run.stderr
-    return {spec["name"]: spec for spec in json.loads(out.read_text())["specs"]}
+    return dict(json.loads(out.read_text()))
+
+
+@pytest.fixture(scope="module")
+def results(run_payload: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    return {spec["name"]: spec for spec in run_payload["specs"]}
 
 
 def test_every_case_is_scored(results: dict[str, dict]) -> None:
@@ -41,7 +47,7 @@ def test_every_case_is_scored(results: dict[str, dict]) -> None:
     for spec in results.values():
         assert 0.0 <= spec["phi"] <= 1.0
         # The paper's seven, plus the standard metrics a spec switches on (none gated there).
-        extra = {"iso18571", "theil"} if "A02" in spec["name"] else set()
+        extra = {"iso18571", "theil"} if "A02 motorway" in spec["name"] else set()
         assert all(set(s["lambdas"]) == PAPER | extra for s in spec["signals"])
 
 
@@ -71,3 +77,19 @@ def test_camry_cold_start_costs_more_than_hot(results: dict[str, dict]) -> None:
     cold_cum = cold["signals"][0]
     hot_cum = hot["signals"][0]
     assert cold_cum["mae"] > hot_cum["mae"]
+
+
+def test_i3_campaign_scores_every_trip_and_excludes_the_fit_trip(
+    run_payload: dict[str, Any],
+) -> None:
+    (campaign,) = run_payload["campaigns"]
+    recordings = {r["id"]: r for r in campaign["recordings"]}
+    assert len(recordings) == 10
+    assert campaign["excluded"] == ["TripA01"]
+    assert recordings["TripA01"]["role"] == "calibration"
+    assert all(r["hash"] and len(r["digest"]) >= 32 for r in recordings.values())
+    # The fit trip passes, but only the nine validation trips count toward the pass rate.
+    assert recordings["TripA01"]["passed"] is True
+    validation = [r for r in recordings.values() if r["role"] == "validation"]
+    assert campaign["pass_rate"] == sum(r["passed"] for r in validation) / 9
+    assert set(campaign["worst"]) <= {r["id"] for r in validation}

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-I3_TRIPS = ("A01", "A02", "A12", "B03")
+I3_TRIPS = ("A01", "A02", "A06", "A12", "A32", "B02", "B03", "B16", "B17", "B34")
 
 # The channels the model reads, the channels it is scored against, and the ones the
 # diagnosis candidates use. Everything else (cabin and vent temperatures, heater internals)

@@ -16,7 +16,14 @@ from typing import Any
 from ..errors import did_you_mean
 from ..files import write_atomic
 from ._base import HistoryError
-from .compare import Comparison, compare, parse_compare_fail, regressions, specs_of
+from .compare import (
+    Comparison,
+    campaign_change_lines,
+    compare,
+    parse_compare_fail,
+    regressions,
+    specs_of,
+)
 from .records import migrate_record
 from .render import render
 from .store import HistoryStore
@@ -206,6 +213,8 @@ def run_compare(args: argparse.Namespace) -> int:
     )
     found = regressions(comparison, rules) if rules is not None else None
     text = _with_pairings(render(comparison, args.format, found), comparison, args.format)
+    if args.format != "json":
+        text += "".join(f"\n{line}\n" for line in campaign_change_lines(comparison))
     _write(text, args.output)
     return 1 if found else 0
 

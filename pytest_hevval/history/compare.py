@@ -32,10 +32,12 @@ from ..core.registry import (
 from ..defaults import REGION_MIN_SAMPLES
 from ..digest import identity
 from ..errors import did_you_mean
+from ..spec.model import split_key
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
     "BaselineDecision",
+    "CampaignChange",
     "Comparison",
     "FieldDelta",
     "MatchedBy",
@@ -43,6 +45,8 @@ __all__ = [
     "Rule",
     "SignalComparison",
     "SpecComparison",
+    "campaign_change_lines",
+    "campaign_changes",
     "compare",
     "is_ci",
     "missing_baseline",
@@ -377,7 +381,66 @@ class Comparison:
             "specs": [s.to_dict() for s in self.specs],
             "added_specs": list(self.added_specs),
             "removed_specs": list(self.removed_specs),
+            **(
+                {"campaigns": [c.to_dict() for c in changes]}
+                if (changes := campaign_changes(self))
+                else {}
+            ),
         }
+
+
+@dataclass(frozen=True)
+class CampaignChange:
+    """Which recordings of one campaign got better and which got worse, by their Φ."""
+
+    spec: str
+    #: (recording, change of Φ), largest change first.
+    better: tuple[tuple[str, float], ...]
+    worse: tuple[tuple[str, float], ...]
+    unchanged: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.spec,
+            "better": [{"recording": r, "phi_delta": d} for r, d in self.better],
+            "worse": [{"recording": r, "phi_delta": d} for r, d in self.worse],
+            "unchanged": list(self.unchanged),
+        }
+
+
+def campaign_changes(comparison: Comparison) -> list[CampaignChange]:
+    """Per campaign, the recordings whose Φ rose and those whose Φ fell between the runs."""
+    deltas: dict[str, list[tuple[str, float | None]]] = {}
+    for spec in comparison.specs:
+        path, recording = split_key(spec.key)
+        if recording is not None:
+            deltas.setdefault(path, []).append((recording, spec.phi.delta))
+    changes = []
+    for path, found in deltas.items():
+        known = [(r, d) for r, d in found if d is not None]
+        changes.append(
+            CampaignChange(
+                spec=path,
+                better=tuple(sorted(((r, d) for r, d in known if d > 0), key=lambda x: -x[1])),
+                worse=tuple(sorted(((r, d) for r, d in known if d < 0), key=lambda x: x[1])),
+                unchanged=tuple(r for r, d in found if d is None or d == 0),
+            )
+        )
+    return changes
+
+
+def campaign_change_lines(comparison: Comparison) -> list[str]:
+    """One line per campaign: the recordings that got better, then those that got worse."""
+
+    def listed(items: Sequence[tuple[str, float]]) -> str:
+        return ", ".join(f"{r} ({d:+.4f})" for r, d in items) or "none"
+
+    return [
+        f"campaign {c.spec} ({comparison.before_label} → {comparison.after_label}): "
+        f"Φ better on {listed(c.better)}; worse on {listed(c.worse)}"
+        + (f"; unchanged on {', '.join(c.unchanged)}" if c.unchanged else "")
+        for c in campaign_changes(comparison)
+    ]
 
 
 def specs_of(document: Sequence[Mapping[str, Any]] | Mapping[str, Any]) -> list[Mapping[str, Any]]:

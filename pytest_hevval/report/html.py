@@ -19,6 +19,7 @@ from ..core.registry import describe
 from ..errors import MissingExtraError
 from ..localise import LocalFailure
 from . import local_svg, model, plots, svg
+from .text import campaigns_of
 
 __all__ = ["render_html"]
 
@@ -227,6 +228,7 @@ def render_html(
         summary=model.summary(spec_results),
         specs=specs,
         worst=worst,
+        campaigns=campaigns_of(spec_results),
         characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,
         short_labels=model.SHORT_LABELS,

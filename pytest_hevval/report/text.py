@@ -13,6 +13,7 @@ from pathlib import Path, PurePath
 from typing import Any
 
 from .. import __version__
+from ..spec.model import split_key
 from . import model
 
 __all__ = [
@@ -80,6 +81,7 @@ def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
         "summary": model.summary(spec_results),
         "worst": _worst_json(spec_results),
         "specs": list(spec_results),
+        **({"campaigns": campaigns} if (campaigns := campaigns_of(spec_results)) else {}),
     }
     options: dict[str, Any] = {
         "sort_keys": True,
@@ -94,6 +96,61 @@ def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
     except ValueError:  # NaN or inf somewhere: clean the whole tree
         text = json.dumps(json_safe(payload), **options)
     return text + "\n"
+
+
+def campaigns_of(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The campaign verdicts, when any result is one recording of a campaign."""
+    if not any(spec.get("recording") for spec in spec_results):
+        return []
+    from ..campaign import campaign_payloads
+
+    return campaign_payloads(spec_results)
+
+
+def _campaign_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+    lines: list[str] = []
+    for found in campaigns_of(spec_results):
+        mark = "✅" if found["passed"] else "❌"
+        lines += [
+            "",
+            f"**{mark} campaign {_md(found['name'])}** ({_code(found['spec'])}): "
+            f"pass rate {_percent(found['pass_rate'])} of the validation recordings"
+            + (
+                f" (min {_percent(found['min_pass_rate'])})"
+                if found["min_pass_rate"] is not None
+                else ""
+            ),
+            "",
+        ]
+        if found["excluded"]:
+            lines += [
+                "Excluded from the gate (calibration): "
+                + ", ".join(_code(r) for r in found["excluded"]),
+                "",
+            ]
+        lines += ["| recording | role | Φ | failing signals |", "|---|---|--:|---|"]
+        for recording in found["recordings"]:
+            failing = ", ".join(_code(s) for s in recording["failed_signals"]) or "—"
+            lines.append(
+                f"| {'✅' if recording['passed'] else '❌'} {_md(recording['id'])} "
+                f"| {recording['role']} | {_num(recording['phi'])} | {failing} |"
+            )
+        lines += [
+            "",
+            "| signal | pass rate | u-pooling area |",
+            "|---|--:|--:|",
+            *(
+                f"| {_code(path)} | {_percent(rate)} | {_num(found['pooled_area'].get(path), 3)} |"
+                for path, rate in found["signal_pass_rates"].items()
+            ),
+        ]
+        if found["failures"]:
+            lines += ["", *(f"- gate: {_md(failure)}" for failure in found["failures"])]
+    return lines
+
+
+def _percent(value: object) -> str:
+    return f"{float(value):.0%}" if model.is_finite_number(value) else "—"
 
 
 def _json_default(value: Any) -> Any:
@@ -225,6 +282,7 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
     lines += _standard_metrics_markdown(spec_results)
+    lines += _campaign_markdown(spec_results)
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
         quality = (spec.get("data") or {}).get("quality")
@@ -269,7 +327,7 @@ def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path 
     out: list[str] = []
     for spec in spec_results:
         name = str(spec.get("name", ""))
-        file = _escape_property(_relative(str(spec.get("spec", "")), rootdir))
+        file = _escape_property(_relative(split_key(str(spec.get("spec", "")))[0], rootdir))
         phi, min_phi = spec.get("phi"), spec.get("min_phi")
         if (
             model.is_finite_number(phi)

@@ -7,6 +7,7 @@ Every problem becomes a :class:`~pytest_hevval.errors.SpecError` of the form
 from __future__ import annotations
 
 import dataclasses
+import glob
 import hashlib
 import itertools
 import math
@@ -29,20 +30,32 @@ from ..defaults import LOCAL_WINDOW_S, REGION_BINS, REGION_MIN_SAMPLES
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
 from .model import (
+    ROLES,
     AlignmentSpec,
+    CampaignSpec,
     ConditionSpec,
+    DiagnosisSpec,
     Interpolation,
     LocalGate,
     LocalSpec,
+    RecordingSpec,
     RegionSpec,
+    Role,
     SignalSpec,
     SourceSpec,
     Spec,
+    split_key,
 )
 from .sidecar import load_sidecar
 from .yaml_lines import LineDict, LineList, load_yaml_with_lines
 
-__all__ = ["THRESHOLD_ALIASES", "characteristic_name", "load_spec", "parse_spec_text"]
+__all__ = [
+    "THRESHOLD_ALIASES",
+    "characteristic_name",
+    "load_spec",
+    "load_specs",
+    "parse_spec_text",
+]
 
 #: ``lambda1`` … ``lambda7`` name the seven characteristics in paper order.
 THRESHOLD_ALIASES: dict[str, str] = LAMBDA_ALIASES
@@ -60,11 +73,17 @@ _TOP_KEYS = (
     "correlation",
     "emergent",
     "candidates",
+    "diagnosis",
     "data_quality",
     "local",
     "regions",
+    "recordings",
+    "campaign",
     "sets",
 )
+_DIAGNOSIS_KEYS = ("min_share", "responses", "causes")
+_RECORDING_KEYS = ("id", "path", "role", "params")
+_CAMPAIGN_KEYS = ("min_pass_rate", "phi_quantile")
 _SOURCE_KEYS = (
     "path",
     "time",
@@ -262,6 +281,26 @@ def load_spec(path: str | Path) -> Spec:
     return dataclasses.replace(spec, ratchet=sidecar) if sidecar else spec
 
 
+def load_specs(target: str | Path) -> tuple[Spec, ...]:
+    """The specs a command-line target names: a spec file (every recording of a campaign), or
+    ``file::recording`` for one recording of a campaign."""
+    path, recording = split_key(str(target))
+    specs = load_spec(path).per_recording()
+    if recording is None:
+        return specs
+    chosen = [s for s in specs if s.recording == recording]
+    if not chosen:
+        known = tuple(str(s.recording) for s in specs if s.recording is not None)
+        raise SpecError(
+            f"no recording {recording!r} in this spec"
+            + ("" if known else " (it is not a campaign)"),
+            file=path,
+            hint=did_you_mean(recording, known)
+            or ("its recordings: " + ", ".join(known) if known else "name the spec file alone"),
+        )
+    return tuple(chosen)
+
+
 def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec:
     """Validate spec text as if it were the file ``path`` (relative paths resolve from it)."""
     file = str(path)
@@ -296,8 +335,12 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
                 hint="see docs/spec.md for the format",
             )
     base = path.parent
-    reference = _source(context, top["reference"], top.line_of("reference"), "reference", base)
+    table = "recordings" in top and not _is_pattern(top["reference"])
+    reference = _source(
+        context, top["reference"], top.line_of("reference"), "reference", base, path_optional=table
+    )
     model = _source(context, top["model"], top.line_of("model"), "model", base)
+    campaign = _campaign(context, top, reference, model, base)
     alignment = _alignment(context, top)
     metrics = _metrics(context, top)
     scored = {c.name for c in select_characteristics(metrics)}
@@ -308,6 +351,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
     candidates = _candidates(context, top)
+    diagnosis = _diagnosis(context, top)
     data_quality = _data_quality(context, top)
     sets_value = top["sets"]
     sets_line = top.line_of("sets")
@@ -353,9 +397,11 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
+        diagnosis=diagnosis,
         data_quality=data_quality,
         local=local,
         regions=regions,
+        campaign=campaign,
     )
 
 
@@ -393,7 +439,15 @@ def _formats() -> tuple[str, ...]:
     return format_names()
 
 
-def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> SourceSpec:
+def _source(
+    context: _Context,
+    value: Any,
+    line: int,
+    key: str,
+    base: Path,
+    *,
+    path_optional: bool = False,
+) -> SourceSpec:
     if isinstance(value, str):
         # Shorthand: `reference: data/trip.csv`.
         mapping = LineDict(path=value)
@@ -408,7 +462,9 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         problem = "needs exactly one of path, callable or fmu"
         raise context.error(mapping.line, key, problem, got=kinds or None)
     if key == "reference" and not kinds:
-        raise context.error(mapping.line, key, "needs a path to the measured data file")
+        if not path_optional:
+            raise context.error(mapping.line, key, "needs a path to the measured data file")
+        kinds = ["path"]
     kind = kinds[0]
     fmt = context.get(mapping, "format", key, context.choice(_formats()), None)
     extra: dict[str, Any] = {}
@@ -440,7 +496,7 @@ def _source(context: _Context, value: Any, line: int, key: str, base: Path) -> S
         extra=extra,
     )
     path: str | None = None
-    if kind in ("path", "fmu"):
+    if kind in ("path", "fmu") and kind in mapping:
         raw = context.text(mapping[kind], mapping.line_of(kind), _join(key, kind))
         where = _join(key, kind)
         path = raw if is_url(raw) else _resolve(context, base, raw, mapping.line_of(kind), where)
@@ -735,6 +791,47 @@ def _candidates(context: _Context, top: LineDict) -> dict[str, Expression]:
     }
 
 
+def _diagnosis(context: _Context, top: LineDict) -> DiagnosisSpec:
+    if "diagnosis" not in top or top["diagnosis"] is None:
+        return DiagnosisSpec()
+    mapping = context.mapping(top["diagnosis"], top.line_of("diagnosis"), "diagnosis")
+    context.check_keys(mapping, _DIAGNOSIS_KEYS, "diagnosis")
+    min_share = context.get(mapping, "min_share", "diagnosis", context.unit_interval, None)
+    if min_share is not None and min_share >= 1.0:
+        raise context.error(
+            mapping.line_of("min_share"),
+            "diagnosis.min_share",
+            "must be below 1 (the share of the residual a relevant effect explains)",
+            got=min_share,
+            hint="0.05, the default, lists effects that remove at least 5 % of the residual",
+        )
+    names: dict[str, tuple[str, ...]] = {}
+    for key in ("responses", "causes"):
+        value = mapping.get(key)
+        line = mapping.line_of(key)
+        if value is None:
+            names[key] = ()
+            continue
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise context.error(
+                line,
+                f"diagnosis.{key}",
+                "must be a list of channel or candidate names",
+                got=value,
+                hint=f'write e.g. {key}: ["Battery Temperature [°C]"]',
+            )
+        names[key] = tuple(value)
+    both = sorted(set(names["responses"]) & set(names["causes"]))
+    if both:
+        raise context.error(
+            mapping.line_of("causes"),
+            "diagnosis.causes",
+            f"{both[0]!r} is declared both a response and a cause",
+            hint="keep it in one of the two lists",
+        )
+    return DiagnosisSpec(min_share=min_share, responses=names["responses"], causes=names["causes"])
+
+
 def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
     mapping = context.mapping(value, line, key)
     context.check_keys(mapping, _SIGNAL_KEYS, key)
@@ -969,3 +1066,192 @@ def thresholds_mapping(values: Mapping[str, float]) -> dict[str, float]:
         if canonical is not None:
             out[canonical] = float(value)
     return out
+
+
+def _is_pattern(reference: Any) -> bool:
+    """A reference path with glob wildcards names a campaign's recordings."""
+    raw = reference.get("path") if isinstance(reference, LineDict) else reference
+    return isinstance(raw, str) and not is_url(raw) and glob.has_magic(raw)
+
+
+def _campaign(
+    context: _Context, top: LineDict, reference: SourceSpec, model: SourceSpec, base: Path
+) -> CampaignSpec | None:
+    """The recordings of a campaign: the files a reference pattern matches, or a table."""
+    pattern = _is_pattern(top["reference"])
+    if not pattern and "recordings" not in top:
+        if "campaign" in top:
+            raise context.error(
+                top.line_of("campaign"),
+                "campaign",
+                "gates a campaign, but the spec names a single recording",
+                hint="give reference.path a pattern (data/Trip*.parquet) or list `recordings:`",
+            )
+        return None
+    reference_value = top["reference"]
+    reference_line = (
+        reference_value.line_of("path")
+        if isinstance(reference_value, LineDict)
+        else top.line_of("reference")
+    )
+    if model.kind == "file":
+        raise context.error(
+            model.line,
+            "model.path",
+            "a campaign runs the model on each recording, so the model cannot be one file",
+            hint="name a callable or an FMU; each recording's `params` are passed to it",
+        )
+    matched: dict[str, str] = {}
+    if pattern:
+        assert reference.path is not None
+        for found in sorted(glob.glob(reference.path)):
+            matched.setdefault(_recording_id(found), found)
+        if not matched:
+            raise context.error(
+                reference_line,
+                "reference.path",
+                "the pattern matches no file",
+                got=_relative_pattern(reference.path, base),
+                hint="check the folder and the wildcards; the pattern is relative to the spec file",
+            )
+    elif reference.path is not None:
+        raise context.error(
+            reference_line,
+            "reference.path",
+            "names one file, but the spec lists its recordings",
+            hint="give the path of each recording in `recordings:`, or make reference.path a "
+            "pattern such as data/Trip*.parquet",
+        )
+    entries = _recording_entries(context, top, base, matched)
+    recordings = [
+        RecordingSpec(
+            id=recording_id,
+            path=entries[recording_id][0] if recording_id in entries else file,
+            role=entries[recording_id][1] if recording_id in entries else "validation",
+            params=entries[recording_id][2] if recording_id in entries else {},
+            line=entries[recording_id][3] if recording_id in entries else reference_line,
+        )
+        for recording_id, file in {**matched, **{k: v[0] for k, v in entries.items()}}.items()
+    ]
+    min_pass_rate: float | None = None
+    phi_quantile: tuple[float, float] | None = None
+    if top.get("campaign") is not None:
+        gate = context.mapping(top["campaign"], top.line_of("campaign"), "campaign")
+        context.check_keys(gate, _CAMPAIGN_KEYS, "campaign")
+        min_pass_rate = context.get(gate, "min_pass_rate", "campaign", context.unit_interval, None)
+        if "phi_quantile" in gate:
+            phi_quantile = _phi_quantile(context, gate)
+    return CampaignSpec(
+        recordings=tuple(recordings),
+        line=top.line_of("campaign") if "campaign" in top else reference_line,
+        min_pass_rate=min_pass_rate,
+        phi_quantile=phi_quantile,
+    )
+
+
+def _recording_id(path: str) -> str:
+    """``TripB03`` for ``…/TripB03.parquet``: the file name without its suffixes."""
+    return Path(path).name.split(".", 1)[0]
+
+
+def _relative_pattern(path: str, base: Path) -> str:
+    try:
+        return str(Path(path).relative_to(base.resolve()))
+    except ValueError:
+        return path
+
+
+def _recording_entries(
+    context: _Context, top: LineDict, base: Path, matched: Mapping[str, str]
+) -> dict[str, tuple[str, Role, dict[str, Any], int]]:
+    """id → (path, role, params, line) of every row of `recordings:`."""
+    if "recordings" not in top or top["recordings"] is None:
+        return {}
+    rows = top["recordings"]
+    if not isinstance(rows, LineList) or not rows:
+        raise context.error(
+            top.line_of("recordings"),
+            "recordings",
+            "must be a non-empty list of recordings ({id, path, role, params})",
+            got=rows,
+        )
+    entries: dict[str, tuple[str, Role, dict[str, Any], int]] = {}
+    for index, row in enumerate(rows):
+        key = f"recordings[{index}]"
+        line = rows.line_of(index)
+        mapping = context.mapping(row, line, key)
+        context.check_keys(mapping, _RECORDING_KEYS, key)
+        if matched and "path" in mapping:
+            raise context.error(
+                mapping.line_of("path"),
+                _join(key, "path"),
+                "the recordings come from reference.path's pattern, so a row names one by id",
+                hint="remove `path:`, or list every recording with its path and no pattern",
+            )
+        if matched:
+            if "id" not in mapping:
+                raise context.error(mapping.line, _join(key, "id"), "is required (a recording id)")
+            path = ""
+        else:
+            if "path" not in mapping:
+                raise context.error(
+                    mapping.line, _join(key, "path"), "is required (the recording's data file)"
+                )
+            raw = context.text(mapping["path"], mapping.line_of("path"), _join(key, "path"))
+            path = (
+                raw
+                if is_url(raw)
+                else _resolve(context, base, raw, mapping.line_of("path"), _join(key, "path"))
+            )
+        recording_id = context.get(mapping, "id", key, context.text, _recording_id(path))
+        id_line = mapping.line_of("id") if "id" in mapping else mapping.line
+        if not recording_id.strip() or "/" in recording_id or "::" in recording_id:
+            raise context.error(
+                id_line,
+                _join(key, "id"),
+                "must be a non-empty name without '/' or '::'",
+                got=recording_id,
+            )
+        if recording_id in entries:
+            raise context.error(
+                id_line,
+                _join(key, "id"),
+                f"duplicate recording id {recording_id!r} "
+                f"(first listed at line {entries[recording_id][3]})",
+                hint="give each recording its own id",
+            )
+        if matched:
+            if recording_id not in matched:
+                raise context.error(
+                    id_line,
+                    _join(key, "id"),
+                    "no file matched by reference.path has this id",
+                    got=recording_id,
+                    hint=did_you_mean(recording_id, tuple(matched))
+                    or "matched: " + ", ".join(matched),
+                )
+            path = matched[recording_id]
+        role = cast("Role", context.get(mapping, "role", key, context.choice(ROLES), "validation"))
+        no_params: dict[str, Any] = {}
+        params = context.get(mapping, "params", key, _plain_mapping(context), no_params)
+        entries[recording_id] = (path, role, params, mapping.line)
+    return entries
+
+
+def _phi_quantile(context: _Context, gate: LineDict) -> tuple[float, float]:
+    key = "campaign.phi_quantile"
+    table = context.mapping(gate["phi_quantile"], gate.line_of("phi_quantile"), key)
+    context.check_keys(table, ("q", "min"), key)
+    for required in ("q", "min"):
+        if required not in table:
+            raise context.error(
+                table.line,
+                _join(key, required),
+                "is required",
+                hint="write phi_quantile: {q: 0.1, min: 0.85} (10 % of recordings may score "
+                "below 0.85)",
+            )
+    return (
+        context.unit_interval(table["q"], table.line_of("q"), _join(key, "q")),
+        context.unit_interval(table["min"], table.line_of("min"), _join(key, "min")),
+    )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -13,21 +13,38 @@ from ..data.record import SourceOptions
 from .expressions import Expression
 
 __all__ = [
+    "ROLES",
     "AlignmentSpec",
+    "CampaignSpec",
     "ConditionSpec",
+    "DiagnosisSpec",
     "Interpolation",
     "LocalGate",
     "LocalSpec",
     "ModelKind",
+    "RecordingSpec",
     "RegionSpec",
+    "Role",
     "SignalSpec",
     "SourceSpec",
     "Spec",
+    "split_key",
 ]
 
 Interpolation = Literal["linear", "previous"]
 ModelKind = Literal["file", "callable", "fmu"]
 NanPolicy = Literal["raise", "omit"]
+#: Calibration recordings fitted the model, so they never count toward a campaign's gate.
+Role = Literal["calibration", "validation"]
+ROLES: tuple[Role, ...] = ("validation", "calibration")
+#: Between a campaign spec's path and a recording id in a result's key and on the command line.
+RECORDING_SEPARATOR = "::"
+
+
+def split_key(key: str) -> tuple[str, str | None]:
+    """(spec path, recording id or None) of a key such as ``specs/i3.hevval.yaml::TripB03``."""
+    path, separator, recording = key.partition(RECORDING_SEPARATOR)
+    return path, (recording if separator else None)
 
 
 @dataclass(frozen=True)
@@ -53,6 +70,19 @@ class SourceSpec:
         if self.kind == "callable":
             return f"callable {self.callable}"
         return str(self.path)
+
+
+@dataclass(frozen=True)
+class DiagnosisSpec:
+    """The spec's ``diagnosis:`` settings (docs/spec.md, docs/diagnosis.md)."""
+
+    #: A significant effect is relevant when it removes at least this share of the residual;
+    #: None: the diagnosis default (``core.diagnosis.MIN_SHARE``).
+    min_share: float | None = None
+    #: Candidate names that echo the scored signal and are never offered as the missing effect.
+    responses: tuple[str, ...] = ()
+    #: Candidate names that are causes, whatever the response rule says.
+    causes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -162,6 +192,30 @@ class SignalSpec:
 
 
 @dataclass(frozen=True)
+class RecordingSpec:
+    """One recording of a campaign: its data file, role and the model parameters it adds."""
+
+    id: str
+    #: Absolute path of the measured data file.
+    path: str
+    role: Role
+    params: Mapping[str, Any]
+    line: int
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """One spec scored over many recordings, and the campaign's own gate."""
+
+    recordings: tuple[RecordingSpec, ...]
+    line: int
+    #: Share of the validation recordings that must pass every gate of the spec.
+    min_pass_rate: float | None = None
+    #: (q, minimum): the q-quantile of Φ over the validation recordings must reach the minimum.
+    phi_quantile: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
 class Spec:
     """A whole validation spec: data sources, the signal sets and the gates."""
 
@@ -183,6 +237,7 @@ class Spec:
     correlation: Literal["xcorr", "pearson"] = "xcorr"
     emergent: Literal["V1", "V2"] = "V2"
     candidates: Mapping[str, Expression] = field(default_factory=dict)
+    diagnosis: DiagnosisSpec = field(default_factory=lambda: DiagnosisSpec())
     #: Limits and action of the data-quality gate on the reference channels.
     data_quality: QualityLimits = field(default_factory=QualityLimits)
     #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
@@ -190,6 +245,33 @@ class Spec:
     #: Where and when the model is wrong: windows, phases, conditions and region cells.
     local: LocalSpec | None = None
     regions: RegionSpec | None = None
+    #: The campaign this spec covers (every recording's spec keeps it, to know its siblings).
+    campaign: CampaignSpec | None = None
+    #: The recording this spec scores, for one recording of a campaign.
+    recording: str | None = None
+    role: Role = "validation"
+
+    @property
+    def key(self) -> str:
+        """What names this spec's result: its path, plus ``::recording`` in a campaign."""
+        if self.recording is None:
+            return str(self.path)
+        return f"{self.path}{RECORDING_SEPARATOR}{self.recording}"
+
+    def per_recording(self) -> tuple[Spec, ...]:
+        """One spec per recording of the campaign (the spec itself when it has one file)."""
+        if self.campaign is None or self.recording is not None:
+            return (self,)
+        return tuple(
+            replace(
+                self,
+                reference=replace(self.reference, path=recording.path),
+                model=replace(self.model, params={**self.model.params, **recording.params}),
+                recording=recording.id,
+                role=recording.role,
+            )
+            for recording in self.campaign.recordings
+        )
 
     def walk(self) -> Iterator[tuple[int, tuple[str, ...], SignalSpec]]:
         """(set index from 1, path of names, node) for every signal, parents first."""

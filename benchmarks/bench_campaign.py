@@ -1,0 +1,162 @@
+"""Campaign benchmark: what scoring recordings as one campaign costs over scoring them one by one.
+
+Run from the project root::
+
+    python benchmarks/bench_campaign.py --recordings 10 --repeat 1    # quick
+    python benchmarks/bench_campaign.py                              # 100 recordings, 3 repeats
+
+The data: ``--recordings`` recordings of 10 min at 10 Hz (6,000 samples) with 20 channels, and a
+callable model that reproduces each channel with a lag, a gain and noise. Two ways to score the
+same recordings, side by side in one process, alternating within each repetition:
+
+``single``
+    one spec file per recording (``reference: {path: data/rec007.parquet}``);
+``campaign``
+    one spec over all of them (``reference: {path: data/rec*.parquet}``): the same scoring plus
+    the campaign's own work, each recording's distribution of u for u-pooling, then the verdict.
+
+Both run the model once per recording and read each file once. The ratio campaign / single is
+the campaign's overhead. Data files are generated once into ``benchmarks/.data/campaign/`` (not
+tracked) and reused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE / ".data" / "campaign"
+RATE_HZ = 10.0
+SECONDS = 600.0
+CHANNELS = 20
+
+MODEL = """\
+import numpy as np
+import pandas as pd
+
+
+def run(frame, lag=3, gain=1.01):
+    out = {"time": frame["time"]}
+    rng = np.random.default_rng(len(frame))
+    for name in frame.columns:
+        if name != "time":
+            values = np.roll(frame[name].to_numpy(), lag) * gain
+            out[name] = values + rng.normal(0.0, 0.2, values.size)
+    return pd.DataFrame(out)
+"""
+
+
+def _columns() -> list[str]:
+    return [f"c{i:02d}" for i in range(CHANNELS)]
+
+
+def _recording(index: int) -> pd.DataFrame:
+    rng = np.random.default_rng(index)
+    t = np.arange(int(SECONDS * RATE_HZ)) / RATE_HZ
+    data: dict[str, np.ndarray] = {"time": t}
+    for name in _columns():
+        freqs = rng.uniform(0.002, 0.2, 3)
+        phases = rng.uniform(0, 2 * np.pi, 3)
+        wave = sum(np.sin(2 * np.pi * f * t + p) for f, p in zip(freqs, phases, strict=True))
+        data[name] = 10.0 * wave + np.cumsum(rng.normal(0.0, 0.05, t.size))
+    return pd.DataFrame(data)
+
+
+def _sets() -> str:
+    lines = ["sets:"]
+    names = _columns()
+    for start in range(0, len(names), 5):
+        parent, *children = names[start : start + 5]
+        lines.append(f"  - signal: {parent}")
+        lines.append("    children:")
+        lines.extend(f"      - {{signal: {child}}}" for child in children)
+    return "\n".join(lines) + "\n"
+
+
+def prepare(count: int) -> tuple[list[Path], Path]:
+    """Write the recordings, the model and both kinds of spec; return (single specs, campaign)."""
+    data = ROOT / "data"
+    data.mkdir(parents=True, exist_ok=True)
+    (ROOT / "campaign_bench_model.py").write_text(MODEL)
+    head = (
+        "model: {callable: 'campaign_bench_model:run'}\n"
+        "alignment: {max_lag_s: 2}\n"
+        "thresholds: {mae: 0.9}\n"
+        "min_phi: 0.8\n"
+    )
+    singles = []
+    for index in range(count):
+        target = data / f"rec{index:03d}.parquet"
+        if not target.exists():
+            _recording(index).to_parquet(target, index=False)
+        spec = ROOT / "single" / f"rec{index:03d}.hevval.yaml"
+        spec.parent.mkdir(exist_ok=True)
+        spec.write_text(f"reference: {{path: ../data/rec{index:03d}.parquet}}\n" + head + _sets())
+        singles.append(spec)
+    for extra in sorted(data.glob("rec*.parquet"))[count:]:
+        extra.unlink()
+    campaign = ROOT / "campaign.hevval.yaml"
+    campaign.write_text(
+        "reference: {path: data/rec*.parquet}\ncampaign: {min_pass_rate: 0.5}\n" + head + _sets()
+    )
+    return singles, campaign
+
+
+def score(specs: list[Path], *, campaign: bool) -> float:
+    """Wall time of loading and scoring ``specs`` (and the verdict, for a campaign)."""
+    from pytest_hevval.campaign import campaign_verdicts
+    from pytest_hevval.engine import Evaluation
+    from pytest_hevval.run import RunOptions, run_specs
+    from pytest_hevval.spec.load import load_specs
+
+    started = time.perf_counter()
+    loaded = [spec for path in specs for spec in load_specs(path)]
+    outcomes = run_specs(loaded, RunOptions(rootdir=ROOT))
+    results = [o.result for o in outcomes if isinstance(o, Evaluation)]
+    if len(results) != len(loaded):
+        raise SystemExit(f"only {len(results)} of {len(loaded)} recordings scored")
+    if campaign:
+        (verdict,) = campaign_verdicts(results)
+        assert len(verdict.recordings) == len(loaded)
+    return time.perf_counter() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--recordings", type=int, default=100)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    singles, campaign = prepare(args.recordings)
+    sys.path.insert(0, str(ROOT))
+    print(
+        f"{args.recordings} recordings of {SECONDS / 60:g} min at {RATE_HZ:g} Hz, "
+        f"{CHANNELS} signals; load average {os.getloadavg()[0]:.2f}"
+    )
+    rows: list[tuple[float, float]] = []
+    for repetition in range(1, args.repeat + 1):
+        single = score(singles, campaign=False)
+        whole = score([campaign], campaign=True)
+        rows.append((single, whole))
+        print(
+            f"  repetition {repetition}: single {single:.2f} s, campaign {whole:.2f} s, "
+            f"ratio {whole / single:.3f}"
+        )
+    best_single = min(r[0] for r in rows)
+    best_campaign = min(r[1] for r in rows)
+    print(
+        f"fastest: single {best_single:.2f} s, campaign {best_campaign:.2f} s, "
+        f"ratio {best_campaign / best_single:.3f}; "
+        f"median ratio per repetition {statistics.median(c / s for s, c in rows):.3f}"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,333 @@
+"""The verdict over a campaign: one spec scored on many recordings.
+
+Pure aggregation of the recordings' :class:`~pytest_hevval.result.SpecResult` objects, so the
+pytest item, the terminal summary and the reports give the same verdict from the same data.
+Calibration recordings (the ones the model was fitted on) are shown but never count toward the
+gate: a model always matches the data it was fitted to.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .core.registry import describe
+from .core.upooling import area_to_uniform, pool
+from .digest import identity
+from .result import SpecResult
+from .spec.model import split_key
+
+__all__ = [
+    "WORST_SHOWN",
+    "CampaignVerdict",
+    "Distribution",
+    "RecordingOutcome",
+    "campaign_of",
+    "campaign_payloads",
+    "campaign_verdicts",
+    "phi_quantile",
+    "verdict",
+    "verdict_lines",
+    "verdicts_from_dicts",
+]
+
+#: How many of the lowest-scoring recordings a verdict names.
+WORST_SHOWN = 3
+
+#: The quantiles a distribution over recordings is summarised by.
+SUMMARY_QUANTILES = (0.1, 0.5, 0.9)
+
+
+def campaign_of(spec_key: str) -> str:
+    """The campaign's spec path in a recording's result key (``spec.yaml::TripB03``)."""
+    return split_key(spec_key)[0]
+
+
+def phi_quantile(phis: Sequence[float], q: float) -> float:
+    """The q-quantile of Φ as an observed value: at most a share q of recordings lie below."""
+    return float(np.quantile(np.asarray(phis, dtype=np.float64), q, method="inverted_cdf"))
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """A value over the counted recordings: its least, quantiles and greatest."""
+
+    minimum: float
+    quantiles: dict[float, float]
+    maximum: float
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> Distribution:
+        finite = [v for v in values if math.isfinite(v)]
+        if not finite:
+            return cls(math.nan, {q: math.nan for q in SUMMARY_QUANTILES}, math.nan)
+        return cls(
+            min(finite),
+            {q: phi_quantile(finite, q) for q in SUMMARY_QUANTILES},
+            max(finite),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "min": _clean(self.minimum),
+            **{f"q{round(q * 100):02d}": _clean(v) for q, v in self.quantiles.items()},
+            "max": _clean(self.maximum),
+        }
+
+
+@dataclass(frozen=True)
+class RecordingOutcome:
+    id: str
+    role: str
+    phi: float
+    passed: bool
+    #: The recording's measured data file: the hash used and its digest.
+    hash: str
+    digest: str
+    failed_signals: tuple[str, ...]
+
+
+@dataclass
+class CampaignVerdict:
+    """Every figure of one campaign; ``failures`` says why its gate fails (empty: it passes)."""
+
+    spec: str
+    name: str
+    recordings: list[RecordingOutcome]
+    #: Recordings of the campaign with no result (unreadable data, or not run).
+    missing: list[str]
+    min_pass_rate: float | None
+    phi_quantile: tuple[float, float] | None
+    phi: Distribution
+    lambdas: dict[str, Distribution]
+    #: Share of the counted recordings in which each signal passes, by signal path.
+    signal_pass_rates: dict[str, float]
+    #: u-pooling area per signal over the counted recordings (0 best, 0.5 worst).
+    pooled_area: dict[str, float]
+    failures: list[str] = field(default_factory=list)
+
+    @property
+    def counted(self) -> list[RecordingOutcome]:
+        return [r for r in self.recordings if r.role != "calibration"]
+
+    @property
+    def excluded(self) -> list[str]:
+        return [r.id for r in self.recordings if r.role == "calibration"]
+
+    @property
+    def pass_rate(self) -> float:
+        counted = self.counted
+        return sum(r.passed for r in counted) / len(counted) if counted else math.nan
+
+    @property
+    def worst(self) -> list[RecordingOutcome]:
+        return sorted(self.counted, key=lambda r: (r.passed, r.phi))[:WORST_SHOWN]
+
+    @property
+    def passed(self) -> bool:
+        return not self.failures
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "spec": self.spec,
+            "name": self.name,
+            "passed": self.passed,
+            "failures": list(self.failures),
+            "pass_rate": _clean(self.pass_rate),
+            "min_pass_rate": self.min_pass_rate,
+            "phi_quantile": list(self.phi_quantile) if self.phi_quantile else None,
+            "excluded": self.excluded,
+            "missing": list(self.missing),
+            "worst": [r.id for r in self.worst],
+            "phi": self.phi.to_dict(),
+            "lambdas": {name: d.to_dict() for name, d in self.lambdas.items()},
+            "signal_pass_rates": dict(self.signal_pass_rates),
+            "pooled_area": {k: _clean(v) for k, v in self.pooled_area.items()},
+            "recordings": [
+                {
+                    "id": r.id,
+                    "role": r.role,
+                    "phi": _clean(r.phi),
+                    "passed": r.passed,
+                    "hash": r.hash,
+                    "digest": r.digest,
+                    "failed_signals": list(r.failed_signals),
+                }
+                for r in self.recordings
+            ],
+        }
+
+
+def _clean(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _mean_lambda(result: SpecResult, name: str) -> float:
+    """α-weighted mean of one characteristic over a recording's signals (Φ's own weighting)."""
+    weighted = [(s.alpha, s.lambdas[name]) for s in result.signals if name in s.lambdas]
+    total = sum(alpha for alpha, _ in weighted)
+    return sum(alpha * value for alpha, value in weighted) / total if total > 0 else math.nan
+
+
+def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
+    """The verdict over the recordings of one campaign (results of the same campaign spec)."""
+    if not results:
+        raise ValueError("a campaign verdict needs at least one recording's result")
+    first = results[0]
+    campaign = first.campaign or {}
+    by_id = {r.recording or r.spec: r for r in results}
+    declared = [str(r) for r in campaign.get("recordings", by_id)]
+    outcomes = [
+        RecordingOutcome(
+            id=recording,
+            role=result.role,
+            phi=result.phi,
+            passed=result.passed,
+            hash=(identity(result.data.get("reference", {})) or ("", ""))[0],
+            digest=(identity(result.data.get("reference", {})) or ("", ""))[1],
+            failed_signals=tuple(s.path for s in result.signals if not s.passed),
+        )
+        for recording in declared
+        if (result := by_id.get(recording)) is not None
+    ]
+    counted = [by_id[o.id] for o in outcomes if o.role != "calibration"]
+    names = [name for name in first.weights if any(name in s.lambdas for s in first.signals)]
+    paths = [s.path for s in first.signals]
+    quantile = campaign.get("phi_quantile")
+    found = CampaignVerdict(
+        spec=campaign_of(first.spec),
+        name=str(campaign.get("name", first.name)),
+        recordings=outcomes,
+        missing=[r for r in declared if r not in by_id],
+        min_pass_rate=campaign.get("min_pass_rate"),
+        phi_quantile=(float(quantile[0]), float(quantile[1])) if quantile else None,
+        phi=Distribution.of([r.phi for r in counted]),
+        lambdas={n: Distribution.of([_mean_lambda(r, n) for r in counted]) for n in names},
+        signal_pass_rates={path: _pass_rate(counted, path) for path in paths},
+        pooled_area=_pooled_areas(counted, paths),
+    )
+    found.failures = _gate_failures(found)
+    return found
+
+
+def _pass_rate(results: Sequence[SpecResult], path: str) -> float:
+    if not results:
+        return math.nan
+    return sum(r.signal(path).passed for r in results) / len(results)
+
+
+def _pooled_areas(results: Sequence[SpecResult], paths: Sequence[str]) -> dict[str, float]:
+    areas: dict[str, float] = {}
+    for path in paths:
+        distributions = [
+            r.signal(path).u_distribution
+            for r in results
+            if r.signal(path).u_distribution is not None
+        ]
+        if distributions:
+            areas[path] = area_to_uniform(pool(distributions))  # type: ignore[arg-type]
+    return areas
+
+
+def _gate_failures(found: CampaignVerdict) -> list[str]:
+    """Why the campaign's gate fails, one line per reason."""
+    counted = found.counted
+    failures: list[str] = []
+    if found.missing:
+        failures.append(
+            "no result for "
+            + ", ".join(found.missing)
+            + " (deselected in this run, or their data or model failed: see their errors)"
+        )
+    gated = found.min_pass_rate is not None or found.phi_quantile is not None
+    if gated and not counted:
+        failures.append(
+            "every recording is a calibration recording, so nothing validates the model"
+        )
+        return failures
+    if found.min_pass_rate is not None and found.pass_rate < found.min_pass_rate:
+        failed = [r.id for r in counted if not r.passed]
+        failures.append(
+            f"pass rate {found.pass_rate:.0%} < min_pass_rate {found.min_pass_rate:.0%} "
+            f"({len(counted) - len(failed)} of {len(counted)} validation recordings pass; "
+            f"failing: {', '.join(failed)})"
+        )
+    if found.phi_quantile is not None:
+        q, minimum = found.phi_quantile
+        value = phi_quantile([r.phi for r in counted], q)
+        if not value >= minimum:
+            failures.append(
+                f"Φ {q:.0%}-quantile {value:.4f} < {minimum:.4g} "
+                f"(more than {q:.0%} of validation recordings score below {minimum:.4g})"
+            )
+    return failures
+
+
+def campaign_verdicts(results: Iterable[SpecResult]) -> list[CampaignVerdict]:
+    """A verdict for every campaign among ``results`` (single-file specs are left out)."""
+    groups: dict[str, list[SpecResult]] = {}
+    for result in results:
+        if result.recording is not None:
+            groups.setdefault(campaign_of(result.spec), []).append(result)
+    return [verdict(groups[key]) for key in sorted(groups)]
+
+
+def verdict_lines(found: CampaignVerdict) -> list[str]:
+    """The campaign section of the terminal summary and of ``hevval run``."""
+    counted = found.counted
+    lines = [
+        f"campaign {found.spec} ({found.name}): "
+        + ("PASS" if found.passed else "FAIL")
+        + (
+            f" ({len(found.recordings)} of {len(found.recordings) + len(found.missing)} "
+            "recordings scored)"
+            if found.missing
+            else ""
+        )
+        + f", {sum(r.passed for r in counted)} of {len(counted)} validation recordings pass"
+        + (f" (min_pass_rate {found.min_pass_rate:.0%})" if found.min_pass_rate is not None else "")
+    ]
+    if found.excluded:
+        lines.append("  excluded from the gate (calibration): " + ", ".join(found.excluded))
+    phi = found.phi
+    lines.append(
+        f"  Φ over recordings: min {phi.minimum:.4f}, "
+        + ", ".join(f"q{round(q * 100):02d} {v:.4f}" for q, v in phi.quantiles.items())
+        + f", max {phi.maximum:.4f}"
+    )
+    for name, spread in found.lambdas.items():
+        lines.append(
+            f"  {describe(name).symbol} {name}: min {spread.minimum:.4f}, "
+            f"median {spread.quantiles[0.5]:.4f}, max {spread.maximum:.4f}"
+        )
+    if found.worst:
+        lines.append(
+            "  worst recordings: "
+            + ", ".join(
+                f"{r.id} Φ {r.phi:.4f}" + ("" if r.passed else " FAIL") for r in found.worst
+            )
+        )
+    lines.append("  signal pass rate (u-pooling area, 0 best, 0.5 worst):")
+    width = max(len(p) for p in found.signal_pass_rates) if found.signal_pass_rates else 0
+    for path, rate in found.signal_pass_rates.items():
+        area = found.pooled_area.get(path)
+        lines.append(
+            f"    {path:<{width}}  {rate:5.0%}"
+            + (f"  (area {area:.3f})" if area is not None else "")
+        )
+    lines.extend(f"  gate: {failure}" for failure in found.failures)
+    return lines
+
+
+def campaign_payloads(dicts: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Every campaign's verdict as plain data: the reports' campaign section."""
+    return [found.to_dict() for found in verdicts_from_dicts(dicts)]
+
+
+def verdicts_from_dicts(dicts: Iterable[Mapping[str, Any]]) -> list[CampaignVerdict]:
+    """:func:`campaign_verdicts` of results in their JSON form (reports, the controller)."""
+    return campaign_verdicts(SpecResult.from_dict(d) for d in dicts if d.get("recording"))

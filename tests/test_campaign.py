@@ -1,0 +1,405 @@
+"""Campaigns: one spec over many recordings, their items, roles, gate and u-pooling."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from pytest_hevval.core.upooling import (
+    U_GRID,
+    area_to_uniform,
+    pool,
+    u_distribution,
+    u_distribution_of,
+    u_values,
+)
+from pytest_hevval.errors import SpecError
+from pytest_hevval.spec.load import load_specs, parse_spec_text
+
+from .strategies import finite
+
+pytest_plugins = ["pytester"]
+
+MODEL = """\
+import pandas as pd
+
+
+def run(frame, gain=1.0):
+    speed = frame["speed"]
+    return pd.DataFrame({"time": frame["t"], "speed": speed, "P": 2.0 * speed * gain})
+"""
+
+SPEC = """\
+name: fleet
+reference: {{path: data/Trip*.csv, time: t}}
+model: {{callable: "campaign_model:run", inputs: [speed]}}
+recordings:
+  - {{id: Trip01, role: calibration}}
+  - {{id: Trip03, params: {{gain: {gain}}}}}
+campaign: {{min_pass_rate: {rate}, phi_quantile: {{q: 0.25, min: 0.5}}}}
+thresholds: {{mae: 0.95}}
+min_phi: 0.95
+sets:
+  - {{signal: P, ref: P, sim: P}}
+  - {{signal: speed, ref: speed, sim: speed}}
+"""
+
+TRIPS = ("Trip01", "Trip02", "Trip03", "Trip04")
+
+
+def write_campaign(root: Path, *, gain: float = 1.0, rate: float = 0.6) -> None:
+    """Four trips at different speeds; the model is exact unless a recording's gain is off."""
+    (root / "data").mkdir(exist_ok=True)
+    t = np.arange(0.0, 60.0, 0.1)
+    for number, trip in enumerate(TRIPS, start=1):
+        speed = 20.0 * number + 10.0 * np.sin(t / (3.0 + number))
+        power = 2.0 * speed + np.random.default_rng(number).normal(0.0, 0.1, t.size)
+        frame = pd.DataFrame({"t": t, "speed": speed, "P": power})
+        frame.to_csv(root / "data" / f"{trip}.csv", index=False)
+    (root / "campaign_model.py").write_text(MODEL)
+    (root / "fleet.hevval.yaml").write_text(SPEC.format(gain=gain, rate=rate))
+
+
+@pytest.fixture
+def project(pytester: pytest.Pytester) -> pytest.Pytester:
+    return pytester
+
+
+# -- pytest items, end to end -----------------------------------------------------------------
+
+
+def test_items_per_recording_and_a_campaign_item(project: pytest.Pytester) -> None:
+    write_campaign(project.path)
+    result = project.runpytest("--hevval", "--hevval-no-history", "--collect-only", "-q")
+    ids = [line for line in result.stdout.lines if line.startswith("fleet.hevval.yaml::")]
+    assert "fleet.hevval.yaml::Trip03::speed" in ids
+    assert "fleet.hevval.yaml::Trip04::Phi" in ids
+    assert ids[-1] == "fleet.hevval.yaml::campaign"
+    assert len(ids) == 4 * 3 + 1
+
+
+def test_a_recording_that_fails_is_its_own_items_failure(project: pytest.Pytester) -> None:
+    # Trip03's model parameters make its power 40 % high; the other recordings pass.
+    write_campaign(project.path, gain=1.4)
+    result = project.runpytest("--hevval", "--hevval-no-history")
+    result.assert_outcomes(passed=11, failed=2)
+    result.stdout.fnmatch_lines(
+        [
+            "campaign fleet.hevval.yaml (fleet): PASS, 2 of 3 validation recordings pass*",
+            "  excluded from the gate (calibration): Trip01",
+            "  worst recordings: Trip03 Φ * FAIL, *",
+            "FAILED fleet.hevval.yaml::Trip03::P - *",
+            "FAILED fleet.hevval.yaml::Trip03::Phi - *",
+        ]
+    )
+    assert "P missed its thresholds (fleet.hevval.yaml:11 (recording Trip03))" in (
+        result.stdout.str()
+    )
+
+
+def test_campaign_gate_fails_below_min_pass_rate(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    result = project.runpytest("--hevval", "--hevval-no-history")
+    result.assert_outcomes(passed=10, failed=3)
+    result.stdout.fnmatch_lines(
+        [
+            "*gate: pass rate 67% < min_pass_rate 90% (2 of 3 validation recordings pass;"
+            " failing: Trip03)",
+            "FAILED fleet.hevval.yaml::campaign - *",
+        ]
+    )
+
+
+def test_calibration_recording_never_counts(project: pytest.Pytester) -> None:
+    write_campaign(project.path, rate=1.0)
+    spec = project.path / "fleet.hevval.yaml"
+    # The fitted-on trip is the one the model misses: it fails its own items, but it is
+    # excluded from the gate, so the campaign passes.
+    spec.write_text(
+        spec.read_text().replace(
+            "{id: Trip01, role: calibration}",
+            "{id: Trip01, role: calibration, params: {gain: 1.4}}",
+        )
+    )
+    result = project.runpytest("--hevval", "--hevval-no-history")
+    result.assert_outcomes(passed=11, failed=2)
+    result.stdout.fnmatch_lines(["campaign fleet.hevval.yaml (fleet): PASS, 3 of 3*"])
+    assert "FAILED fleet.hevval.yaml::Trip01::P" in result.stdout.str()
+
+
+def test_same_outcomes_under_xdist_and_selection(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    serial = project.runpytest("--hevval", "--hevval-no-history")
+    parallel = project.runpytest("--hevval", "--hevval-no-history", "-p", "xdist", "-n", "2")
+    assert serial.parseoutcomes() == parallel.parseoutcomes()
+    parallel.stdout.fnmatch_lines(["campaign fleet.hevval.yaml (fleet): FAIL, 2 of 3*"])
+    selected = project.runpytest("--hevval", "--hevval-no-history", "-k", "Trip03")
+    selected.assert_outcomes(passed=1, failed=2)
+    selected.stdout.fnmatch_lines(
+        ["campaign fleet.hevval.yaml (fleet): FAIL (1 of 4 recordings scored)*"]
+    )
+    # --lf reruns the failed recording's items and the failed campaign item, nothing else.
+    rerun = project.runpytest("--hevval", "--hevval-no-history", "--lf")
+    rerun.assert_outcomes(failed=3)
+
+
+def test_cli_run_gives_the_campaign_verdict(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    result = project.run(
+        sys.executable,
+        "-m",
+        "pytest_hevval",
+        "run",
+        "fleet.hevval.yaml",
+        "--json",
+        "out.json",
+        "--no-history",
+    )
+    assert result.ret == 1
+    payload = json.loads((project.path / "out.json").read_text())
+    (campaign,) = payload["campaigns"]
+    assert campaign["excluded"] == ["Trip01"]
+    assert campaign["pass_rate"] == pytest.approx(2 / 3)
+    assert [r["id"] for r in campaign["recordings"]] == list(TRIPS)
+    # Each recording's file is identified (xxh3_128 with the fast extra, else sampled BLAKE2b).
+    assert all(r["hash"] and len(r["digest"]) >= 32 for r in campaign["recordings"])
+    assert {s["spec"] for s in payload["specs"]} == {f"fleet.hevval.yaml::{t}" for t in TRIPS}
+
+
+# -- the spec ---------------------------------------------------------------------------------
+
+
+def _spec(tmp_path: Path, head: str) -> str:
+    (tmp_path / "data").mkdir(exist_ok=True)
+    for trip in ("TripA", "TripB"):
+        (tmp_path / "data" / f"{trip}.csv").write_text("t,x\n0,1\n1,2\n")
+    return head + "sets:\n  - {signal: x}\n"
+
+
+GLOB_HEAD = "reference: {path: data/Trip*.csv, time: t}\nmodel: {callable: 'm:run'}\n"
+
+
+def test_pattern_expands_to_one_spec_per_recording(tmp_path: Path) -> None:
+    text = _spec(tmp_path, GLOB_HEAD + "recordings:\n  - {id: TripB, role: calibration}\n")
+    (tmp_path / "c.hevval.yaml").write_text(text)
+    specs = load_specs(tmp_path / "c.hevval.yaml")
+    assert [(s.recording, s.role) for s in specs] == [
+        ("TripA", "validation"),
+        ("TripB", "calibration"),
+    ]
+    assert specs[1].reference.path == str((tmp_path / "data" / "TripB.csv").resolve())
+    assert specs[0].key.endswith("c.hevval.yaml::TripA")
+    (only,) = load_specs(f"{tmp_path / 'c.hevval.yaml'}::TripB")
+    assert only.recording == "TripB"
+
+
+def test_table_of_recordings_passes_parameters(tmp_path: Path) -> None:
+    text = _spec(
+        tmp_path,
+        "reference: {time: t}\n"
+        "model: {callable: 'm:run', params: {version: 2}}\n"
+        "recordings:\n"
+        "  - {path: data/TripA.csv, params: {ambient_c: 31}}\n"
+        "  - {id: cold, path: data/TripB.csv, params: {ambient_c: -5, version: 1}}\n",
+    )
+    specs = parse_spec_text(text, tmp_path / "c.hevval.yaml").per_recording()
+    assert [s.recording for s in specs] == ["TripA", "cold"]
+    assert dict(specs[1].model.params) == {"version": 1, "ambient_c": -5}
+    assert dict(specs[0].model.params) == {"version": 2, "ambient_c": 31}
+
+
+@pytest.mark.parametrize(
+    ("head", "line", "key", "message"),
+    [
+        (
+            "reference: {path: data/Nothing*.csv, time: t}\nmodel: {callable: 'm:run'}\n",
+            1,
+            "reference.path",
+            "the pattern matches no file (got 'data/Nothing*.csv')",
+        ),
+        (
+            GLOB_HEAD + "recordings:\n  - {id: TripA, role: calibraton}\n",
+            4,
+            "recordings[0].role",
+            "must be one of validation, calibration",
+        ),
+        (
+            GLOB_HEAD + "recordings:\n  - {id: TripA}\n  - {id: TripA, role: calibration}\n",
+            5,
+            "recordings[1].id",
+            "duplicate recording id 'TripA' (first listed at line 4)",
+        ),
+        (
+            GLOB_HEAD + "recordings:\n  - {id: TripC}\n",
+            4,
+            "recordings[0].id",
+            "no file matched by reference.path has this id",
+        ),
+        (
+            "reference: {path: data/TripA.csv, time: t}\nmodel: {callable: 'm:run'}\n"
+            "campaign: {min_pass_rate: 0.8}\n",
+            3,
+            "campaign",
+            "gates a campaign, but the spec names a single recording",
+        ),
+        (
+            "reference: {path: data/Trip*.csv, time: t}\nmodel: {path: data/TripA.csv}\n",
+            2,
+            "model.path",
+            "a campaign runs the model on each recording",
+        ),
+        (
+            "reference: {time: t}\nmodel: {callable: 'm:run'}\nrecordings:\n"
+            "  - {path: data/TripA.csv}\n  - {path: data/TripA.csv}\n",
+            5,
+            "recordings[1].id",
+            "duplicate recording id 'TripA'",
+        ),
+        (
+            GLOB_HEAD + "campaign: {phi_quantile: {q: 0.1}}\n",
+            3,
+            "campaign.phi_quantile.min",
+            "is required",
+        ),
+    ],
+)
+def test_bad_campaigns_are_spec_errors(
+    tmp_path: Path, head: str, line: int, key: str, message: str
+) -> None:
+    path = tmp_path / "c.hevval.yaml"
+    with pytest.raises(SpecError) as caught:
+        parse_spec_text(_spec(tmp_path, head), path)
+    error = caught.value
+    assert (error.file, error.line, error.key) == (str(path), line, key)
+    assert message in str(error)
+
+
+def test_unknown_recording_on_the_command_line(tmp_path: Path) -> None:
+    (tmp_path / "c.hevval.yaml").write_text(_spec(tmp_path, GLOB_HEAD))
+    with pytest.raises(SpecError, match=r"no recording 'TripC'.*did you mean"):
+        load_specs(f"{tmp_path / 'c.hevval.yaml'}::TripC")
+
+
+# -- u-pooling --------------------------------------------------------------------------------
+
+
+def test_golden_areas() -> None:
+    observed = np.linspace(0.0, 1.0, 20001)
+    # Predicted U(0, 2), observed U(0, 1): u = y / 2 is uniform on [0, 0.5], its distribution
+    # min(2u, 1), and the area to the uniform one ∫0^.5 u du + ∫.5^1 (1 − u) du = 1/4.
+    half = area_to_uniform(u_distribution(u_values(observed, np.linspace(0.0, 2.0, 20001))))
+    assert half == pytest.approx(0.25, abs=1e-3)
+    # Every observation below everything predicted: u = 0, the largest area, 1/2.
+    assert area_to_uniform(u_distribution(u_values(observed, observed + 5.0))) == pytest.approx(
+        0.5, abs=1e-3
+    )
+    # The model's distribution is the observed one: u is uniform, the area 0.
+    assert area_to_uniform(u_distribution(u_values(observed, observed))) == pytest.approx(
+        0.0, abs=1e-3
+    )
+
+
+def test_pooling_over_operating_points() -> None:
+    # Two recordings far apart in physical units, each matched in distribution: pooled area 0.
+    low = np.linspace(0.0, 1.0, 5001)
+    high = np.linspace(100.0, 300.0, 5001)
+    pooled = pool([u_distribution(u_values(x, x)) for x in (low, high)])
+    assert area_to_uniform(pooled) == pytest.approx(0.0, abs=1e-3)
+    # One matched, one wholly below its prediction (area 0.5): the pool lies between.
+    pooled = pool([u_distribution(u_values(low, low)), u_distribution(u_values(high, high + 500))])
+    assert area_to_uniform(pooled) == pytest.approx(0.25, abs=2e-3)
+
+
+samples = hnp.arrays(np.float64, st.integers(1, 200), elements=finite)
+
+
+@settings(max_examples=60, deadline=None)
+@given(samples, samples, samples, samples)
+def test_u_pooling_properties(
+    observed_a: np.ndarray, predicted_a: np.ndarray, observed_b: np.ndarray, predicted_b: np.ndarray
+) -> None:
+    a = u_distribution(u_values(observed_a, predicted_a))
+    b = u_distribution(u_values(observed_b, predicted_b))
+    for distribution in (a, b):
+        assert np.all(np.diff(distribution) >= 0)
+        assert distribution[-1] == 1.0
+        assert 0.0 <= area_to_uniform(distribution) <= 0.5 + 1e-12
+    assert np.array_equal(pool([a, a]), a)
+    # The area is convex in the distribution: a pool is never worse than its recordings' mean.
+    assert area_to_uniform(pool([a, b])) <= (area_to_uniform(a) + area_to_uniform(b)) / 2 + 1e-12
+    # u depends only on ranks: scaling both sides alike (exactly, by 2) changes nothing.
+    shifted = u_values(2.0 * observed_a, 2.0 * predicted_a)
+    assert np.allclose(shifted, u_values(observed_a, predicted_a))
+
+
+few_values = hnp.arrays(
+    np.float64, st.integers(1, 60), elements=st.sampled_from([-1.5, 0.0, 2.0, 7.0])
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(samples, few_values), st.one_of(samples, few_values))
+def test_fast_distribution_is_the_definition(observed: np.ndarray, predicted: np.ndarray) -> None:
+    """The engine's shortcut gives, bit for bit, the distribution of u sample by sample."""
+    expected = u_distribution(u_values(observed, predicted))
+    assert np.array_equal(u_distribution_of(observed, predicted), expected)
+
+
+def test_pool_rejects_bad_input() -> None:
+    with pytest.raises(ValueError, match="nothing to pool"):
+        pool([])
+    with pytest.raises(ValueError, match="points on U_GRID"):
+        pool([np.zeros(3)])
+    with pytest.raises(ValueError, match="weights"):
+        pool([U_GRID], weights=[0.0])
+
+
+# -- reports and comparison -------------------------------------------------------------------
+
+
+def test_reports_have_a_campaign_section(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    project.runpytest("--hevval", "--hevval-no-history", "--hevval-report=html,json,md")
+    folder = next(project.path.glob("**/report.json")).parent
+    (campaign,) = json.loads((folder / "report.json").read_text())["campaigns"]
+    assert campaign["excluded"] == ["Trip01"]
+    assert campaign["failures"][0].startswith("pass rate 67% < min_pass_rate 90%")
+    assert 0.0 <= campaign["pooled_area"]["P"] <= 0.5
+    markdown = (folder / "report.md").read_text()
+    assert "**❌ campaign fleet** (`fleet.hevval.yaml`)" in markdown
+    assert "Excluded from the gate (calibration): `Trip01`" in markdown
+    assert '<section class="card" id="campaign-1">' in (folder / "report.html").read_text()
+
+
+def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4)
+    project.runpytest("--hevval", "--hevval-model-version=v1")
+    write_campaign(project.path, gain=1.0)
+    result = project.runpytest("--hevval", "--hevval-model-version=v2", "--hevval-compare=latest")
+    result.stdout.fnmatch_lines(
+        [
+            "campaign fleet.hevval.yaml (v1 → v2): Φ better on Trip03 (+0.1*); worse on none;"
+            " unchanged on Trip01, Trip02, Trip04"
+        ]
+    )
+
+
+def test_a_recording_is_scored_alone_as_file_and_id(project: pytest.Pytester) -> None:
+    """The form a Dask worker receives a campaign recording in."""
+    from pytest_hevval.distributed import evaluate_spec_file
+
+    write_campaign(project.path)
+    payload = evaluate_spec_file(
+        str(project.path / "fleet.hevval.yaml") + "::Trip02", str(project.path)
+    )
+    assert (payload["recording"], payload["role"]) == ("Trip02", "validation")
+    assert payload["campaign"]["recordings"] == list(TRIPS)
+    assert len(payload["signals"][0]["u_distribution"]) == U_GRID.size
