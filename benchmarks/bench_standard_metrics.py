@@ -3,9 +3,11 @@
     python benchmarks/bench_standard_metrics.py                    # n = 1,000 and 4,000
     python benchmarks/bench_standard_metrics.py --samples 4000 --repeat 5
     python benchmarks/bench_standard_metrics.py --long 14130 360000   # ours alone, long records
+    python benchmarks/bench_standard_metrics.py --samples --banded 88   # banded vs exact, i3
 
 ISO/TS 18571: ``objective-rating-metrics`` (``ISO18571(...).overall_rating()``, its numba
-compilation done once before timing) against ``iso18571_rating``, on the drive-cycle pair of
+compilation done once before timing) against ``iso18571_rating`` on the numpy path and, with
+the ``fast`` extra, on the compiled kernel (compiled before timing), on the drive-cycle pair of
 ``bench_core.py``, interleaved repetition by repetition; the ratio is taken per repetition and
 the two ratings are printed so that they can be compared. The other standard metrics are
 single passes; their times at the same size are printed for scale.
@@ -41,34 +43,67 @@ def _package(ref: np.ndarray, sim: np.ndarray) -> float:
     return float(ISO18571(np.c_[t, ref], np.c_[t, sim], dt=DT).overall_rating(-1))
 
 
+def _on_path(path: str, ref: np.ndarray, sim: np.ndarray) -> Any:
+    """``iso18571_rating`` on the numpy reference path or the compiled kernel."""
+    from pytest_hevval.core.kernel import KERNEL_ENV
+    from pytest_hevval.core.standard import iso18571_rating
+
+    os.environ[KERNEL_ENV] = path
+    try:
+        return iso18571_rating(ref, sim)
+    finally:
+        del os.environ[KERNEL_ENV]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, nargs="*", default=[1000, 4000])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--long", type=int, nargs="*", default=[], help="ours alone at these n")
+    parser.add_argument(
+        "--banded",
+        type=int,
+        nargs="*",
+        default=[],
+        help="warping half-bands: banded against exact rating on every signal of two i3 trips",
+    )
     args = parser.parse_args()
 
+    from pytest_hevval.core import kernel
     from pytest_hevval.core.registry import STANDARD_CHARACTERISTICS, get_characteristic
-    from pytest_hevval.core.standard import iso18571_rating
 
-    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    warm_ref, warm_sim = make_pair("drive", 64)
-    t_jit, _ = _timed(_package, warm_ref, warm_sim)
-    print(f"objective-rating-metrics first call (numba compilation, not counted): {t_jit:.2f} s")
+    paths = ["numpy"] + (["numba"] if kernel.active_path() == "numba" else [])
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; paths {paths}")
+    if args.samples:
+        warm_ref, warm_sim = make_pair("drive", 64)
+        t_jit, _ = _timed(_package, warm_ref, warm_sim)
+        print(
+            f"objective-rating-metrics first call (numba compilation, not counted): {t_jit:.2f} s"
+        )
+        for path in paths:
+            t_warm, _ = _timed(_on_path, path, warm_ref, warm_sim)
+            print(f"ours on {path}, first call (not counted): {t_warm:.2f} s")
     for n in args.samples:
         ref, sim = make_pair("drive", n)
-        ratios, theirs, ours = [], [], []
+        theirs: list[float] = []
+        ours: dict[str, list[float]] = {path: [] for path in paths}
+        ratios: dict[str, list[float]] = {path: [] for path in paths}
+        ratings: dict[str, float] = {}
         for _ in range(args.repeat):
             t_pkg, r_pkg = _timed(_package, ref, sim)
-            t_ours, r_ours = _timed(iso18571_rating, ref, sim)
             theirs.append(t_pkg)
-            ours.append(t_ours)
-            ratios.append(t_pkg / t_ours)
-        print(
-            f"ISO/TS 18571 n = {n:6d}: package {min(theirs) * 1e3:9.1f} ms (rating {r_pkg:.4f})"
-            f"   ours {min(ours) * 1e3:7.1f} ms (rating {r_ours.rating:.4f})"
-            f"   package/ours min {min(ratios):.0f}x median {statistics.median(ratios):.0f}x"
-        )
+            for path in paths:
+                t_ours, r_ours = _timed(_on_path, path, ref, sim)
+                ours[path].append(t_ours)
+                ratios[path].append(t_pkg / t_ours)
+                ratings[path] = r_ours.rating
+        print(f"ISO/TS 18571 n = {n:6d}: package {min(theirs) * 1e3:9.1f} ms (rating {r_pkg:.4f})")
+        for path in paths:
+            print(
+                f"    ours, {path:5s}: {min(ours[path]) * 1e3:9.2f} ms (rating {ratings[path]:.4f})"
+                f"   package/ours min {min(ratios[path]):.0f}x"
+                f" median {statistics.median(ratios[path]):.0f}x"
+            )
         for name in STANDARD_CHARACTERISTICS[1:]:
             compute = get_characteristic(name).compute
             assert compute is not None
@@ -76,9 +111,36 @@ def main() -> None:
             print(f"    {name:14s} n = {n:6d}: {best * 1e3:7.3f} ms")
     for n in args.long:
         ref, sim = make_pair("drive", n)
-        t_ours, rating = _timed(iso18571_rating, ref, sim)
-        mode = f"banded to ±{rating.band}" if rating.banded else f"exact band ±{rating.band}"
-        print(f"ISO/TS 18571 n = {n:6d}: ours {t_ours:.2f} s, {mode}, rating {rating.rating:.4f}")
+        for path in paths:
+            t_ours, rating = _timed(_on_path, path, ref, sim)
+            mode = f"banded to ±{rating.band}" if rating.banded else f"exact band ±{rating.band}"
+            print(
+                f"ISO/TS 18571 n = {n:6d}, {path:5s}: {t_ours:.2f} s, {mode}, "
+                f"rating {rating.rating:.4f}"
+            )
+
+    for band in args.banded:
+        banded_deviation(band)
+
+
+def banded_deviation(band: int) -> None:
+    """The rating with the warping band narrowed to ±band against the exact one, i3 trips."""
+    from pytest_hevval.core.standard import iso18571_rating
+    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.spec.load import load_spec
+
+    example = Path(__file__).resolve().parent.parent / "example_project"
+    for name in ("i3-A02-motorway-v2", "i3-B03-winter-v2"):
+        spec = load_spec(example / "specs" / f"{name}.hevval.yaml")
+        arrays = evaluate_spec(spec, rootdir=example, keep_arrays=True).arrays
+        for path, (ref, sim) in arrays.items():
+            exact = iso18571_rating(ref, sim)
+            narrow = iso18571_rating(ref, sim, max_cells=ref.size * (2 * band + 1))
+            print(
+                f"{name} {path:24s} n = {ref.size}: exact ±{exact.band} {exact.rating:.4f}, "
+                f"±{narrow.band} {narrow.rating:.4f} ({narrow.rating - exact.rating:+.5f}; "
+                f"magnitude {narrow.magnitude - exact.magnitude:+.5f})"
+            )
 
 
 if __name__ == "__main__":

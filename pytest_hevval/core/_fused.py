@@ -296,3 +296,68 @@ def grouped_sums(r, s, labels, shift, out):  # type: ignore[no-untyped-def]
             a9 += 1.0
     if current >= 0:
         _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
+
+
+@numba.njit(cache=True, nogil=True)
+def dtw_path(x, y, band):  # type: ignore[no-untyped-def]
+    """ISO/TS 18571's warping path of x onto y with |i − j| ≤ band: (rows, cols) from (0, 0).
+
+    The compiled form of ``core.standard.iso18571._dtw_path``: the same recurrence, band layout
+    and ties (up, then left, then diagonal), cell by cell instead of a row's running minimum.
+    """
+    n = x.shape[0]
+    width = 2 * band + 1
+    choice = np.empty((n, width), dtype=np.int8)
+    # Band cell k of a row at index k + 1, inf on both sides.
+    previous = np.full(width + 2, np.inf)
+    current = np.full(width + 2, np.inf)
+    for i in range(n):
+        lo = max(0, band - i)
+        hi = min(width, n - i + band)
+        current[lo] = np.inf
+        current[hi + 1] = np.inf
+        for k in range(lo, hi):
+            gap = x[i] - y[i + k - band]
+            up = previous[k + 2]
+            left = current[k]
+            diagonal = previous[k + 1]
+            if i == 0 and k == lo:
+                best = 0.0
+                step = 0
+            elif up <= left and up <= diagonal:
+                best = up
+                step = 0
+            elif left <= diagonal:
+                best = left
+                step = 1
+            else:
+                best = diagonal
+                step = 2
+            current[k + 1] = gap * gap + best
+            choice[i, k] = step
+        previous, current = current, previous
+    rows = np.empty(2 * n, dtype=np.int64)
+    cols = np.empty(2 * n, dtype=np.int64)
+    i = n - 1
+    j = n - 1
+    m = 0
+    rows[0] = i
+    cols[0] = j
+    while i > 0 or j > 0:
+        if i == 0:
+            j -= 1
+        elif j == 0:
+            i -= 1
+        else:
+            step = choice[i, j - i + band]
+            if step == 0:
+                i -= 1
+            elif step == 1:
+                j -= 1
+            else:
+                i -= 1
+                j -= 1
+        m += 1
+        rows[m] = i
+        cols[m] = j
+    return rows[m::-1].copy(), cols[m::-1].copy()

@@ -325,3 +325,15 @@ def grouped_sums(
         out,
     )
     return out
+
+
+def dtw_path(
+    module: ModuleType, x: AnyFloatArray, y: AnyFloatArray, band: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """ISO/TS 18571's warping path (rows of x, columns of y), one sequential compiled pass."""
+    rows, cols = module.dtw_path(
+        np.ascontiguousarray(x, dtype=np.float64),
+        np.ascontiguousarray(y, dtype=np.float64),
+        int(band),
+    )
+    return rows, cols

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal as sps
 
+from .. import kernel
 from ..registry import CharacteristicValue
 from ._inputs import FloatArray, checked_pair, degenerate
 
@@ -108,13 +109,7 @@ def iso18571_rating(
     n = ref.shape[0]
     corridor = _corridor(ref, sim, p)
     shift = _phase_shift(ref, sim, p.phase_limit)
-    limit = n * round(p.phase_limit, 2)
-    if shift == 0:
-        phase = 1.0
-    elif abs(shift) >= limit:
-        phase = 0.0
-    else:
-        phase = ((limit - abs(shift)) / limit) ** p.phase_exponent
+    phase = _ramp(abs(shift), n * p.phase_limit, p.phase_exponent)
     # A negative shift: the simulation lags, its later samples meet the reference's earlier ones.
     if shift < 0:
         ref_s, sim_s = ref[: n + shift], sim[-shift:]
@@ -128,21 +123,9 @@ def iso18571_rating(
     if banded:
         band = max(1, (max_cells // m - 1) // 2)
     magnitude_error = _warped_magnitude_error(sim_s, ref_s, band)
-    if magnitude_error == 0.0:
-        magnitude = 1.0
-    elif magnitude_error > p.magnitude_limit:
-        magnitude = 0.0
-    else:
-        magnitude = ((p.magnitude_limit - magnitude_error) / p.magnitude_limit) ** (
-            p.magnitude_exponent
-        )
+    magnitude = _ramp(magnitude_error, p.magnitude_limit, p.magnitude_exponent)
     slope_error = _slope_error(ref_s, sim_s)
-    if slope_error <= 0.0:
-        slope = 1.0
-    elif slope_error >= p.slope_limit:
-        slope = 0.0
-    else:
-        slope = (p.slope_limit - slope_error) / p.slope_limit
+    slope = _ramp(slope_error, p.slope_limit, 1.0)
     rating = (
         p.weight_corridor * corridor
         + p.weight_phase * phase
@@ -152,9 +135,9 @@ def iso18571_rating(
     return Iso18571Rating(
         rating=float(min(1.0, max(0.0, rating))),
         corridor=corridor,
-        phase=float(phase),
-        magnitude=float(magnitude),
-        slope=float(slope),
+        phase=phase,
+        magnitude=magnitude,
+        slope=slope,
         shift=shift,
         magnitude_error=magnitude_error,
         slope_error=slope_error,
@@ -183,6 +166,15 @@ def iso18571_characteristic(
     )
 
 
+def _ramp(error: float, limit: float, exponent: float) -> float:
+    """The standard's score of an error: 1 at 0, 0 from ``limit`` on, ((ε_lim − ε)/ε_lim)^k."""
+    if error <= 0.0:
+        return 1.0
+    if error >= limit:
+        return 0.0
+    return float(((limit - error) / limit) ** exponent)
+
+
 def _corridor(ref: FloatArray, sim: FloatArray, p: Iso18571Parameters) -> float:
     peak = float(np.max(np.abs(ref)))
     inner = p.inner_corridor * peak
@@ -197,7 +189,7 @@ def _corridor(ref: FloatArray, sim: FloatArray, p: Iso18571Parameters) -> float:
 def _phase_shift(ref: FloatArray, sim: FloatArray, phase_limit: float) -> int:
     """The shift of ``sim`` (samples; negative = sim lags) with the highest overlap correlation."""
     n = ref.shape[0]
-    shifts = math.floor(n * round(phase_limit, 2)) + 1
+    shifts = math.floor(n * phase_limit) + 1
     x = ref - ref.mean()
     y = sim - sim.mean()
     cross = sps.correlate(y, x, mode="full", method="fft" if n > 256 else "direct")
@@ -270,10 +262,15 @@ def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.n
     S the row's cumulative cost, D[i, j] = S_j + min_{k ≤ j}(A_k − S_k), so each row is a few
     vector operations. Rows are kept in band coordinates (k = j − i + band) a block at a time;
     the backtracking steps of a whole block are then chosen at once, ties going up, then left,
-    then diagonal (as dtwalign backtracks). Memory: one byte per band cell.
+    then diagonal (as dtwalign backtracks). Memory: one byte per band cell. With the ``fast``
+    extra, bands the kernel takes (:func:`~pytest_hevval.core.kernel.kernel_for`, counted in
+    cells) run as one compiled loop with the same ties.
     """
     n = x.shape[0]
     width = 2 * band + 1
+    compiled = kernel.kernel_for(n * width, ("dtw_path",))
+    if compiled is not None:
+        return kernel.dtw_path(compiled, x, y, band)
     choice = np.empty((n, width), dtype=np.int8)
     # Row r of the block sits at rows[r + 1], band cell k at column k + 1, with inf padding on
     # both sides; rows[0] is the last row of the previous block.

@@ -58,8 +58,15 @@ def _energy_ratio_and_phase(
         )
     m, c = ref / ref_peak, sim / sim_peak
     mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
+    ratio = (sim_peak / ref_peak) * math.sqrt(cc / mm)
+    if not (math.isfinite(ratio) and ratio > 0.0 and math.isfinite(1.0 / ratio)):
+        raise degenerate(
+            metric,
+            f"the signals' magnitudes differ by a factor beyond the float range ({ratio:.3g})",
+            "check the model output's column and scale",
+        )
     cosine = max(-1.0, min(1.0, mc / math.sqrt(mm * cc)))
-    return (sim_peak / ref_peak) * math.sqrt(cc / mm), math.acos(cosine) / math.pi
+    return ratio, math.acos(cosine) / math.pi
 
 
 def sprague_geers(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
