@@ -16,8 +16,9 @@ same recordings, side by side in one process, alternating within each repetition
     the campaign's own work, each recording's distribution of u for u-pooling, then the verdict.
 
 Both run the model once per recording and read each file once. The ratio campaign / single is
-the campaign's overhead. Data files are generated once into ``benchmarks/.data/campaign/`` (not
-tracked) and reused.
+the campaign's overhead. Last, one signal's u distribution (6,000 samples) computed sample by
+sample (``u_distribution(u_values(...))``) against the engine's ``u_distribution_of``. Data
+files are generated once into ``benchmarks/.data/campaign/`` (not tracked) and reused.
 """
 
 from __future__ import annotations
@@ -129,6 +130,27 @@ def score(specs: list[Path], *, campaign: bool) -> tuple[float, float]:
     return time.perf_counter() - started, time.process_time() - cpu
 
 
+def u_distribution_timing(calls: int = 300) -> None:
+    """Milliseconds per signal: u sample by sample against the engine's shortcut."""
+    from pytest_hevval.core.upooling import u_distribution, u_distribution_of, u_values
+
+    reference = _recording(0)["c00"].to_numpy()
+    model = np.roll(reference, 3) * 1.01 + np.random.default_rng(1).normal(0, 0.2, reference.size)
+    for label, run in (
+        ("sample by sample", lambda: u_distribution(u_values(reference, model))),
+        ("u_distribution_of", lambda: u_distribution_of(reference, model)),
+    ):
+        times = []
+        for _ in range(calls):
+            started = time.perf_counter()
+            run()
+            times.append(time.perf_counter() - started)
+        print(
+            f"u distribution of {reference.size} samples, {label}: "
+            f"median {statistics.median(times) * 1e3:.2f} ms, fastest {min(times) * 1e3:.2f} ms"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recordings", type=int, default=100)
@@ -159,6 +181,7 @@ def main() -> None:
             f"ratio {fastest_campaign / fastest_single:.3f}; median ratio per repetition "
             f"{median:.3f}"
         )
+    u_distribution_timing()
 
 
 if __name__ == "__main__":
