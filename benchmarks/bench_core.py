@@ -668,7 +668,7 @@ def run_size(kind: str, n: int, args: argparse.Namespace, report: dict[str, Any]
 
 
 def run_iso(sizes: list[int], args: argparse.Namespace, report: dict[str, Any]) -> None:
-    from objective_rating_metrics.rating import ISO18571  # type: ignore[import-untyped]
+    from objective_rating_metrics.rating import ISO18571
 
     def iso(ref2: FloatArray, sim2: FloatArray) -> dict[str, float]:
         return {"rating": float(ISO18571(ref2, sim2, dt=DT).overall_rating())}

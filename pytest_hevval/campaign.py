@@ -17,6 +17,7 @@ import numpy as np
 
 from .core.registry import describe
 from .core.upooling import area_to_uniform, pool
+from .digest import identity
 from .result import SpecResult
 from .spec.model import split_key
 
@@ -84,8 +85,9 @@ class RecordingOutcome:
     role: str
     phi: float
     passed: bool
-    #: SHA-256 of the recording's measured data file.
-    sha256: str
+    #: The measured data file's digest, and the hash that made it (see pytest_hevval.digest).
+    hash: str
+    digest: str
     failed_signals: tuple[str, ...]
 
 
@@ -151,7 +153,8 @@ class CampaignVerdict:
                     "role": r.role,
                     "phi": _clean(r.phi),
                     "passed": r.passed,
-                    "sha256": r.sha256,
+                    "hash": r.hash,
+                    "digest": r.digest,
                     "failed_signals": list(r.failed_signals),
                 }
                 for r in self.recordings
@@ -161,6 +164,11 @@ class CampaignVerdict:
 
 def _clean(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
+
+
+def _identity(result: SpecResult) -> tuple[str, str]:
+    """(hash, digest) of a recording's measured data file; empty when it was not hashed."""
+    return identity(result.data.get("reference") or {}) or ("", "")
 
 
 def _mean_lambda(result: SpecResult, name: str) -> float:
@@ -184,7 +192,8 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
             role=result.role,
             phi=result.phi,
             passed=result.passed,
-            sha256=str(result.data.get("reference", {}).get("sha256", "")),
+            hash=_identity(result)[0],
+            digest=_identity(result)[1],
             failed_signals=tuple(s.path for s in result.signals if not s.passed),
         )
         for recording in declared

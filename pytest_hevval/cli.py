@@ -65,6 +65,7 @@ def _run(args: argparse.Namespace) -> int:
         figures="html" in (args.report or ""),
         workers=args.workers,
         dask=args.dask,
+        data_hash=args.hash,
     )
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
     done = [0]
@@ -176,6 +177,8 @@ def _shared(parser: argparse.ArgumentParser, name: str, **overrides: Any) -> Non
         kwargs["action"] = "store_true"
     else:
         kwargs["default"] = option.default
+    if option.choices:
+        kwargs["choices"] = option.choices
     kwargs.update(overrides)
     parser.add_argument(f"--{name}", **kwargs)
 
@@ -198,7 +201,9 @@ def _parser() -> argparse.ArgumentParser:
         description="Multi-fidelity validation of simulation models against measured data.",
         epilog="Each command has its own --help. The same checks run as tests: pytest --hevval.",
     )
-    parser.add_argument("--version", action="version", version=_version_text(__version__))
+    parser.add_argument(
+        "--version", action=_VersionAction, version=_version_text(__version__), nargs=0
+    )
     commands = parser.add_subparsers(
         dest="command", required=True, metavar="COMMAND", parser_class=_Parser
     )
@@ -214,6 +219,7 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "model-version")
     _shared(run, "dask", metavar="ADDRESS")
     _shared(run, "workers", type=_workers)
+    _shared(run, "hash")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     diagnose = commands.add_parser(
@@ -275,6 +281,26 @@ def _parser() -> argparse.ArgumentParser:
 
 def _version_text(version: str) -> str:
     return f"pytest-hevval {version}"
+
+
+class _VersionAction(argparse.Action):
+    """Prints the version and the active scoring path (this loads numba, so only on request)."""
+
+    def __init__(self, option_strings: list[str], version: str, **kwargs: Any) -> None:
+        super().__init__(
+            option_strings, help="show the version and the scoring path, then exit", **kwargs
+        )
+        self.version = version
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
+        from .core.kernel import describe
+
+        try:
+            path = describe()
+        except HevvalError as error:
+            parser.exit(2, f"{self.version}\nhevval: {error}\n")
+        print(f"{self.version}\n{path}")
+        parser.exit()
 
 
 def _dispatch(args: argparse.Namespace) -> int:

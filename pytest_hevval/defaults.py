@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-__all__ = ["HISTORY_DIR", "REPORT_DIR", "SPEC_GLOBS"]
+__all__ = [
+    "HISTORY_DIR",
+    "LOCAL_WINDOW_S",
+    "REGION_BINS",
+    "REGION_MIN_SAMPLES",
+    "REPORT_DIR",
+    "SPEC_GLOBS",
+]
 
 #: Spec files, as pytest's ``python_files`` globs (ini ``hevval_files`` overrides them).
 SPEC_GLOBS: tuple[str, ...] = ("*.hevval.yaml", "*.hevval.yml")
@@ -10,3 +17,10 @@ SPEC_GLOBS: tuple[str, ...] = ("*.hevval.yaml", "*.hevval.yml")
 HISTORY_DIR = ".hevval/history"
 #: Where reports go, relative to the project root.
 REPORT_DIR = ".hevval/report"
+#: ``local:`` windows, in seconds, when the spec does not say.
+LOCAL_WINDOW_S = 30.0
+#: ``regions:`` equal bins per variable when ``bins`` is not given.
+REGION_BINS = 10
+#: A region cell with fewer samples is shown but neither judged by the gate nor coloured as
+#: failing: at 10 Hz, 10 s of driving.
+REGION_MIN_SAMPLES = 100

@@ -10,20 +10,29 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
-from collections.abc import Sequence
+import re
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from .core.diagnosis import Candidate, diagnose_residual
-from .core.registry import FUSED_CHARACTERISTICS
+from .core.diagnosis import MIN_SHARE, Candidate, Diagnosis, diagnose_residual
+from .core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from .data.record import Record
 from .engine import Evaluation
 from .errors import DataError, HevvalError, SpecError
 
-__all__ = ["candidates_for", "diagnose_main", "diagnose_origin", "diagnose_signal"]
+__all__ = [
+    "candidates_for",
+    "derivative_name",
+    "diagnose_main",
+    "diagnose_origin",
+    "diagnose_pair",
+    "diagnose_signal",
+    "effect_text",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -108,8 +117,40 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
             continue
         on_grid = np.interp(time, channel.time[ok], values[ok])
         add(name, "channel", on_grid)
-        add(f"d/dt {name}", "derivative", np.gradient(_smoothed(on_grid, smoothing), time))
+        add(derivative_name(name), "derivative", np.gradient(_smoothed(on_grid, smoothing), time))
     return found
+
+
+def _with_derivatives(names: Sequence[str]) -> tuple[str, ...]:
+    """Names declared for a channel also cover its derivative candidate."""
+    return (*names, *(derivative_name(n) for n in names))
+
+
+def derivative_name(channel: str) -> str:
+    """The name of the derivative candidate of a channel."""
+    return f"d/dt {channel}"
+
+
+def diagnose_pair(
+    evaluation: Evaluation,
+    reference: FloatArray,
+    simulated: FloatArray,
+    candidates: Sequence[Candidate],
+) -> Diagnosis:
+    """Diagnose one aligned pair of the evaluation with the spec's diagnosis settings."""
+    assert evaluation.aligned is not None
+    settings = evaluation.spec.diagnosis
+    return diagnose_residual(
+        reference,
+        simulated,
+        dt=evaluation.aligned.grid.dt,
+        candidates=candidates,
+        max_lag_s=evaluation.spec.alignment.max_lag_s,
+        responses=_with_derivatives(settings.responses),
+        # A channel the model reads is an input; the spec can name more causes.
+        causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
+        min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
+    )
 
 
 def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True) -> dict[str, Any]:
@@ -123,12 +164,8 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         )
     reference, simulated = evaluation.arrays[path]
     result = evaluation.result.signal(path)
-    diagnosis = diagnose_residual(
-        reference,
-        simulated,
-        dt=evaluation.aligned.grid.dt,
-        candidates=candidates_for(evaluation, channels=channels),
-        max_lag_s=evaluation.spec.alignment.max_lag_s,
+    diagnosis = diagnose_pair(
+        evaluation, reference, simulated, candidates_for(evaluation, channels=channels)
     )
     by_path = {s.path: s for s in evaluation.result.signals}
     origin_path = result.origins[0] if result.origins else path
@@ -142,7 +179,120 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         "origins": [{"path": p, "level": by_path[p].level} for p in result.origins if p in by_path],
     }
     payload.update(diagnosis.as_dict())
+    for effect in payload["effects"]:
+        effect["text"] = effect_text(effect, path.rsplit("/", 1)[-1], result.unit)
     return payload
+
+
+def _candidate_unit(name: str, kind: str) -> str | None:
+    """The unit in a logged column's name (``Heating Power CAN [kW]`` → ``kW``), per second for
+    its derivative; None for a declared expression, whose unit the spec does not state."""
+    base = name.removeprefix("d/dt ") if kind == "derivative" else name
+    match = re.search(r"\[([^\]]+)\]\s*$", base)
+    if match is None:
+        return None
+    return f"{match.group(1)}/s" if kind == "derivative" else match.group(1)
+
+
+def effect_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
+    """One effect in physical units with its interval, e.g. ``+0.94 kW of P_batt per kW of
+    Heating Power CAN [kW] [0.82, 1.06]``."""
+    coef = float(effect["coefficient"])
+    low, high = (float(v) for v in effect["interval"])
+    unit_text = f" {unit}" if unit else ""
+    kind = str(effect["kind"])
+    if kind == "offset":
+        return f"offset {coef:+.3g}{unit_text} of {signal} [{low:.3g}, {high:.3g}]"
+    if kind == "gain":
+        return f"gain error {100 * coef:+.2f} % [{100 * low:.2f}, {100 * high:.2f}]"
+    if kind == "lag":
+        late = "late" if coef > 0 else "early"
+        return f"the simulation is {abs(coef):.3g} s {late} [{low:.3g}, {high:.3g}] s"
+    per = _candidate_unit(str(effect["name"]), kind)
+    per_text = f"{per} of " if per else "unit of "
+    return (
+        f"{coef:+.3g}{unit_text} of {signal} per {per_text}{effect['name']} [{low:.3g}, {high:.3g}]"
+    )
+
+
+def _lambda_change(before: Mapping[str, Any], after: Mapping[str, Any]) -> str:
+    return ", ".join(
+        f"{get_characteristic(name).symbol} {float(before[name]):.4f} → {float(after[name]):.4f}"
+        for name in after
+        if name in before
+    )
+
+
+def _describe_effects(found: Mapping[str, Any]) -> list[str]:
+    effects = found.get("effects") or []
+    unit = f" {found['unit']}" if found.get("unit") else ""
+    share = float(found.get("min_share", MIN_SHARE))
+    before = found.get("lambdas") or {}
+    relevant = [e for e in effects if e["relevant"]]
+    minor = [e for e in effects if e["significant"] and not e["relevant"]]
+    lines: list[str] = []
+    if relevant:
+        lines.append(
+            f"  effects (significant, each removing at least {100 * share:.0f} % of the "
+            "residual), largest first:"
+        )
+    for i, e in enumerate(relevant, start=1):
+        mean = float(e.get("offset_explained") or 0.0)
+        carries = (
+            f"; carries {mean:+.3g}{unit} of the mean shift"
+            if e["kind"]
+            not in (
+                "gain",
+                "lag",
+                "offset",
+            )
+            and abs(mean) > 0
+            else ""
+        )
+        lines.append(
+            f"   {i}. {e['text']}: removes {100 * e['share']:.1f} % of the residual{carries}"
+        )
+        if e.get("predicted") and before:
+            lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
+    if minor:
+        lines.append(
+            f"  minor (significant, under {100 * share:.0f} % each): "
+            + "; ".join(f"{e['text']} ({100 * e['share']:.1f} %)" for e in minor)
+        )
+    if len(relevant) > 1 and found.get("predicted") and before:
+        lines.append(
+            f"  after adding all {len(relevant)}: {_lambda_change(before, found['predicted'])}"
+        )
+    for r in found.get("responses") or []:
+        how = (
+            "declared a response in the spec"
+            if r["reason"] == "declared"
+            else f"the measured signal explains {100 * r['measured_r2']:.0f} % of it, the "
+            f"residual adds {100 * r['residual_r2']:.1f} %"
+        )
+        lines.append(
+            f"  response: {r['name']} moves with {found['signal'].rsplit('/', 1)[-1]}, "
+            f"probably a consequence ({how}); not offered as a cause"
+        )
+    where = found.get("localisation")
+    if where and where.get("windows"):
+        spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in where["spans_s"][:3])
+        more = " …" if len(where["spans_s"]) > 3 else ""
+        text = (
+            f"  where: {100 * where['error_share']:.0f} % of the squared residual lies in "
+            f"{100 * where['time_share']:.0f} % of the time, in {where['windows']} window(s) of "
+            f"{where['window_s']:g} s: {spans}{more}"
+        )
+        if relevant and relevant[0].get("hot_share") is not None:
+            first = relevant[0]
+            hot = 100 * first["hot_share"]
+            text += (
+                f"; {first['name']} removes {hot:.0f} % of it there"
+                if hot >= 0
+                else f"; {first['name']} does not explain it there (it would add {-hot:.0f} %)"
+            )
+        lines.append(text)
+    return lines
 
 
 def _strongest_finding(found: dict[str, Any]) -> float:
@@ -206,6 +356,7 @@ def _describe(found: dict[str, Any]) -> list[str]:
                 f"{100 * item['explained_fraction']:5.1f}% / {joint_text}, "
                 f"{item['coefficient']:.4g} [{interval[0]:.4g}, {interval[1]:.4g}]"
             )
+    lines.extend(_describe_effects(found))
     remaining = found.get("remaining") or {}
     if remaining:
         verdict = "white" if remaining.get("white") else "not white"

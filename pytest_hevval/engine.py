@@ -6,7 +6,6 @@ never prints, and it writes nothing.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import threading
 from collections.abc import Callable, Iterable, Mapping
@@ -25,12 +24,22 @@ from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
 from .data.record import Record, SourceOptions
+from .digest import DEFAULT_HASH, file_digest
 from .errors import (
     CharacteristicError,
     DataError,
     DegenerateSignalError,
     ExpressionError,
     HevvalError,
+)
+from .localise import (
+    Labels,
+    LocalFailure,
+    LocalResult,
+    label_samples,
+    local_failures,
+    score_local,
+    spec_local_summary,
 )
 from .result import Failure, SignalResult, SpecResult
 from .spec.expressions import Expression
@@ -47,20 +56,11 @@ def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
     return read_record
 
 
-def file_digest(path: str) -> str:
-    """SHA-256 of a data file (hex), so history can tell when the measurements changed."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 22), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _digest_or_empty(path: str) -> str:
+def _digest_or_empty(path: str, algorithm: str) -> dict[str, str]:
     try:
-        return file_digest(path)
+        return file_digest(path, algorithm)
     except OSError:
-        return ""
+        return {}
 
 
 class DataCache:
@@ -70,11 +70,13 @@ class DataCache:
     a file then reads all declared columns in one go.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, data_hash: str = DEFAULT_HASH) -> None:
+        #: How data files are identified in results (see :mod:`pytest_hevval.digest`).
+        self.data_hash = data_hash
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
         self._declared: dict[tuple[str, str], set[str]] = {}
-        self._digests: dict[str, Future[str]] = {}
+        self._digests: dict[str, Future[dict[str, str]]] = {}
         self._hasher: ThreadPoolExecutor | None = None
         #: How many times each file was actually read (tests and benchmarks check it).
         self.reads: dict[str, int] = {}
@@ -120,15 +122,16 @@ class DataCache:
             self._start_digest(key[0])
             return record
 
-    def _start_digest(self, path: str) -> Future[str]:
-        # hashlib releases the GIL, so hashing overlaps with reading the model and scoring.
+    def _start_digest(self, path: str) -> Future[dict[str, str]]:
+        # hashlib and xxhash release the GIL, so hashing overlaps with reading and scoring.
         if path not in self._digests:
             if self._hasher is None:
-                self._hasher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hevval-sha")
-            self._digests[path] = self._hasher.submit(_digest_or_empty, path)
+                self._hasher = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hevval-hash")
+            self._digests[path] = self._hasher.submit(_digest_or_empty, path, self.data_hash)
         return self._digests[path]
 
-    def digest(self, path: str) -> str:
+    def digest(self, path: str) -> dict[str, str]:
+        """``{"hash": …, "digest": …}`` of a data file (empty if it could not be read)."""
         with self._lock:
             future = self._start_digest(path)
         return future.result()
@@ -152,7 +155,7 @@ def _load_model(
     model = spec.model
     if model.kind == "file":
         record = cache.read(model, spec.model_columns())
-        return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "file"}
+        return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "file"}
     if model.kind == "callable":
         from .data.models import run_callable
 
@@ -189,7 +192,7 @@ def _load_model(
         step_size=model.step_size,
         parameters={k: float(v) for k, v in model.params.items()},
     )
-    return record, {"path": model.path, "sha256": cache.digest(str(model.path)), "kind": "fmu"}
+    return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "fmu"}
 
 
 def _columns_of(expression: Expression, record: Record) -> tuple[str, ...]:
@@ -312,9 +315,15 @@ def _evaluate(
     dt = aligned.grid.dt
     fused = _fused_characteristics(spec, unique, values, dt, workers)
     registered = _registered_characteristics(spec, unique, values, dt)
+    labels = _labels(spec, aligned)
+    local = _local_results(spec, labels, unique, values, fused, workers)
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
+    missed_locally = {
+        path: local_failures(spec, node, labels, local.get(_signature(node)))
+        for path, node in node_specs.items()
+    }
     signals: list[SignalResult] = []
     arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
     characteristics: dict[str, SignalCharacteristics] = {}
@@ -332,12 +341,17 @@ def _evaluate(
                 {name: parts for name, (_, parts) in registered[signature].items() if parts},
                 failures,
                 _figures(ref, sim, chars, aligned) if figures else None,
+                local.get(signature),
+                missed_locally,
             )
         )
         characteristics[signals[-1].path] = chars
         if keep_arrays:
             arrays[signals[-1].path] = (ref, sim)
     result = _spec_result(spec, signals, aligned, model_info, cache)
+    result.local = spec_local_summary(
+        spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
+    )
     if spec.campaign is not None:
         _add_campaign_facts(spec, result, values, node_specs)
     return Evaluation(
@@ -361,6 +375,8 @@ def _align(
     for _, _, node in nodes:
         ref_columns.update(_columns_of(node.ref, reference))
         model_columns.update(_columns_of(node.sim, model_record))
+    for expression in _local_expressions(spec):
+        ref_columns.update(_columns_of(expression, reference))
     alignment = spec.alignment
     findings = assess(reference, sorted(ref_columns), spec.data_quality)
     if spec.data_quality.action == "error":
@@ -384,6 +400,72 @@ def _align(
         bad = mask_on_grid(findings, aligned.time)
         aligned.gap_mask = bad if aligned.gap_mask is None else aligned.gap_mask | bad
     return aligned
+
+
+def _local_expressions(spec: Spec) -> list[Expression]:
+    """The reference expressions that cut a record into phases, conditions and cells."""
+    expressions: list[Expression] = []
+    if spec.local is not None:
+        if spec.local.phases is not None:
+            expressions.append(spec.local.phases)
+        expressions.extend(c.expression for c in spec.local.conditions)
+    if spec.regions is not None:
+        expressions.extend(spec.regions.by)
+    return expressions
+
+
+def _reference_values(aligned: AlignedData, expression: Expression, key: str) -> FloatArray:
+    """A reference column or expression on the grid (phases, conditions, region variables)."""
+    record = aligned.reference
+    names = _columns_of(expression, record)
+    method = record.meta.get("interpolation", "linear")
+    try:
+        columns = aligned.columns("reference", names, method)
+        if expression.is_column or names == (expression.source,):
+            return np.asarray(columns[names[0]], dtype=np.float64)
+        return np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
+    except ExpressionError as exc:
+        raise exc.with_context(key=key) from None
+
+
+def _labels(spec: Spec, aligned: AlignedData) -> Labels | None:
+    keep = None
+    if aligned.gap_mask is not None and aligned.gap_mask.any():
+        keep = ~aligned.gap_mask
+    try:
+        return label_samples(
+            spec,
+            aligned.time,
+            keep,
+            lambda expression, key: _reference_values(aligned, expression, key),
+        )
+    except DegenerateSignalError as exc:
+        raise exc.with_context(key="regions") from None
+
+
+def _local_results(
+    spec: Spec,
+    labels: Labels | None,
+    unique: dict[Signature, SignalSpec],
+    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    fused: Mapping[Signature, SignalCharacteristics],
+    workers: int | None,
+) -> dict[Signature, LocalResult]:
+    """Each distinct signal over windows, phases, conditions and cells (one pass each)."""
+    if labels is None:
+        return {}
+    n_workers = workers if workers is not None else min(2, os.cpu_count() or 1)
+
+    def score(signature: Signature) -> tuple[Signature, LocalResult]:
+        ref, sim = values[signature]
+        chars = fused[signature]
+        return signature, score_local(labels, ref, sim, chars.reference_range, spec.correlation)
+
+    if n_workers > 1 and len(unique) > 1:
+        # The compiled pass and numpy's loops release the GIL: signals run side by side.
+        with ThreadPoolExecutor(max_workers=n_workers) as pool:
+            return dict(pool.map(score, unique))
+    return dict(map(score, unique))
 
 
 def _signal_arrays(
@@ -543,11 +625,13 @@ def _signal_result(
     components: dict[str, dict[str, float]],
     failures: Mapping[NodePath, list[Failure]],
     figures: dict[str, Any] | None,
+    local: LocalResult | None,
+    missed_locally: Mapping[NodePath, list[LocalFailure]],
 ) -> SignalResult:
     path = scored_node.path
 
     def failed(candidate: ScoredNode) -> bool:
-        return bool(failures[candidate.path])
+        return bool(failures[candidate.path] or missed_locally[candidate.path])
 
     origins = error_origins(scored_node, failed)
     return SignalResult(
@@ -565,10 +649,12 @@ def _signal_result(
         failures=failures[path],
         unit=node.unit,
         description=node.description,
-        origin=bool(failures[path]) and origins == (scored_node,),
+        origin=failed(scored_node) and origins == (scored_node,),
         origins=["/".join(o.path) for o in origins],
         children=["/".join(c.path) for c in scored_node.children],
         figures=figures,
+        local=local,
+        local_failures=missed_locally[path],
     )
 
 
@@ -593,7 +679,7 @@ def _spec_result(
         data={
             "reference": {
                 "path": spec.reference.path,
-                "sha256": cache.digest(str(spec.reference.path)),
+                **cache.digest(str(spec.reference.path)),
             },
             "model": model_info,
             **(

@@ -145,7 +145,7 @@ class SignalItem(_SpecItem):
         diagnosis = self.state.diagnosis_for(self.evaluation, signal)
         if diagnosis is not None:
             self.hevval_diagnosis = {"spec": result.spec, **diagnosis}
-        if signal.failures:
+        if not signal.passed:
             line = diagnosis.get("summary") if diagnosis else None
             target = diagnosis.get("diagnosed") if diagnosis else None
             raise ThresholdMissed(

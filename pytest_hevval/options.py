@@ -12,6 +12,7 @@ from typing import Any, Literal
 import pytest
 
 from .defaults import HISTORY_DIR, REPORT_DIR, SPEC_GLOBS
+from .digest import DEFAULT_HASH, HASH_CHOICES
 
 __all__ = ["OPTIONS", "Option", "add_options", "get_option", "option_named"]
 
@@ -85,6 +86,14 @@ OPTIONS: tuple[Option, ...] = (
     ),
     Option("dask", "string", "evaluate specs on this dask.distributed scheduler address", None),
     Option("workers", "string", "threads per spec for scoring signals (default 2)", None),
+    Option(
+        "hash",
+        "choice",
+        "identify data files in results and history by a fast hash (xxh3_128, else sampled) "
+        "or by sha256",
+        DEFAULT_HASH,
+        HASH_CHOICES,
+    ),
 )
 
 _BY_NAME = {o.name: o for o in OPTIONS}

@@ -14,6 +14,7 @@ from typing import Any
 
 from .core.characteristics import SignalCharacteristics
 from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
+from .localise import LocalFailure, LocalResult
 
 __all__ = ["RESULT_SCHEMA_VERSION", "Failure", "SignalResult", "SpecResult"]
 
@@ -81,12 +82,16 @@ class SignalResult:
     children: list[str] = field(default_factory=list)
     figures: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
+    #: The signal over windows, phases, conditions and region cells (``local:``/``regions:``).
+    local: LocalResult | None = None
+    #: Window and cell gates missed.
+    local_failures: list[LocalFailure] = field(default_factory=list)
     #: A campaign recording's distribution of u = F_model(measured) on core.upooling.U_GRID.
     u_distribution: list[float] | None = None
 
     @property
     def passed(self) -> bool:
-        return not self.failures
+        return not self.failures and not self.local_failures
 
     def lambda_of(self, characteristic: str) -> float:
         return self.lambdas[characteristic]
@@ -154,6 +159,10 @@ class SignalResult:
             out["figures"] = self.figures
         if self.diagnosis is not None:
             out["diagnosis"] = self.diagnosis
+        if self.local is not None:
+            out["local"] = self.local.to_dict()
+        if self.local_failures:
+            out["local_failures"] = [f.to_dict() for f in self.local_failures]
         if self.u_distribution is not None:
             out["u_distribution"] = list(self.u_distribution)
         return out
@@ -189,6 +198,8 @@ class SignalResult:
             children=list(data.get("children", [])),
             figures=data.get("figures"),
             diagnosis=data.get("diagnosis"),
+            local=LocalResult.from_dict(data["local"]) if data.get("local") else None,
+            local_failures=[LocalFailure.from_dict(f) for f in data.get("local_failures", [])],
             u_distribution=data.get("u_distribution"),
         )
 
@@ -205,6 +216,24 @@ class SignalResult:
             lines.append(
                 f"{characteristic.title} = {failure.value:.4f} < {failure.threshold:.4g}"
                 + (f" ({meaning})" if meaning else "")
+            )
+        for local in self.local_failures:
+            lines.append(local.sentence(describe(local.characteristic).title))
+        return lines
+
+    def where_lines(self) -> list[str]:
+        """Where and when the error lies: its concentration and the worst windows."""
+        if self.local is None:
+            return []
+        lines = [f"where: {self.local.concentration.get('sentence', '')}"]
+        worst = self.local.worst_windows()
+        if worst:
+            windows = self.local.windows
+            lines.append(
+                "worst windows: "
+                + ", ".join(
+                    f"{windows.labels[k]} ({windows.error_share[k]:.0%} of Σe²)" for k in worst
+                )
             )
         return lines
 
@@ -224,6 +253,8 @@ class SpecResult:
     signals: list[SignalResult]
     data: dict[str, Any]
     alignment: dict[str, Any]
+    #: The grid of windows and cells, coverage and Φ per window and per cell.
+    local: dict[str, Any] | None = None
     #: One recording of a campaign: its id, its role and the campaign's gate (see campaign.py).
     recording: str | None = None
     role: str = "validation"
@@ -273,6 +304,7 @@ class SpecResult:
             "data": self.data,
             "alignment": self.alignment,
             "signals": [s.to_dict() for s in self.signals],
+            **({"local": self.local} if self.local is not None else {}),
             **(
                 {"recording": self.recording, "role": self.role, "campaign": self.campaign}
                 if self.recording is not None
@@ -297,6 +329,7 @@ class SpecResult:
             signals=[SignalResult.from_dict(s) for s in data["signals"]],
             data=dict(data.get("data", {})),
             alignment=dict(data.get("alignment", {})),
+            local=data.get("local"),
             recording=data.get("recording"),
             role=str(data.get("role", "validation")),
             campaign=data.get("campaign"),

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .data.remote import is_url
+from .digest import DEFAULT_HASH
 from .engine import DataCache, Evaluation, evaluate_spec
 from .errors import HevvalError
 from .result import SpecResult
@@ -38,6 +39,8 @@ class RunOptions:
     workers: int | None = None
     #: A dask.distributed scheduler address (or "local"): score the specs there.
     dask: str | None = None
+    #: How data files are identified in results: "fast" or "sha256" (see digest.py).
+    data_hash: str = DEFAULT_HASH
 
 
 def relative_to(rootdir: Path, path: str) -> str:
@@ -74,7 +77,7 @@ def run_specs(
     if options.dask:
         outcomes = _on_dask(specs, options, progress)
     else:
-        shared = cache if cache is not None else DataCache()
+        shared = cache if cache is not None else DataCache(options.data_hash)
         for spec in specs:
             shared.declare(spec.reference, spec.reference_columns())
             shared.declare(spec.model, spec.model_columns())
@@ -105,7 +108,7 @@ def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
 
 def evaluate_here(spec: Spec, options: RunOptions) -> Outcome:
     """Score one spec in this process with a cache of its own (the Dask task body)."""
-    return _evaluate(spec, options, DataCache())
+    return _evaluate(spec, options, DataCache(options.data_hash))
 
 
 def _on_dask(

@@ -160,7 +160,9 @@ class HevvalSession:
                 keep_arrays=self.option("diagnose") != "off",
                 workers=self.workers(),
                 dask=str(self.option("dask")) if self.option("dask") else None,
+                data_hash=str(self.option("hash")),
             )
+            self.cache.data_hash = self._run_options.data_hash
         return self._run_options
 
     def prefetch_on_dask(self) -> None:

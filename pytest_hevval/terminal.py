@@ -38,6 +38,7 @@ def signal_failure_report(
         f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
         f"(λ1 at zero lag {signal.lambdas['lag_correlation']:.4f})"
     )
+    lines.extend(f"  {text}" for text in signal.where_lines())
     by_path = {s.path: s for s in result.signals}
     if signal.origins == [signal.path]:
         if signal.children:
@@ -102,7 +103,7 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
             if not details and signal.passed:
                 continue
             indent = "  " * signal.level
-            mark = "✗" if signal.failures else "✓"
+            mark = "✓" if signal.passed else "✗"
             origin = "  ← error appears here" if signal.origin else ""
             label = f"{indent}{mark} {signal.name}"
             if details:
@@ -110,14 +111,33 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                     f"{signal.lambdas[n]:{max(6, len(describe(n).symbol))}.4f}" for n in names
                 )
                 lines.append(f"  {label:<30}{values}{origin}")
+                lines.extend(_standard_metric_lines(signal, indent))
             else:
                 failed = ", ".join(
-                    f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures
+                    [f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures]
+                    + [
+                        f"{f.characteristic} <{f.threshold:g} in {len(f.where)} {f.scope}"
+                        for f in signal.local_failures
+                    ]
                 )
                 lines.append(f"  {label} [{signal.path}] {failed}{origin}")
         if not details and result.passed:
             lines.append(f"  all {len(result.signals)} signals pass")
         lines.extend(quality_lines(result))
+    return lines
+
+
+def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:
+    """One line per standard metric of ``signal`` with its raw values (``--hevval-details``)."""
+    lines = []
+    for name, value in signal.lambdas.items():
+        described = describe(name)
+        if not described.standard:
+            continue
+        parts = ", ".join(f"{k} {v:.4g}" for k, v in signal.components.get(name, {}).items())
+        lines.append(
+            f"      {indent}{described.label} {value:.4f}" + (f" ({parts})" if parts else "")
+        )
     return lines
 
 

@@ -12,9 +12,46 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import importlib.util
+
+import pytest
 
 from pytest_hevval import engine, session
 
 _KEPT_LOADED = [engine, session, importlib.import_module("pandas")]
 with contextlib.suppress(ImportError):  # the parquet extra
     _KEPT_LOADED.append(importlib.import_module("pyarrow"))
+# The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
+# and the next would pay its import again.
+with contextlib.suppress(Exception):
+    _KEPT_LOADED.append(importlib.import_module("pytest_hevval.core._fused"))
+    # numba imports more of itself on its first compile (its typing registries); an inline
+    # run would unload those and the next compile would register them twice.
+    from numba.core.registry import cpu_target
+
+    cpu_target.target_context.refresh()
+
+
+def _kernel_unavailable() -> str | None:
+    """Why the compiled kernel cannot run here, or None when it can."""
+    from pytest_hevval.core import kernel
+
+    if importlib.util.find_spec("numba") is None:
+        return 'numba is not installed (the "fast" extra)'
+    if kernel._load() is None:
+        return f"numba cannot be loaded: {kernel.describe()}"
+    return None
+
+
+@pytest.fixture(params=["numpy", "numba"])
+def kernel_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Runs a test once on the numpy reference path and once on the compiled kernel."""
+    from pytest_hevval.core.kernel import KERNEL_ENV
+
+    path: str = request.param
+    if path == "numba":
+        reason = _kernel_unavailable()
+        if reason is not None:
+            pytest.skip(reason)
+    monkeypatch.setenv(KERNEL_ENV, path)
+    return path

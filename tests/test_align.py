@@ -192,3 +192,18 @@ def test_channels_sharing_a_time_base_share_one_interpolation_plan() -> None:
             np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
     assert len(aligned._plans) == 2  # one per method, not one per column
     assert len(aligned.interpolated) == 10
+
+
+def test_an_interpolation_plan_rounds_as_np_interp(kernel_path: str) -> None:
+    """On either path (numpy, or the compiled kernel) a plan gives np.interp's very bits."""
+    rng = np.random.default_rng(5)
+    n = 20_000
+    t = np.arange(n) * 0.01 + rng.uniform(-0.002, 0.002, n)  # jitter: off the grid
+    columns = {f"c{i}": np.cumsum(rng.normal(size=n)) for i in range(3)}
+    ref = record("ref.csv", np.arange(n) * 0.01, x=np.zeros(n))
+    sim = record("sim.csv", t, **columns)
+    aligned = align_records(ref, sim, reference_columns=["x"], model_columns=list(columns))
+    for name, values in columns.items():
+        got = aligned.column("model", name, "linear")
+        np.testing.assert_array_equal(got, np.interp(aligned.time, t, values))
+    assert len(aligned.interpolated) == 3

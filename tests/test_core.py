@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from scipy import signal as sps
@@ -24,6 +24,9 @@ from pytest_hevval.core.lag import search_lag
 from pytest_hevval.core.tree import iter_nodes
 from pytest_hevval.errors import DegenerateSignalError
 from tests.strategies import finite, signal_pairs
+
+# The kernel_path fixture only sets an environment variable, which every example may share.
+_FIXTURE = [HealthCheck.function_scoped_fixture]
 
 # Table 4 of the paper: α and λ1..λ7 of every signal (λ7 = 1 placeholders for leaves and v).
 TABLE4 = {
@@ -147,7 +150,7 @@ def _plain(reference: np.ndarray, simulated: np.ndarray) -> dict[str, float]:
 
 
 @pytest.mark.parametrize("n", [5, 1000, 300_001])
-def test_matches_plain_numpy(n: int) -> None:
+def test_matches_plain_numpy(n: int, kernel_path: str) -> None:
     rng = np.random.default_rng(n)
     reference = np.cumsum(rng.normal(size=n)) + 10
     simulated = reference + rng.normal(0.2, 0.5, size=n)
@@ -175,7 +178,7 @@ def test_pearson_option() -> None:
 
 
 @pytest.mark.parametrize("n", [2_000, 600_000])
-def test_lag_is_argmax_of_full_correlation(n: int) -> None:
+def test_lag_is_argmax_of_full_correlation(n: int, kernel_path: str) -> None:
     """Exact FFT search for short records, the block pyramid for long ones: same answer."""
     rng = np.random.default_rng(n)
     noise = rng.normal(size=n + 400)
@@ -243,7 +246,7 @@ def test_zero_simulation_against_signal_has_zero_correlation() -> None:
 
 
 @pytest.mark.parametrize("n", [200_001, 300_001])  # the exact and the pyramid lag path
-def test_float32_accumulates_in_float64(n: int) -> None:
+def test_float32_accumulates_in_float64(n: int, kernel_path: str) -> None:
     rng = np.random.default_rng(7)
     reference = rng.normal(size=n).astype(np.float32) + np.float32(100)
     simulated = reference + rng.normal(size=n).astype(np.float32)
@@ -255,7 +258,7 @@ def test_float32_accumulates_in_float64(n: int) -> None:
 
 @pytest.mark.parametrize("n", [1000, 300_001])
 @pytest.mark.parametrize("magnitude", [1e-300, 1e-200, 1e200, 1e300])
-def test_huge_and_tiny_magnitudes(magnitude: float, n: int) -> None:
+def test_huge_and_tiny_magnitudes(magnitude: float, n: int, kernel_path: str) -> None:
     rng = np.random.default_rng(11)
     reference = np.cumsum(rng.normal(size=n))
     simulated = reference + rng.normal(0, 0.3, size=n)
@@ -266,7 +269,7 @@ def test_huge_and_tiny_magnitudes(magnitude: float, n: int) -> None:
     assert scaled.lag_s == unit.lag_s
 
 
-def test_constant_offset_gives_the_paper_synthetic_values() -> None:
+def test_constant_offset_gives_the_paper_synthetic_values(kernel_path: str) -> None:
     reference = np.sin(np.linspace(0, 10, 500)) * 3
     got = signal_characteristics(reference, reference - 0.4, dt=0.1)
     assert got.mae == pytest.approx(0.4)
@@ -281,16 +284,18 @@ def test_constant_offset_gives_the_paper_synthetic_values() -> None:
 
 
 @given(signal_pairs())
-@settings(max_examples=150, deadline=None)
-def test_every_lambda_lies_in_unit_interval(pair: tuple[np.ndarray, np.ndarray]) -> None:
+@settings(max_examples=150, deadline=None, suppress_health_check=_FIXTURE)
+def test_every_lambda_lies_in_unit_interval(
+    kernel_path: str, pair: tuple[np.ndarray, np.ndarray]
+) -> None:
     got = signal_characteristics(*pair, dt=0.1)
     assert all(0.0 <= v <= 1.0 for v in got.lambdas)
     assert got.rms >= got.mae >= 0.0
 
 
 @given(hnp.arrays(np.float64, st.integers(3, 300), elements=finite))
-@settings(max_examples=100, deadline=None)
-def test_identity_gives_all_ones(reference: np.ndarray) -> None:
+@settings(max_examples=100, deadline=None, suppress_health_check=_FIXTURE)
+def test_identity_gives_all_ones(kernel_path: str, reference: np.ndarray) -> None:
     assume(np.ptp(reference) > 0)
     got = signal_characteristics(reference, reference.copy(), dt=0.01)
     # λ1 is a ratio of two separately rounded sums; the others are exact.
@@ -316,8 +321,8 @@ def test_error_lambdas_invariant_under_affine_units(
 
 
 @given(st.integers(1, 40), st.sampled_from([-1, 1]), st.integers(0, 2**31 - 1))
-@settings(max_examples=40, deadline=None)
-def test_injected_delay_is_recovered(delay: int, sign: int, seed: int) -> None:
+@settings(max_examples=40, deadline=None, suppress_health_check=_FIXTURE)
+def test_injected_delay_is_recovered(kernel_path: str, delay: int, sign: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     n = 4000
     smooth = sps.sosfiltfilt(sps.butter(3, 0.02, output="sos"), rng.normal(size=n + 200)) * 10

@@ -443,6 +443,61 @@ def test_compare_deltas_and_membership() -> None:
     json.dumps(comparison.to_dict(), allow_nan=False)
 
 
+def _with_data(reference: dict[str, Any], model: dict[str, Any] | None = None) -> dict[str, Any]:
+    one = spec()
+    one["data"] = {"reference": {"path": "ref.csv", **reference}}
+    if model is not None:
+        one["data"]["model"] = {"path": "model.csv", "kind": "file", **model}
+    return one
+
+
+@pytest.mark.parametrize(
+    ("before", "after", "changed"),
+    [
+        # Records from before the algorithm was stored carry "sha256" alone.
+        ({"sha256": "aa"}, {"hash": "sha256", "digest": "aa"}, ()),
+        ({"sha256": "aa"}, {"hash": "sha256", "digest": "bb"}, ("reference",)),
+        (
+            {"hash": "xxh3_128", "digest": "aa"},
+            {"hash": "xxh3_128", "digest": "bb"},
+            ("reference",),
+        ),
+        # Different algorithms cannot tell whether the file changed: no claim either way.
+        ({"sha256": "aa"}, {"hash": "xxh3_128", "digest": "bb"}, ()),
+        ({"hash": "xxh3_128", "digest": "aa"}, {"hash": "sampled-blake2b", "digest": "bb"}, ()),
+        ({}, {"hash": "xxh3_128", "digest": "bb"}, ()),
+    ],
+)
+def test_compare_says_data_changed_only_for_the_same_hash(
+    before: dict[str, str], after: dict[str, str], changed: tuple[str, ...]
+) -> None:
+    comparison = h.compare(
+        [_with_data(after, model={"hash": "sha256", "digest": "m"})],
+        record("v1", T0, [_with_data(before, model={"hash": "sha256", "digest": "m"})]),
+    )
+    (one,) = comparison.specs
+    assert one.data_changed == changed
+    notes = [n for n in comparison.notes if "data changed" in n]
+    assert notes == ([f"{one.key}: data changed (reference)"] if changed else [])
+    assert one.to_dict()["data_changed"] == list(changed)
+
+
+def test_stored_old_records_compare_with_new_ones() -> None:
+    old = json.loads(
+        (Path(__file__).parent / "data" / "history" / "schema2_camry_hwfet.json").read_text()
+    )
+    digest = old["specs"][0]["data"]["reference"]["sha256"]
+    new = json.loads(json.dumps(old["specs"]))
+    new[0]["data"]["reference"] = {
+        "path": new[0]["data"]["reference"]["path"],
+        "hash": "sha256",
+        "digest": digest,
+    }
+    assert h.compare(new, old).specs[0].data_changed == ()
+    new[0]["data"]["reference"]["digest"] = "0" * 64
+    assert h.compare(new, old).specs[0].data_changed == ("reference",)
+
+
 def test_regressions_absolute_relative_and_lag() -> None:
     before = record("v1", T0)
     current = [spec(phi=0.93, signals=[signal(lambdas=changed({2: 0.90, 0: 0.985}), lag_s=-0.6)])]

@@ -73,7 +73,9 @@ def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     import pytest_hevval
 
     assert cli.main(["--version"]) == 0
-    assert capsys.readouterr().out.strip() == f"pytest-hevval {pytest_hevval.__version__}"
+    version, path = capsys.readouterr().out.strip().splitlines()
+    assert version == f"pytest-hevval {pytest_hevval.__version__}"
+    assert path.startswith("kernel: ")
 
 
 @pytest.mark.parametrize("command", ["run", "diagnose", "compare", "history"])

@@ -38,10 +38,20 @@ def test_every_run_is_recorded(project: pytest.Pytester) -> None:
     spec = found[0]["specs"][0]
     assert spec["spec"] == "pack.hevval.yaml"
     assert len(spec["spec_hash"]) == 64
-    assert len(spec["data"]["reference"]["sha256"]) == 64
+    reference = spec["data"]["reference"]
+    assert reference["hash"] in ("xxh3_128", "sampled-blake2b")
+    assert len(reference["digest"]) == 32
+
     signal = next(s for s in spec["signals"] if s["path"] == "E/P/I")
     assert len(signal["lambdas"]) == 7
     assert {"numpy", "scipy", "pytest-hevval"} <= set(found[0]["tool_versions"])
+
+
+def test_sha256_identifies_data_on_request(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-hash=sha256").assert_outcomes(passed=6)
+    reference = records(project.path)[0]["specs"][0]["data"]["reference"]
+    assert reference["hash"] == "sha256"
+    assert len(reference["digest"]) == 64
 
 
 def test_no_history_flag(project: pytest.Pytester) -> None:

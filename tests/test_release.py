@@ -36,7 +36,9 @@ def test_the_version_has_one_source() -> None:
         text=True,
         check=True,
     )
-    assert done.stdout.strip() == f"pytest-hevval {_pyproject_version()}"
+    version, path = done.stdout.strip().splitlines()
+    assert version == f"pytest-hevval {_pyproject_version()}"
+    assert path.startswith("kernel: ")
 
 
 def test_the_changelog_has_this_version() -> None:

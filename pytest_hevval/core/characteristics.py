@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
+from . import kernel
 from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
 from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
 
@@ -200,6 +201,38 @@ class _Sums:
         self.sign_matches += other.sign_matches
 
 
+def _sums_from_rows(rows: FloatArray) -> _Sums:
+    """The compiled pass's per-chunk rows merged in record order, as the numpy path merges."""
+    total = _Sums()
+    for values in rows.tolist():
+        m = int(values[kernel.N])
+        part = _Sums(
+            n=m,
+            abs_error=values[kernel.ABS_ERROR],
+            sq_error=values[kernel.SQ_ERROR],
+            error_mean=values[kernel.ERROR_SUM] / m,
+            error_m2=values[kernel.ERROR_M2],
+            ref_sum=values[kernel.REF_SUM],
+            sim_sum=values[kernel.SIM_SUM],
+            ref_sq=values[kernel.REF_SQ],
+            sim_sq=values[kernel.SIM_SQ],
+            cross=values[kernel.CROSS],
+            ref_min=values[kernel.REF_MIN],
+            ref_max=values[kernel.REF_MAX],
+            sim_min=values[kernel.SIM_MIN],
+            sim_max=values[kernel.SIM_MAX],
+            sign_matches=int(values[kernel.SIGN_MATCHES]),
+        )
+        total.merge(part)
+    # The compiled min and max assume no NaN. A NaN sample makes the sum of squares NaN
+    # (overflow gives inf, never NaN), so that marks the extremes unusable.
+    if math.isnan(total.ref_sq):
+        total.ref_min = total.ref_max = math.nan
+    if math.isnan(total.sim_sq):
+        total.sim_min = total.sim_max = math.nan
+    return total
+
+
 FloatArray = npt.NDArray[np.float64]
 AnyFloatArray = npt.NDArray[np.floating]
 
@@ -343,6 +376,10 @@ def _all_sums(
     levels: _Levels | None = None,
 ) -> _Sums:
     n = ref.shape[0]
+    compiled = kernel.kernel_for(n) if kernel.accepts(ref, sim) else None
+    if compiled is not None:
+        flat = None if levels is None else (levels[0][0], levels[0][1], levels[1][0], levels[1][1])
+        return _sums_from_rows(kernel.main_pass(compiled, ref, sim, scale, workers, flat))
     convert = scale != 1.0 or ref.dtype != np.float64 or sim.dtype != np.float64
     if n <= _SMALL:
         with np.errstate(all="ignore"):

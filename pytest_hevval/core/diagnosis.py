@@ -20,8 +20,8 @@ formulas and the interpretation of every field.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, replace
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -33,11 +33,15 @@ from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
 from .lag import search_lag
+from .local import concentration, fixed_windows, group_lambdas, segment_sums
 
 __all__ = [
     "Candidate",
     "CandidateFinding",
     "Diagnosis",
+    "Effect",
+    "Localisation",
+    "Response",
     "Whiteness",
     "diagnose_residual",
     "ljung_box",
@@ -52,6 +56,26 @@ GAIN_MATERIALITY = 0.005
 OFFSET_MATERIALITY = 0.005
 #: A candidate must raise the explained variance by at least this much to be selected.
 MIN_EXPLAINED_INCREASE = 0.005
+#: A finding is relevant when fixing it alone removes at least this share of the residual's
+#: mean square. 5 % lowers the RMS error by 2.5 % (√0.95): anything smaller cannot move λ4 by
+#: more than a fortieth of its distance to 1, so it is listed as minor rather than as a cause.
+MIN_SHARE = 0.05
+#: A channel is a response (an echo of the scored signal) when the measured signal and its
+#: running sum explain at least this share of its variance ...
+RESPONSE_MIN_R2 = 0.1
+#: ... and the residual adds less than this fraction of that share on top of it.
+RESPONSE_RESIDUAL_RATIO = 0.25
+#: A channel whose cross-correlation with the measured signal peaks with the channel ahead by
+#: at least RESPONSE_MIN_LEAD_S, within ±RESPONSE_LEAD_WINDOW_S, is treated as an input (the
+#: driver acts, then the power follows), however well the measured signal explains it. A
+#: shorter lead is within the timing jitter of CAN logging (frames at 10–100 Hz) and says
+#: nothing about direction.
+RESPONSE_LEAD_WINDOW_S = 2.0
+RESPONSE_MIN_LEAD_S = 0.2
+#: Windows over which the diagnosis says where the residual concentrates.
+LOCAL_WINDOW_S = 30.0
+#: The characteristics the diagnosis predicts after a fix.
+PREDICTED_CHARACTERISTICS: tuple[str, ...] = ("mae", "rms")
 #: Ljung-Box lags, in samples of the (possibly decimated) regression grid.
 LJUNG_BOX_LAGS: tuple[int, ...] = (10, 20)
 
@@ -159,6 +183,106 @@ class Whiteness:
 
 
 @dataclass(frozen=True)
+class Effect:
+    """One effect the residual holds, fitted jointly with the intercept and the others.
+
+    Attributes
+    ----------
+    name, kind:
+        As in the :class:`CandidateFinding`; ``kind="offset"`` is the intercept left once the
+        other effects have taken the mean shift they explain.
+    coefficient, interval, p_value:
+        From the joint model, in the signal's units per unit of the candidate (for the
+        offset: in the signal's units).
+    share:
+        Share of the residual's mean square this effect explains beyond all the others (the
+        others refitted without it, the offset held at the value left over), at the original
+        sample rate.
+    offset_explained:
+        The mean shift this effect is credited with, in the signal's units: coefficient × mean
+        of the candidate when that brings the offset left over closer to zero, else 0 (always
+        0 for gain and lag, whose mean goes to the offset, as in the headline fit).
+    significant:
+        The coefficient passed its family-wise level (Holm level at selection; α/2 and
+        material for the offset).
+    relevant:
+        Significant and ``share`` ≥ the minimum share.
+    predicted:
+        λ3 and λ4 of the signal if this effect alone were added to the model, with the
+        coefficient above.
+    hot_share:
+        Share of the residual's squared error inside the hot windows that this effect removes;
+        ``None`` when the error does not concentrate.
+    """
+
+    name: str
+    kind: str
+    coefficient: float
+    interval: tuple[float, float]
+    p_value: float
+    share: float
+    offset_explained: float
+    significant: bool
+    relevant: bool
+    predicted: Mapping[str, float]
+    hot_share: float | None
+
+
+@dataclass(frozen=True)
+class Response:
+    """A channel that moves with the scored signal, probably a consequence rather than a cause.
+
+    Attributes
+    ----------
+    name, kind:
+        As in the :class:`Candidate`.
+    reason:
+        ``"declared"`` (the spec lists it under ``responses:``) or ``"follows"`` (the rule).
+    measured_r2:
+        Share of the channel's variance the measured signal and its running sum explain.
+    residual_r2:
+        What the residual adds to that share.
+    lead_s:
+        Lead of the channel over the measured signal at the peak of their |cross-correlation|
+        within ±2 s (negative: the channel follows).
+    explains:
+        Share of the residual's variance the channel explains alone: what it would have been
+        offered as, had it not been set apart.
+    """
+
+    name: str
+    kind: str
+    reason: str
+    measured_r2: float
+    residual_r2: float
+    lead_s: float
+    explains: float
+
+
+@dataclass(frozen=True)
+class Localisation:
+    """Where in time the residual concentrates (:func:`pytest_hevval.core.local.concentration`).
+
+    Attributes
+    ----------
+    window_s:
+        Length of the windows.
+    error_share, time_share:
+        Share of the squared residual in the hot windows, and share of the time they take.
+    spans_s:
+        The hot stretches (start, stop) in seconds, worst first.
+    windows:
+        Number of hot windows.
+    """
+
+    window_s: float
+    error_share: float
+    time_share: float
+    spans_s: tuple[tuple[float, float], ...]
+    windows: int
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Where a residual comes from. Every field is explained in ``docs/diagnosis.md``."""
 
@@ -177,6 +301,22 @@ class Diagnosis:
     effective_samples: float
     summary: str
     notes: tuple[str, ...] = ()
+    effects: tuple[Effect, ...] = ()
+    responses: tuple[Response, ...] = ()
+    min_share: float = MIN_SHARE
+    lambdas: Mapping[str, float] = field(default_factory=dict)
+    predicted: Mapping[str, float] = field(default_factory=dict)
+    localisation: Localisation | None = None
+
+    @property
+    def relevant(self) -> tuple[Effect, ...]:
+        """The effects that are significant and explain at least the minimum share."""
+        return tuple(e for e in self.effects if e.relevant)
+
+    @property
+    def minor(self) -> tuple[Effect, ...]:
+        """Significant effects that explain less than the minimum share."""
+        return tuple(e for e in self.effects if e.significant and not e.relevant)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-safe mapping: tuples become lists, non-finite floats become ``None``."""
@@ -664,6 +804,10 @@ def diagnose_residual(
     alpha: float = 0.05,
     max_selected: int = 5,
     max_samples: int = 20000,
+    responses: Collection[str] = (),
+    causes: Collection[str] = (),
+    min_share: float = MIN_SHARE,
+    window_s: float = LOCAL_WINDOW_S,
 ) -> Diagnosis:
     """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
 
@@ -686,6 +830,14 @@ def diagnose_residual(
     max_samples:
         Longer records are reduced by block means to at most this many samples for the
         regressions and tests (explained fractions are computed at the original rate).
+    responses, causes:
+        Candidate names declared as responses of the scored signal (never offered as the
+        missing effect) or as causes (never classified as responses).
+    min_share:
+        A significant effect is relevant when fixing it alone removes at least this share of
+        the residual's mean square; smaller ones are minor.
+    window_s:
+        Window length, in seconds, over which the concentration of the residual is found.
 
     Returns
     -------
@@ -732,6 +884,8 @@ def diagnose_residual(
     """
     dt = _checked_dt(dt)
     _check_settings(alpha, max_selected, max_samples)
+    if not 0.0 <= min_share < 1.0:
+        raise SpecError(f"min_share must lie in [0, 1), got {min_share}")
     ref, sim, user, names = _checked_inputs(reference, simulated, candidates)
     n = ref.shape[0]
     if not np.any(ref - sim):
@@ -760,6 +914,7 @@ def diagnose_residual(
     if not sim_varies:
         notes.append("the simulated signal is constant: gain and lag cannot be estimated")
 
+    user, echoes = _split_responses(ref, ref - sim, dt, user, responses, causes)
     series = _candidate_series(sim, lag, dt, window, factor, user, units, names)
     kept, z_rows = _independent(series, r_g.shape[0], notes)
     m = len(kept)
@@ -796,8 +951,25 @@ def diagnose_residual(
     if factor > 1:
         notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
 
+    effects, lambdas, predicted, where = _effects(
+        ref[window],
+        sim[window],
+        r_g,
+        kept,
+        selected,
+        holm_levels,
+        order,
+        alpha=alpha,
+        dt=dt,
+        start_s=window.start * dt,
+        min_share=min_share,
+        window_s=window_s,
+        scale=s_sig,
+        offset_name=_free_name("offset", names),
+    )
     summary = _summary(
-        ordered,
+        effects,
+        echoes,
         lag_s=lag_s,
         timing_significant=timing_significant,
         gain=head.gain,
@@ -820,6 +992,12 @@ def diagnose_residual(
         effective_samples=effective,
         summary=summary,
         notes=tuple(notes),
+        effects=effects,
+        responses=echoes,
+        min_share=min_share,
+        lambdas=lambdas,
+        predicted=predicted,
+        localisation=where,
     )
 
 
@@ -1249,7 +1427,8 @@ def _p_value(beta: float, se: float, df: int) -> float:
 
 
 def _summary(
-    findings: Sequence[CandidateFinding],
+    effects: Sequence[Effect],
+    echoes: Sequence[Response],
     *,
     lag_s: float,
     timing_significant: bool,
@@ -1258,30 +1437,324 @@ def _summary(
     remaining: Whiteness,
 ) -> str:
     parts: list[str] = []
-    for f in findings:
-        if not (f.selected and f.significant):
+    for e in effects:
+        if not e.relevant:
             continue
-        half = (f.interval[1] - f.interval[0]) / 2.0
-        if f.kind == "offset":
+        half = (e.interval[1] - e.interval[0]) / 2.0
+        if e.kind == "offset":
             parts.append(
-                f"offset {f.coefficient:+.3g} ± {half:.2g} carries "
-                f"{_format_pct(f.explained_fraction)} of the residual's mean square"
+                f"offset {e.coefficient:+.3g} ± {half:.2g} carries "
+                f"{_format_pct(e.share)} of the residual's mean square"
             )
         else:
             parts.append(
-                f"{f.name} explains {_format_pct(f.explained_fraction)} of the residual "
-                f"(coef {f.coefficient:.3g} ± {half:.2g})"
+                f"{e.name} explains {_format_pct(e.share)} of the residual "
+                f"(coef {e.coefficient:.3g} ± {half:.2g})"
             )
     if timing_significant:
         direction = "lags" if lag_s < 0 else "leads"
         parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
     if gain_significant:
         parts.append(f"gain error {100.0 * (gain - 1.0):+.1f} %")
+    minor = [e.name for e in effects if e.significant and not e.relevant]
     if not parts:
         text = "no significant effect found: the residual is indistinguishable from noise"
-        if not remaining.white:
+        if minor:
+            text = "no relevant effect found"
+        elif not remaining.white:
             text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
-        return text
-    if not remaining.white:
+        parts.append(text)
+    elif not remaining.white:
         parts.append("the remaining residual is still autocorrelated")
+    if minor:
+        parts.append("minor: " + ", ".join(minor))
+    # Only the echoes that would have been offered as an effect are worth a word here.
+    loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    if loud:
+        names = ", ".join(e.name for e in loud)
+        parts.append(f"moves with the measured signal, probably a consequence: {names}")
     return "; ".join(parts)
+
+
+# -- causes, responses and effects ----------------------------------------------------------------
+
+
+def _split_responses(
+    ref: FloatArray,
+    residual: FloatArray,
+    dt: float,
+    user: _UserSeries,
+    declared_responses: Collection[str],
+    declared_causes: Collection[str],
+) -> tuple[_UserSeries, tuple[Response, ...]]:
+    """The user's candidates that may be causes, and those that echo the scored signal.
+
+    A channel x is a response when the spec says so, or when (1) the measured signal and its
+    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds
+    less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the
+    measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
+    A missing cause enters the residual and the measured signal alike, so the residual tells
+    about it what the measured signal cannot; an echo of the measured signal (the bus voltage
+    sagging with the power, the state of charge falling with it) is explained by the measured
+    signal and the residual adds nothing.
+    """
+    kept: _UserSeries = []
+    echoes: list[Response] = []
+    lead_window = max(1, round(RESPONSE_LEAD_WINDOW_S / dt))
+    ref_varies = _varies(ref)
+    # What the measured signal drives: its value (a voltage sagging under load) and its
+    # running sum (a state of charge, a temperature that rises with the energy drawn).
+    running = np.cumsum(ref - float(np.mean(ref))) * dt
+    for name, kind, values in user:
+        if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
+            kept.append((name, kind, values))
+            continue
+        measured = _full_rate_r2(values, [ref, running])
+        added = _full_rate_r2(values, [ref, running, residual]) - measured
+        # The direction of the peak |correlation|: a voltage falls as the power rises.
+        sign = (
+            1.0 if _dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
+        )
+        lead = search_lag(ref, sign * values, lead_window).lag if ref_varies else 0
+        declared = name in declared_responses
+        follows = (
+            measured >= RESPONSE_MIN_R2
+            and added < RESPONSE_RESIDUAL_RATIO * measured
+            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
+        )
+        if declared or follows:
+            echoes.append(
+                Response(
+                    name=name,
+                    kind=kind,
+                    reason="declared" if declared else "follows",
+                    measured_r2=measured,
+                    residual_r2=max(added, 0.0),
+                    lead_s=lead * dt,
+                    explains=_full_rate_r2(residual, [values]),
+                )
+            )
+        else:
+            kept.append((name, kind, values))
+    return kept, tuple(echoes)
+
+
+def _lambdas(ref: FloatArray, sim: FloatArray, reference_range: float) -> dict[str, float]:
+    """λ3 and λ4 of the whole pair, by the same sums the local characteristics use."""
+    if not (reference_range > 0.0 and math.isfinite(reference_range)):
+        return {}
+    n = ref.shape[0]
+    sums = segment_sums(ref, sim, np.array([0], dtype=np.int64), np.array([n], dtype=np.int64))
+    values = group_lambdas(sums, reference_range)
+    return {name: float(values[name][0]) for name in PREDICTED_CHARACTERISTICS}
+
+
+def _removed_share(r: FloatArray, term: FloatArray) -> float:
+    """Share of Σr² removed by subtracting ``term``: 1 − Σ(r − term)² / Σr²."""
+    total = _dot(r, r)
+    if total <= 0.0:
+        return 0.0
+    left = r - term
+    return 1.0 - _dot(left, left) / total
+
+
+def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]:
+    """Where each selected term is zero: 0 (it carries the mean it implies) or its mean.
+
+    In the order the terms entered, a channel, expression or derivative is credited with the
+    mean shift coefficient × mean(channel) when that brings the offset left over closer to
+    zero: a missing heater load explains the mean shift it causes. A term whose mean would
+    only have to be cancelled by a larger opposite offset (the throttle position, whose zero
+    is far from its working range) keeps its mean out, as gain and lag always do.
+    """
+    columns = [(s.grid - s.mean) / s.std for s in chosen]
+    design = np.column_stack([np.ones_like(r_g), *columns])
+    beta, *_ = np.linalg.lstsq(design, r_g, rcond=_RCOND)
+    left = float(np.mean(r_g))
+    centres: list[float] = []
+    for pos, s in enumerate(chosen, start=1):
+        carried = float(beta[pos]) / s.std * s.mean
+        if s.kind not in ("gain", "lag") and abs(left - carried) < abs(left):
+            centres.append(0.0)
+            left -= carried
+        else:
+            centres.append(s.mean)
+    return centres
+
+
+def _least_squares_fit(r: FloatArray, columns: Sequence[FloatArray]) -> FloatArray:
+    """The least-squares combination of ``columns`` closest to r (no intercept of its own)."""
+    design = np.column_stack(columns)
+    gram = np.einsum("ti,tj->ij", design, design)
+    coef = np.linalg.pinv(gram, rcond=_RCOND) @ np.einsum("ti,t->i", design, r)
+    return np.asarray(design @ coef, dtype=np.float64)
+
+
+def _unique_shares(r: FloatArray, columns: Sequence[FloatArray], offset: float) -> list[float]:
+    """What each term alone adds to the fit of r, as a share of Σr²; the intercept last.
+
+    A term's share is the rise of the sum of squares left when it is dropped and the other
+    terms are refitted, with the offset held at the value left over: a channel credited with
+    the mean shift it causes keeps that credit, instead of the intercept taking it over. The
+    intercept's share is the same rise for the intercept itself. A term that only compensates
+    another (a gain error and an offset that cancel in the mean) adds little once the other is
+    there, so it cannot claim the residual.
+    """
+    total = _dot(r, r)
+    k = len(columns)
+    if total <= 0.0:
+        return [0.0] * (k + 1)
+
+    def explained(target: FloatArray, design: Sequence[FloatArray], keep: list[int]) -> float:
+        if not keep:
+            return 0.0
+        gram = np.array([[_dot(design[a], design[b]) for b in keep] for a in keep])
+        cross = np.array([_dot(design[a], target) for a in keep])
+        coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
+        return float(coef @ cross)
+
+    held = r - offset
+    every = list(range(k))
+    full = explained(held, columns, every)
+    shares = [
+        (full - explained(held, columns, [i for i in every if i != j])) / total for j in every
+    ]
+    with_intercept = [*columns, np.ones_like(r)]
+    everything = explained(r, with_intercept, [*every, k])
+    shares.append((everything - explained(r, with_intercept, every)) / total)
+    return [min(max(share, 0.0), 1.0) for share in shares]
+
+
+def _hot_mask(where: Localisation, n: int, dt: float, start_s: float) -> npt.NDArray[np.bool_]:
+    times = start_s + np.arange(n) * dt
+    mask = np.zeros(n, dtype=bool)
+    for a, b in where.spans_s:
+        mask |= (times >= a - 0.5 * dt) & (times < b - 0.5 * dt)
+    return mask
+
+
+def _localise(
+    ref: FloatArray, sim: FloatArray, dt: float, start_s: float, window_s: float
+) -> Localisation | None:
+    n = ref.shape[0]
+    if window_s <= 0.0 or not math.isfinite(window_s):
+        return None
+    starts, stops = fixed_windows(n, dt, window_s)
+    if starts.shape[0] < 2:
+        return None
+    found = concentration(segment_sums(ref, sim, starts, stops), starts, stops, dt, start_s)
+    return Localisation(
+        window_s=window_s,
+        error_share=found.error_share,
+        time_share=found.time_share,
+        spans_s=found.spans_s,
+        windows=found.windows,
+    )
+
+
+def _effects(
+    ref: FloatArray,
+    sim: FloatArray,
+    r_g: FloatArray,
+    kept: list[_Series],
+    selected: list[int],
+    holm_levels: list[float],
+    order: int,
+    *,
+    alpha: float,
+    dt: float,
+    start_s: float,
+    min_share: float,
+    window_s: float,
+    scale: float,
+    offset_name: str,
+) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
+    """The selected candidates and the intercept, fitted jointly, as effects one can act on.
+
+    A candidate credited with the mean shift it carries enters uncentred (see
+    :func:`_credited_centres`), so the intercept is the offset left over: a missing load with
+    a nonzero mean is one effect, not a load and an offset.
+    """
+    r = ref - sim
+    n = r.shape[0]
+    reference_range = float(np.ptp(ref))
+    chosen = [kept[i] for i in selected]
+    centres = _credited_centres(r_g, chosen)
+    design = np.column_stack(
+        [np.ones_like(r_g), *((s.grid - c) / s.std for s, c in zip(chosen, centres, strict=True))]
+    )
+    joint = _hac_fit(r_g, design, order)
+    se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
+    raw: list[tuple[str, str, float, tuple[float, float], float, bool, FloatArray, float]] = []
+    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
+        b_std, se_std, df = float(joint.beta[pos]), float(se[pos]), int(joint.df[pos])
+        coef = b_std / s.std
+        p = _p_value(b_std, se_std, df)
+        term = coef * (s.full - centre)
+        raw.append(
+            (
+                s.name,
+                s.kind,
+                coef * s.unit,
+                _scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                p,
+                p <= holm_levels[pos - 1],
+                term,
+                coef * (float(np.mean(s.full)) - centre) / scale,
+            )
+        )
+    intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
+    interval0 = _interval(intercept, se0, df0, alpha)
+    p0 = _p_value(intercept, se0, df0)
+    offset_significant = (
+        p0 <= alpha / 2.0
+        and not (interval0[0] <= 0.0 <= interval0[1])
+        and abs(intercept) > OFFSET_MATERIALITY * (reference_range or 1.0)
+    )
+    raw.append(
+        (
+            offset_name,
+            "offset",
+            intercept / scale,
+            _scaled(interval0, 1.0 / scale),
+            p0,
+            offset_significant,
+            np.full(n, intercept),
+            intercept / scale,
+        )
+    )
+    where = _localise(ref, sim, dt, start_s, window_s)
+    hot = _hot_mask(where, n, dt, start_s) if where is not None and where.windows else None
+    shares = _unique_shares(
+        r, [s.full - c for s, c in zip(chosen, centres, strict=True)], float(intercept)
+    )
+    effects: list[Effect] = []
+    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), share in zip(
+        raw, shares, strict=True
+    ):
+        effects.append(
+            Effect(
+                name=name,
+                kind=kind,
+                coefficient=coef_out,
+                interval=interval_out,
+                p_value=p,
+                share=share,
+                offset_explained=mean_shift,
+                significant=significant,
+                relevant=significant and share >= min_share,
+                predicted=_lambdas(ref, sim + term, reference_range),
+                hot_share=None if hot is None else _removed_share(r[hot], term[hot]),
+            )
+        )
+    # The joint coefficients share the residual between correlated terms; fixing only the
+    # relevant ones is predicted with their own least-squares fit, so that a minor term that
+    # compensated one of them in the joint model does not spoil the prediction.
+    relevant_terms = [term for (*_, term, _), e in zip(raw, effects, strict=True) if e.relevant]
+    predicted = (
+        _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
+        if relevant_terms
+        else {}
+    )
+    effects.sort(key=lambda e: (not e.relevant, not e.significant, -e.share))
+    return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where

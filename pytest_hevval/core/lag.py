@@ -30,6 +30,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy import signal as sps
 
+from . import kernel
+
 __all__ = ["LagSearch", "correlation_curve", "dot_overlap", "search_lag"]
 
 FloatArray = npt.NDArray[np.floating]
@@ -262,7 +264,12 @@ def _exact_window(
     # longer overlap, and every index stays inside both records.
     core_lo = half
     core_hi = n - half
-    if core_hi > core_lo:
+    compiled = kernel.kernel_for(n) if kernel.accepts(r, s) else None
+    if compiled is not None and core_hi > core_lo:
+        out = kernel.lag_window(
+            compiled, r, s, lo, count, r_mean, s_mean, scale, (core_lo, core_hi), workers
+        )
+    elif core_hi > core_lo:
         bounds = [*range(core_lo, core_hi, _CHUNK), core_hi]
         spans = list(itertools.pairwise(bounds))
 

@@ -29,6 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
+from . import kernel
 from .registry import FUSED_CHARACTERISTICS
 
 __all__ = [
@@ -36,14 +37,19 @@ __all__ = [
     "LOCAL_CHARACTERISTICS",
     "MIN_GROUP_SAMPLES",
     "PHASES",
+    "SUM_COLUMNS",
     "Concentration",
     "GroupSums",
     "RegionGrid",
+    "SumTable",
     "concentration",
     "derivative_signs",
     "driving_phases",
     "fixed_windows",
     "group_lambdas",
+    "labelled_sums",
+    "labelled_table",
+    "merge_groups",
     "region_grid",
     "region_sums",
     "runs",
@@ -364,3 +370,179 @@ def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums
             f"the region grid has {grid.cell.shape[0]} samples, the signal {r.shape[0]}"
         )
     return _group_sums(r, s, grid.cell, int(np.prod(grid.shape)))
+
+
+# -- every grouping in one pass ------------------------------------------------------------
+
+
+#: The shift of the spread sums is the mean error of this many first samples.
+SHIFT_SAMPLES = 1024
+
+
+#: Columns of a :class:`SumTable`, one row per group. Every column adds up across groups;
+#: the error sums are taken about a shift near the mean error (shifted sums), so the spread
+#: Σ(e − ē)² of any union of groups is S2 − S1²/n without losing it to a large bias.
+SUM_COLUMNS = (
+    "n",
+    "shifted_sum",
+    "shifted_sq",
+    "abs_error",
+    "ref_sum",
+    "sim_sum",
+    "ref_sq",
+    "sim_sq",
+    "cross",
+    "sign_matches",
+)
+
+
+@dataclass(frozen=True)
+class SumTable:
+    """Additive sums per group: a union of groups is the sum of their rows."""
+
+    values: FloatArray  # (groups, len(SUM_COLUMNS))
+    shift: float
+
+    def merged(self, shape: Sequence[int], keep: int) -> SumTable:
+        """Rows laid out as a mixed-radix grid of ``shape``, summed over all axes but ``keep``."""
+        grid = self.values.reshape((*shape, len(SUM_COLUMNS)))
+        axes = tuple(a for a in range(len(shape)) if a != keep)
+        return SumTable(np.ascontiguousarray(grid.sum(axis=axes)), self.shift)
+
+    def sums(self) -> GroupSums:
+        table = self.values
+        n = np.rint(table[:, 0]).astype(np.int64)
+        nf = n.astype(np.float64)
+        shifted_sum, shifted_sq = table[:, 1], table[:, 2]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)
+        k = self.shift
+        return GroupSums(
+            n=n,
+            error_sum=shifted_sum + nf * k,
+            abs_error=table[:, 3],
+            sq_error=np.maximum(shifted_sq + 2.0 * k * shifted_sum + nf * k * k, 0.0),
+            error_m2=np.maximum(error_m2, 0.0),
+            ref_sum=table[:, 4],
+            sim_sum=table[:, 5],
+            ref_sq=table[:, 6],
+            sim_sq=table[:, 7],
+            cross=table[:, 8],
+            sign_matches=np.rint(table[:, 9]).astype(np.int64),
+        )
+
+
+def labelled_table(
+    ref: FloatArray,
+    sim: FloatArray,
+    labels: IntArray,
+    groups: int,
+    *,
+    compiled: bool | None = None,
+) -> SumTable:
+    """The additive sums of every label in [0, ``groups``) (−1: no group), in one pass.
+
+    Callers combine several groupings (window × phase × conditions × region cell) into one fine
+    label, so each signal is read once and every grouping is then a sum over the small fine
+    table. ``compiled``: None lets :func:`pytest_hevval.core.kernel.kernel_for` choose (the
+    compiled pass for long records or a warm cache, ``HEVVAL_KERNEL`` to force); True or False
+    force a path.
+    """
+    r, s = _check_pair(ref, sim)
+    labels = np.asarray(labels, dtype=np.int64)
+    # Any value near the mean error keeps the shifted sums exact enough; the first samples'
+    # mean costs nothing and is the same on both paths.
+    shift = float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
+    module = None
+    if compiled is None:
+        module = kernel.kernel_for(r.shape[0], ("grouped_sums",))
+    elif compiled:
+        module = kernel.load_or_raise()
+    if module is not None:
+        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift), shift)
+    signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
+    if (labels < 0).any():  # samples in no group, as the compiled pass skips them
+        keep = labels >= 0
+        r, s, labels, signs_match = r[keep], s[keep], labels[keep], signs_match[keep]
+    e = r - s
+    d = e - shift
+
+    def total(weights: npt.NDArray[np.generic] | None) -> FloatArray:
+        return np.asarray(np.bincount(labels, weights=weights, minlength=groups), dtype=np.float64)
+
+    columns = (
+        total(None),
+        total(d),
+        total(d * d),
+        total(np.abs(e)),
+        total(r),
+        total(s),
+        total(r * r),
+        total(s * s),
+        total(r * s),
+        total(signs_match),
+    )
+    return SumTable(np.column_stack(columns), shift)
+
+
+def labelled_sums(
+    ref: FloatArray,
+    sim: FloatArray,
+    labels: IntArray,
+    groups: int,
+    *,
+    compiled: bool | None = None,
+) -> GroupSums:
+    """The sums of every label in [0, ``groups``), in one pass (see :func:`labelled_table`)."""
+    return labelled_table(ref, sim, labels, groups, compiled=compiled).sums()
+
+
+def merge_groups(fine: GroupSums, mapping: IntArray, groups: int) -> GroupSums:
+    """Sums of coarse groups made of fine ones: fine group k goes to ``mapping[k]`` (−1: none).
+
+    Σ(e − ē)² merges by the parallel-variance rule, exactly.
+    """
+    mapping = np.asarray(mapping, dtype=np.int64)
+    keep = mapping >= 0
+    m = mapping[keep]
+    n_fine = fine.n[keep].astype(np.float64)
+    columns = (
+        n_fine,
+        fine.error_sum[keep],
+        fine.abs_error[keep],
+        fine.sq_error[keep],
+        fine.error_m2[keep],
+        fine.ref_sum[keep],
+        fine.sim_sum[keep],
+        fine.ref_sq[keep],
+        fine.sim_sq[keep],
+        fine.cross[keep],
+        fine.sign_matches[keep].astype(np.float64),
+    )
+    width = len(columns)
+    # One weighted count over (coarse group, column) pairs sums every column at once.
+    index = (m[:, None] * width + np.arange(width)).ravel()
+    table = np.asarray(
+        np.bincount(index, weights=np.column_stack(columns).ravel(), minlength=groups * width),
+        dtype=np.float64,
+    ).reshape(groups, width)
+    n = np.rint(table[:, 0]).astype(np.int64)
+    error_sum = table[:, 1]
+    fine_mean = columns[1] / np.maximum(n_fine, 1.0)
+    coarse_mean = error_sum / np.maximum(n, 1)
+    spread = np.bincount(
+        m, weights=n_fine * (fine_mean - coarse_mean[m]) ** 2, minlength=groups
+    ).astype(np.float64)
+    return GroupSums(
+        n=n,
+        error_sum=error_sum,
+        abs_error=table[:, 2],
+        sq_error=table[:, 3],
+        error_m2=table[:, 4] + spread,
+        ref_sum=table[:, 5],
+        sim_sum=table[:, 6],
+        ref_sq=table[:, 7],
+        sim_sq=table[:, 8],
+        cross=table[:, 9],
+        sign_matches=np.rint(table[:, 10]).astype(np.int64),
+    )

@@ -13,6 +13,7 @@ Pure Python: no numpy import at module level, no files, no pytest.
 
 from __future__ import annotations
 
+import importlib
 import math
 import re
 import threading
@@ -28,6 +29,7 @@ __all__ = [
     "FUSED_CHARACTERISTICS",
     "LAMBDA_ALIASES",
     "PAPER_CHARACTERISTICS",
+    "STANDARD_CHARACTERISTICS",
     "Characteristic",
     "CharacteristicKind",
     "CharacteristicValue",
@@ -101,6 +103,11 @@ class Characteristic:
     @property
     def builtin(self) -> bool:
         return self.name in PAPER_CHARACTERISTICS
+
+    @property
+    def standard(self) -> bool:
+        """One of the field's standard metrics shipped with hevval (docs/metrics.md)."""
+        return self.name in STANDARD_CHARACTERISTICS
 
     def explain(self, errors: Mapping[str, Any], unit: str | None) -> str:
         """The physical meaning of this characteristic's value for one signal ('' if none)."""
@@ -189,6 +196,52 @@ _BUILTINS: tuple[Characteristic, ...] = (
     ),
 )
 
+
+@dataclass(frozen=True)
+class _StandardCompute:
+    """A standard metric's compute, imported on first use: the registry imports no numpy."""
+
+    module: str
+    function: str
+
+    def __call__(self, ref: Any, sim: Any, dt: float) -> CharacteristicValue:
+        found = importlib.import_module(f"{__package__}.standard.{self.module}")
+        result: CharacteristicValue = getattr(found, self.function)(ref, sim, dt)
+        return result
+
+
+def _standard(
+    name: str, symbol: str, label: str, module: str, colour: str, order: int, **more: Any
+) -> Characteristic:
+    return Characteristic(
+        name=name,
+        symbol=symbol,
+        label=label,
+        compute=_StandardCompute(module, f"{name}_characteristic"),
+        colour=colour,
+        order=order,
+        enabled_by_default=False,
+        **more,
+    )
+
+
+# The field's standard metrics (docs/metrics.md): off unless a spec names them in ``metrics``.
+# Each scores in [0, 1]; its raw values are the components. Weight 1 in Φ where the score is a
+# rating; CV(RMSE) and NMBE are Guideline 14's pass/fail criteria, so they only gate.
+_STANDARD: tuple[Characteristic, ...] = (
+    _standard("iso18571", "ISO", "ISO/TS 18571 rating", "iso18571", "#332288", 20),
+    _standard("theil", "1−U", "Theil's U", "theil", "#117733", 21),
+    _standard("sprague_geers", "1−C", "Sprague–Geers", "sprague_geers", "#44AA99", 22),
+    _standard("russell", "1−RC", "Russell", "sprague_geers", "#88CCEE", 23),
+    _standard("kge", "KGE*", "KGE (2009)", "kge", "#DDCC77", 24),
+    _standard("kge2012", "KGE′*", "KGE (2012)", "kge", "#CC6677", 25),
+    _standard("nse", "NSE*", "Nash–Sutcliffe", "kge", "#AA4499", 26),
+    _standard("cvrmse", "1−CV", "CV(RMSE)", "ashrae14", "#882255", 27, default_weight=0.0),
+    _standard("nmbe", "1−|NMBE|", "NMBE", "ashrae14", "#661100", 28, default_weight=0.0),
+)
+#: The standard metrics' names, in report order.
+STANDARD_CHARACTERISTICS: tuple[str, ...] = tuple(c.name for c in _STANDARD)
+
 #: The paper's seven characteristics in paper order (λ1 … λ7).
 PAPER_CHARACTERISTICS: tuple[str, ...] = tuple(c.name for c in _BUILTINS)
 #: λ1–λ6, in the order the fused pass returns them (``SignalCharacteristics.lambdas``); λ7's
@@ -200,7 +253,7 @@ LAMBDA_ALIASES: dict[str, str] = {f"lambda{c.symbol[1:]}": c.name for c in _BUIL
 CHARACTERISTIC_LABELS: dict[str, str] = {c.name: c.title for c in _BUILTINS}
 
 _lock = threading.Lock()
-_registry: dict[str, Characteristic] = {c.name: c for c in _BUILTINS}
+_registry: dict[str, Characteristic] = {c.name: c for c in _BUILTINS + _STANDARD}
 _entry_points_loaded = False
 
 
@@ -228,7 +281,7 @@ def register_characteristic(characteristic: Characteristic) -> Characteristic:
                 return existing
             what = (
                 "is a built-in characteristic"
-                if existing.builtin
+                if existing.builtin or existing.standard
                 else "is already registered with a different definition"
             )
             raise CharacteristicError(

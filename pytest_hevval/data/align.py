@@ -18,6 +18,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from ..core import kernel
 from ..core.lag import search_lag
 from ..errors import DataError
 from .record import Channel, Record
@@ -411,13 +412,16 @@ class _Plan:
     """Where each grid point falls in one time base, computed once for all its channels.
 
     ``apply`` gives what ``np.interp`` (linear) or a zero-order hold (previous) would: the
-    search over the time stamps, the costly part, is not repeated per channel.
+    search over the time stamps, the costly part, is not repeated per channel, and nor are
+    the indices of the right-hand neighbours.
     """
 
     method: Method
     #: Index of the sample at or before each grid point (clipped to the record).
     index: npt.NDArray[np.intp]
-    #: Linear only: grid point minus that sample's time, and the step to the next sample.
+    #: Linear only: index of the sample after it (clipped), grid point minus that sample's
+    #: time, and the step to the next sample.
+    right: npt.NDArray[np.intp] | None = None
     offset: FloatArray | None = None
     step: FloatArray | None = None
     #: Linear only: grid points at or outside the first/last sample take that sample's value.
@@ -438,17 +442,29 @@ class _Plan:
         exact = below | above | (offset == 0.0)
         # Points beyond either end hold the end value, as np.interp does.
         index = np.where(above, last, index)
-        return cls("linear", index, np.where(exact, 0.0, offset), step, exact)
+        right = np.minimum(index + 1, last)
+        return cls("linear", index, right, np.where(exact, 0.0, offset), step, exact)
 
     def apply(self, values: FloatArray) -> FloatArray:
         if self.method == "previous":
-            return values[self.index]
+            return np.take(values, self.index)
+        assert self.right is not None
         assert self.offset is not None
         assert self.step is not None
         assert self.exact is not None
-        left = values[self.index]
-        right = values[np.minimum(self.index + 1, values.shape[0] - 1)]
+        compiled = kernel.kernel_for(self.index.shape[0]) if kernel.accepts(values) else None
+        if compiled is not None:
+            return kernel.interpolate(
+                compiled, values, self.index, self.right, self.offset, self.step, self.exact
+            )
+        # np.interp's arithmetic, (right − left) / step · offset + left, in place in one
+        # buffer: two gathers and four passes, no temporaries.
+        left = np.take(values, self.index)
+        out = np.take(values, self.right)
         with np.errstate(invalid="ignore", divide="ignore"):
-            slope = (right - left) / self.step
-            out = slope * self.offset + left
-        return np.where(self.exact, left, out)
+            np.subtract(out, left, out=out)
+            np.divide(out, self.step, out=out)
+            np.multiply(out, self.offset, out=out)
+            np.add(out, left, out=out)
+        np.copyto(out, left, where=self.exact)
+        return out

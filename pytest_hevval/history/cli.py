@@ -220,12 +220,13 @@ def run_compare(args: argparse.Namespace) -> int:
 
 
 def _with_pairings(text: str, comparison: Comparison, fmt: str) -> str:
-    """Say under the title which different specs were compared; JSON carries ``pairings``."""
-    if fmt == "json" or not comparison.pairings:
+    """Say under the title which different specs were compared and whose data changed; JSON
+    carries ``pairings`` and each spec's ``data_changed``."""
+    if fmt == "json" or not comparison.notes:
         return text
     title, _, rest = text.partition("\n")
     if fmt == "md":
         # A blank line ends the heading; two trailing spaces break lines inside the paragraph.
-        notes = [note.replace("|", "\\|") for note in comparison.pairings]
+        notes = [note.replace("|", "\\|") for note in comparison.notes]
         return title + "\n\n" + "  \n".join(notes) + "\n" + rest
-    return title + "\n" + "".join(note + "\n" for note in comparison.pairings) + rest
+    return title + "\n" + "".join(note + "\n" for note in comparison.notes) + rest

@@ -29,6 +29,8 @@ from ..core.registry import (
     keyed_lambdas,
     order_names,
 )
+from ..defaults import REGION_MIN_SAMPLES
+from ..digest import identity
 from ..errors import did_you_mean
 from ..spec.model import split_key
 from ._base import ERROR_FIELDS, HistoryError, spec_key
@@ -159,6 +161,94 @@ class FieldDelta:
         return {"before": self.before, "after": self.after, "delta": self.delta}
 
 
+#: A window, phase, condition or cell counts as better or worse when its RMS error changed
+#: by more than this share; smaller changes are noise at the scale of one group.
+LOCAL_CHANGE = 0.10
+#: Groups with fewer samples on either side are not compared.
+LOCAL_MIN_SAMPLES = REGION_MIN_SAMPLES
+
+
+@dataclass(frozen=True)
+class GroupChange:
+    """One window, driving phase, condition or region cell whose RMS error changed."""
+
+    grouping: str
+    label: str
+    rms_before: float
+    rms_after: float
+
+    @property
+    def ratio(self) -> float:
+        return self.rms_after / self.rms_before if self.rms_before > 0 else math.inf
+
+    def text(self, unit: str | None) -> str:
+        suffix = f" {unit}" if unit else ""
+        if self.grouping in ("windows", "regions"):
+            where = self.label
+        elif self.grouping == "phases":
+            where = f"phase {self.label}"
+        else:
+            where = f"{self.grouping} {self.label}"
+        return f"{where} (RMS {self.rms_before:.3g} → {self.rms_after:.3g}{suffix})"
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "grouping": self.grouping,
+            "label": self.label,
+            "rms": {"before": self.rms_before, "after": self.rms_after},
+        }
+
+
+def _tables(local: Any) -> dict[str, Mapping[str, Any]]:
+    if not isinstance(local, Mapping):
+        return {}
+    tables = {
+        name: local[name]
+        for name in ("windows", "phases", "regions")
+        if isinstance(local.get(name), Mapping)
+    }
+    for name, table in dict(local.get("conditions") or {}).items():
+        if isinstance(table, Mapping):
+            tables[str(name)] = table
+    return tables
+
+
+def _group_rows(table: Mapping[str, Any]) -> dict[str, tuple[int, Any]]:
+    labels, counts, rms = (list(table.get(key) or []) for key in ("labels", "n", "rms"))
+    if not len(labels) == len(counts) == len(rms):
+        return {}
+    return {str(a): (int(b), c) for a, b, c in zip(labels, counts, rms, strict=True)}
+
+
+def local_changes(
+    before: Mapping[str, Any], after: Mapping[str, Any]
+) -> tuple[tuple[GroupChange, ...], tuple[GroupChange, ...]]:
+    """The groups (by label) whose RMS error fell, and those where it rose, largest first."""
+    better: list[GroupChange] = []
+    worse: list[GroupChange] = []
+    after_tables = _tables(after.get("local"))
+    for grouping, old in _tables(before.get("local")).items():
+        new = after_tables.get(grouping)
+        if new is None:
+            continue
+        old_rows = _group_rows(old)
+        for label, (n, rms) in _group_rows(new).items():
+            if label not in old_rows:
+                continue
+            n_old, rms_old = old_rows[label]
+            a, b = _number(rms), _number(rms_old)
+            if a is None or b is None or min(int(n), int(n_old)) < LOCAL_MIN_SAMPLES:
+                continue
+            change = GroupChange(grouping, str(label), b, a)
+            if a < (1.0 - LOCAL_CHANGE) * b:
+                better.append(change)
+            elif a > (1.0 + LOCAL_CHANGE) * b:
+                worse.append(change)
+    better.sort(key=lambda c: c.ratio)
+    worse.sort(key=lambda c: -c.ratio)
+    return tuple(better), tuple(worse)
+
+
 @dataclass(frozen=True)
 class SignalComparison:
     """λ1–λ7 and the physical errors of one signal present in both runs."""
@@ -170,6 +260,9 @@ class SignalComparison:
     errors: tuple[FieldDelta, ...]
     passed_before: bool | None
     passed_after: bool | None
+    #: Windows, phases, conditions and cells where the RMS error fell or rose.
+    better: tuple[GroupChange, ...] = ()
+    worse: tuple[GroupChange, ...] = ()
 
     def field(self, name: str) -> FieldDelta:
         for delta in (*self.lambdas, *self.errors):
@@ -185,6 +278,16 @@ class SignalComparison:
             "lambdas": {d.field: d.to_dict() for d in self.lambdas},
             "errors": {d.field: d.to_dict() for d in self.errors},
             "passed": {"before": self.passed_before, "after": self.passed_after},
+            **(
+                {
+                    "where": {
+                        "better": [c.to_dict() for c in self.better],
+                        "worse": [c.to_dict() for c in self.worse],
+                    }
+                }
+                if self.better or self.worse
+                else {}
+            ),
         }
 
 
@@ -207,6 +310,16 @@ class SpecComparison:
     removed_signals: tuple[str, ...]
     before_key: str | None = None
     matched_by: MatchedBy = "path"
+    #: Data sides (reference, model) whose files differ: digests by the same algorithm
+    #: differ. Digests by different algorithms say nothing and are not compared.
+    data_changed: tuple[str, ...] = ()
+
+    @property
+    def data_note(self) -> str | None:
+        """A sentence naming the data files that changed between the runs, else ``None``."""
+        if not self.data_changed:
+            return None
+        return f"{self.key}: data changed ({', '.join(self.data_changed)})"
 
     @property
     def pairing(self) -> str | None:
@@ -232,6 +345,7 @@ class SpecComparison:
             "signals": [s.to_dict() for s in self.signals],
             "added_signals": list(self.added_signals),
             "removed_signals": list(self.removed_signals),
+            "data_changed": list(self.data_changed),
         }
 
 
@@ -252,6 +366,12 @@ class Comparison:
     def pairings(self) -> tuple[str, ...]:
         """One sentence per pair of different specs compared with each other."""
         return tuple(p for p in (s.pairing for s in self.specs) if p is not None)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """The pairings, then one sentence per spec whose data files changed."""
+        changed = tuple(n for n in (s.data_note for s in self.specs) if n is not None)
+        return self.pairings + changed
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -469,6 +589,7 @@ def _compare_spec(
         sig_before = before_signals.get(path)
         if sig_before is None:
             continue
+        better, worse = local_changes(sig_before, sig_after)
         signals.append(
             SignalComparison(
                 path=path,
@@ -481,6 +602,8 @@ def _compare_spec(
                 ),
                 passed_before=_flag(sig_before.get("passed")),
                 passed_after=_flag(sig_after.get("passed")),
+                better=better,
+                worse=worse,
             )
         )
     return SpecComparison(
@@ -494,7 +617,28 @@ def _compare_spec(
         removed_signals=tuple(p for p in before_signals if p not in after_signals),
         before_key=before_key,
         matched_by=matched_by,
+        data_changed=_data_changed(before, after),
     )
+
+
+def _data_changed(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[str, ...]:
+    """Sides whose data digests differ under the same hash algorithm."""
+    sides_before = before.get("data")
+    sides_after = after.get("data")
+    if not isinstance(sides_before, Mapping) or not isinstance(sides_after, Mapping):
+        return ()
+    changed = []
+    for side in ("reference", "model"):
+        old = sides_before.get(side)
+        new = sides_after.get(side)
+        if not isinstance(old, Mapping) or not isinstance(new, Mapping):
+            continue
+        old_id = identity(old)
+        new_id = identity(new)
+        same_hash = old_id is not None and new_id is not None and old_id[0] == new_id[0]
+        if same_hash and old_id != new_id:
+            changed.append(side)
+    return tuple(changed)
 
 
 # -- regressions ----------------------------------------------------------------------------

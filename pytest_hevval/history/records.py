@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
+from ..localise import compact_local
 from ..result import ERROR_KEYS
 from ._base import HistoryError, json_safe, optional_float
 
@@ -57,6 +58,7 @@ _SPEC_KEYS = (
     "weights",
     "data",
     "alignment",
+    "local",
 )
 _SIGNAL_KEYS = (
     "path",
@@ -404,6 +406,10 @@ def _normalise_signal(signal: Any, where: str, file: str | None) -> dict[str, An
         )
     out: dict[str, Any] = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
     out["lambdas"] = _lambda_mapping(signal.get("lambdas"), f"{where}.lambdas", file)
+    if isinstance(signal.get("local"), Mapping):
+        out["local"] = compact_local(signal["local"])
+    if isinstance(signal.get("local_failures"), list):
+        out["local_failures"] = list(signal["local_failures"])
     for key in ("lag_s", "peak_correlation", "mae", "rms", "delta_e", "error_std", "mean_error"):
         if key in signal:
             out[key] = optional_float(signal[key], where=f"{where}.{key}", file=file)

@@ -84,6 +84,21 @@ def _columns(rows: Sequence[Sequence[str]], indent: str) -> list[str]:
     return out
 
 
+#: The windows, phases and cells named per signal and direction; the rest are counted.
+WHERE_NAMED = 4
+
+
+def _where_lines(signal: SignalComparison) -> list[str]:
+    """Where the model change helped and where it hurt (windows, phases, conditions, cells)."""
+    lines = []
+    for word, changes in (("better", signal.better), ("worse", signal.worse)):
+        if changes:
+            named = "; ".join(c.text(signal.unit) for c in changes[:WHERE_NAMED])
+            more = f" (+{len(changes) - WHERE_NAMED} more)" if len(changes) > WHERE_NAMED else ""
+            lines.append(f"    {word} in: {named}{more}")
+    return lines
+
+
 def comparison_table(comparison: Comparison, found: Sequence[Regression] | None = None) -> str:
     """Terminal text: per signal each λ, the physical errors and the lag, then Φ per spec."""
     lines = [f"compare {comparison.before_label} → {comparison.after_label}"]
@@ -96,6 +111,7 @@ def comparison_table(comparison: Comparison, found: Sequence[Regression] | None 
             )
             rows = [("", comparison.before_label, comparison.after_label, "Δ")]
             lines += _columns(rows + _signal_rows(signal), "    ")
+            lines += _where_lines(signal)
         for path in spec.added_signals:
             lines.append(f"  {path}: new (no baseline)")
         for path in spec.removed_signals:

@@ -15,8 +15,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from .. import __version__
+from ..core.registry import describe
 from ..errors import MissingExtraError
-from . import model, plots, svg
+from ..localise import LocalFailure
+from . import local_svg, model, plots, svg
 from .text import campaigns_of
 
 __all__ = ["render_html"]
@@ -63,6 +65,7 @@ def _signal_view(
         "path": path,
         "anchor": anchors.get(path, f"spec{spec_index}-{_slug(path)}"),
         "cells": model.cells(signal),
+        "standard_metrics": model.standard_metric_rows(signal),
         "failed": failed,
         "is_origin": failed and bool(signal.get("origin")),
         "origins": [(o, anchors.get(o)) for o in origins if o != path],
@@ -70,7 +73,46 @@ def _signal_view(
         "plot": svg.signal_svg(signal, f"{spec_index}-{anchors.get(path, path)}"),
         "diagnosis": diagnosis if isinstance(diagnosis, Mapping) else None,
         "history": svg.history_svg(history) if isinstance(history, Sequence) else None,
+        **_local_view(signal),
     }
+
+
+def _local_view(signal: Mapping[str, Any]) -> dict[str, Any]:
+    """Where and when: the window strip, phase and condition tables, the cell heat maps."""
+    local = signal.get("local")
+    if not isinstance(local, Mapping):
+        return {"local": None}
+    regions = local.get("regions")
+    region_grid = signal.get("_region_grid")
+    maps: list[str] = []
+    if isinstance(regions, Mapping) and isinstance(region_grid, Mapping):
+        missed = {
+            f["characteristic"]: f.get("where", [])
+            for f in model.items(signal.get("local_failures"))
+            if f.get("scope") == "regions"
+        }
+        for name in missed or ["mae"]:
+            drawn = local_svg.heatmap_svg(
+                region_grid,
+                regions.get("lambdas", {}).get(name, []),
+                f"{describe(name).title} per cell",
+                missed=missed.get(name, ()),
+            )
+            if drawn:
+                maps.append(drawn)
+    return {
+        "local": local,
+        "timeline": local_svg.timeline_svg(signal),
+        "region_maps": maps,
+        "local_failures": [
+            _local_failure_sentence(f) for f in model.items(signal.get("local_failures"))
+        ],
+    }
+
+
+def _local_failure_sentence(failure: Mapping[str, Any]) -> str:
+    parsed = LocalFailure.from_dict(failure)
+    return parsed.sentence(describe(parsed.characteristic).title)
 
 
 def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
@@ -78,7 +120,14 @@ def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
     for j, signal in enumerate(model.items(spec.get("signals"))):
         path = str(signal.get("path") or signal.get("name") or "")
         anchors.setdefault(path, f"spec{index}-{j}-{_slug(path)}")
-    views = {id(s): _signal_view(index, s, anchors) for s in model.ordered_signals(spec)}
+    local = spec.get("local") if isinstance(spec.get("local"), Mapping) else None
+    region_grid = local.get("regions") if local else None
+    views = {
+        id(s): _signal_view(
+            index, {**s, "_region_grid": region_grid} if region_grid else s, anchors
+        )
+        for s in model.ordered_signals(spec)
+    }
     tree = [(views[id(s)], depth) for s, depth in model.tree_rows(spec)]
     signals = list(views.values())
     phi = spec.get("phi")
@@ -101,7 +150,28 @@ def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
         "signals": signals,
         "failing": [v for v in signals if v["failed"]],
         "weights": spec.get("weights"),
+        "region_phi": (
+            local_svg.heatmap_svg(region_grid, region_grid.get("phi", []), "Φ per cell")
+            if isinstance(region_grid, Mapping)
+            else None
+        ),
+        "region_coverage": (
+            local_svg.coverage_svg(region_grid) if isinstance(region_grid, Mapping) else None
+        ),
+        "region_unvisited": (
+            [region_grid["labels"][_flat(region_grid, i)] for i in region_grid.get("unvisited", [])]
+            if isinstance(region_grid, Mapping)
+            else []
+        ),
     }
+
+
+def _flat(region: Mapping[str, Any], index: Sequence[int]) -> int:
+    shape = list(region.get("shape", []))
+    flat = 0
+    for size, i in zip(shape, index, strict=True):
+        flat = flat * int(size) + int(i)
+    return flat
 
 
 def _environment() -> Any:

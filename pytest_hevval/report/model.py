@@ -23,6 +23,7 @@ __all__ = [
     "SHORT_LABELS",
     "Cell",
     "GlyphPoint",
+    "StandardMetricRow",
     "WorstRow",
     "cells",
     "characteristic_names",
@@ -33,6 +34,7 @@ __all__ = [
     "margin",
     "ordered_signals",
     "signal_order",
+    "standard_metric_rows",
     "summary",
     "tree_rows",
     "worst_rows",
@@ -159,6 +161,39 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
             status = "pass"
         out.append(Cell(name, i, value, threshold, status))
     return out
+
+
+@dataclass(frozen=True)
+class StandardMetricRow:
+    """One standard metric of one signal: its scored cell and the raw values behind it."""
+
+    cell: Cell
+    components: tuple[tuple[str, float], ...]
+
+    @property
+    def title(self) -> str:
+        return describe(self.cell.characteristic).label
+
+    def components_text(self, digits: int = 4) -> str:
+        return ", ".join(f"{key} {value:.{digits}g}" for key, value in self.components)
+
+
+def standard_metric_rows(signal: Mapping[str, Any]) -> list[StandardMetricRow]:
+    """The "standard metrics" table of ``signal``: empty unless its spec switched any on."""
+    parts = signal.get("components")
+    parts = parts if isinstance(parts, Mapping) else {}
+    rows: list[StandardMetricRow] = []
+    for cell in cells(signal):
+        if not describe(cell.characteristic).standard:
+            continue
+        found = parts.get(cell.characteristic)
+        components = tuple(
+            (str(key), float(value))
+            for key, value in (found.items() if isinstance(found, Mapping) else ())
+            if is_finite_number(value)
+        )
+        rows.append(StandardMetricRow(cell, components))
+    return rows
 
 
 def margin(signal: Mapping[str, Any]) -> float | None:

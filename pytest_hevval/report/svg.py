@@ -275,6 +275,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
     defs.append(ov.clip(f"{ident}-ov"))
     ov.frame(parts, x_label=None, y_label=f"{signal.get('name') or ''}{suffix}", x_ticks=False)
     parts.append(f'<g clip-path="url(#{ident}-ov)">')
+    parts.extend(_hot_spans(signal, ov))
     parts.append(ov.band(t_ref, ref_lo, ref_hi, "hv-ref"))
     parts.append(ov.band(t_sim, sim_lo, sim_hi, "hv-sim"))
     parts.append("</g>")
@@ -402,6 +403,23 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
         f"<title>{_esc(title)}</title>"
         f"<defs>{''.join(defs)}</defs>{''.join(parts)}</svg>"
     )
+
+
+def _hot_spans(signal: Mapping[str, Any], panel: _Panel) -> list[str]:
+    """The windows where the error concentrates (``local:``), shaded behind the overlay."""
+    local = signal.get("local")
+    if not isinstance(local, Mapping):
+        return []
+    spans = (local.get("concentration") or {}).get("spans_s") or []
+    out = []
+    for a, b in spans:
+        x0, x1 = float(panel.px(float(a))), float(panel.px(float(b)))
+        out.append(
+            f'<rect class="hv-hot" x="{x0:.1f}" y="{panel.y}" width="{max(x1 - x0, 1):.1f}" '
+            f'height="{panel.height}"><title>error concentrates here: {float(a):.0f}–'
+            f"{float(b):.0f} s</title></rect>"
+        )
+    return out
 
 
 def _time_range(data: Mapping[str, Any], time: FloatArray) -> tuple[float, float]:

@@ -206,6 +206,33 @@ def _where_text(signal: Mapping[str, Any]) -> str:
     return ", ".join((["here"] if here else []) + others)
 
 
+def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+    """A "standard metrics" table per spec that switched any on, one row per signal and metric."""
+    lines: list[str] = []
+    for spec in spec_results:
+        rows = [
+            (signal, row)
+            for signal in model.ordered_signals(spec)
+            for row in model.standard_metric_rows(signal)
+        ]
+        if not rows:
+            continue
+        lines += [
+            "",
+            f"**Standard metrics of {_md(spec.get('name', ''))}**",
+            "",
+            "| signal | metric | score | threshold | components |",
+            "|---|---|--:|--:|---|",
+        ]
+        for signal, row in rows:
+            gate = _num(row.cell.threshold, 3) if row.cell.threshold is not None else "—"
+            lines.append(
+                f"| {_code(signal.get('path', ''))} | {_md(row.cell.label)} {_md(row.title)} "
+                f"| {_num(row.cell.value)} | {gate} | {_md(row.components_text())} |"
+            )
+    return lines
+
+
 def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
     """A short summary for a GitHub step summary or PR comment."""
     counts = model.summary(spec_results)
@@ -255,6 +282,7 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
     lines += _campaign_markdown(spec_results)
+    lines += _standard_metrics_markdown(spec_results)
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
         quality = (spec.get("data") or {}).get("quality")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import glob
 import hashlib
+import itertools
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -25,14 +26,20 @@ from ..core.registry import (
 from ..data.quality import QUALITY_ACTIONS, QualityLimits
 from ..data.record import SourceOptions
 from ..data.remote import is_url
+from ..defaults import LOCAL_WINDOW_S, REGION_BINS, REGION_MIN_SAMPLES
 from ..errors import ExpressionError, SpecError, did_you_mean
 from .expressions import Expression, parse_signal
 from .model import (
     ROLES,
     AlignmentSpec,
     CampaignSpec,
+    ConditionSpec,
+    DiagnosisSpec,
     Interpolation,
+    LocalGate,
+    LocalSpec,
     RecordingSpec,
+    RegionSpec,
     Role,
     SignalSpec,
     SourceSpec,
@@ -66,11 +73,15 @@ _TOP_KEYS = (
     "correlation",
     "emergent",
     "candidates",
+    "diagnosis",
     "data_quality",
+    "local",
+    "regions",
     "recordings",
     "campaign",
     "sets",
 )
+_DIAGNOSIS_KEYS = ("min_share", "responses", "causes")
 _RECORDING_KEYS = ("id", "path", "role", "params")
 _CAMPAIGN_KEYS = ("min_pass_rate", "phi_quantile")
 _SOURCE_KEYS = (
@@ -112,8 +123,14 @@ _SIGNAL_KEYS = (
     "ref_offset",
     "sim_scale",
     "sim_offset",
+    "local_thresholds",
+    "region_thresholds",
     "children",
 )
+_LOCAL_KEYS = ("window_s", "phases", "conditions", "gate")
+_REGION_KEYS = ("by", "bins", "min_samples", "gate")
+_GATE_KEYS = ("thresholds", "share")
+_CONDITION_KEYS = ("when", "thresholds")
 
 T = TypeVar("T")
 
@@ -334,6 +351,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
     candidates = _candidates(context, top)
+    diagnosis = _diagnosis(context, top)
     data_quality = _data_quality(context, top)
     sets_value = top["sets"]
     sets_line = top.line_of("sets")
@@ -346,8 +364,20 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         for i, item in enumerate(sets_value)
     )
     _check_unique_paths(context, roots)
+    local = _local(context, top)
+    regions = _regions(context, top)
     for _, node in _all_nodes(roots):
         _check_scored(context, node.thresholds, scored, node.line, _join(node.key, "thresholds"))
+        _check_local_scored(context, node.local_thresholds, node, "local_thresholds")
+        _check_local_scored(context, node.region_thresholds, node, "region_thresholds")
+    if local and local.gate:
+        _check_local_scored(context, local.gate.thresholds, None, "local.gate.thresholds")
+    for condition in local.conditions if local else ():
+        _check_local_scored(
+            context, condition.thresholds, None, f"local.conditions.{condition.name}.thresholds"
+        )
+    if regions and regions.gate:
+        _check_local_scored(context, regions.gate.thresholds, None, "regions.gate.thresholds")
     _check_phi_defined(context, roots, sets_line)
     name = context.get(top, "name", "", context.text, _default_name(path))
     return Spec(
@@ -367,7 +397,10 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
+        diagnosis=diagnosis,
         data_quality=data_quality,
+        local=local,
+        regions=regions,
         campaign=campaign,
     )
 
@@ -758,6 +791,47 @@ def _candidates(context: _Context, top: LineDict) -> dict[str, Expression]:
     }
 
 
+def _diagnosis(context: _Context, top: LineDict) -> DiagnosisSpec:
+    if "diagnosis" not in top or top["diagnosis"] is None:
+        return DiagnosisSpec()
+    mapping = context.mapping(top["diagnosis"], top.line_of("diagnosis"), "diagnosis")
+    context.check_keys(mapping, _DIAGNOSIS_KEYS, "diagnosis")
+    min_share = context.get(mapping, "min_share", "diagnosis", context.unit_interval, None)
+    if min_share is not None and min_share >= 1.0:
+        raise context.error(
+            mapping.line_of("min_share"),
+            "diagnosis.min_share",
+            "must be below 1 (the share of the residual a relevant effect explains)",
+            got=min_share,
+            hint="0.05, the default, lists effects that remove at least 5 % of the residual",
+        )
+    names: dict[str, tuple[str, ...]] = {}
+    for key in ("responses", "causes"):
+        value = mapping.get(key)
+        line = mapping.line_of(key)
+        if value is None:
+            names[key] = ()
+            continue
+        if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+            raise context.error(
+                line,
+                f"diagnosis.{key}",
+                "must be a list of channel or candidate names",
+                got=value,
+                hint=f'write e.g. {key}: ["Battery Temperature [°C]"]',
+            )
+        names[key] = tuple(value)
+    both = sorted(set(names["responses"]) & set(names["causes"]))
+    if both:
+        raise context.error(
+            mapping.line_of("causes"),
+            "diagnosis.causes",
+            f"{both[0]!r} is declared both a response and a cause",
+            hint="keep it in one of the two lists",
+        )
+    return DiagnosisSpec(min_share=min_share, responses=names["responses"], causes=names["causes"])
+
+
 def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
     mapping = context.mapping(value, line, key)
     context.check_keys(mapping, _SIGNAL_KEYS, key)
@@ -812,6 +886,154 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         sim_scale=context.get(mapping, "sim_scale", key, context.number, 1.0),
         sim_offset=context.get(mapping, "sim_offset", key, context.number, 0.0),
         children=children,
+        local_thresholds=_thresholds(
+            context, mapping, "local_thresholds", _join(key, "local_thresholds")
+        ),
+        region_thresholds=_thresholds(
+            context, mapping, "region_thresholds", _join(key, "region_thresholds")
+        ),
+    )
+
+
+def _check_local_scored(
+    context: _Context, table: Mapping[str, float], node: SignalSpec | None, key: str
+) -> None:
+    """Windows and cells are scored on λ1–λ6 only: λ7 and whole-record metrics have no part."""
+    from ..core.local import LOCAL_CHARACTERISTICS
+
+    for name in table:
+        if name not in LOCAL_CHARACTERISTICS:
+            raise context.error(
+                node.line if node else 1,
+                _join(_join(node.key, key) if node else key, name),
+                f"{name!r} is not scored over windows or region cells",
+                hint="use one of " + ", ".join(LOCAL_CHARACTERISTICS),
+            )
+
+
+def _local_gate(context: _Context, mapping: LineDict, key: str) -> LocalGate | None:
+    if "gate" not in mapping or mapping["gate"] is None:
+        return None
+    where = _join(key, "gate")
+    gate = context.mapping(mapping["gate"], mapping.line_of("gate"), where)
+    context.check_keys(gate, _GATE_KEYS, where)
+    thresholds = _thresholds(context, gate, "thresholds", _join(where, "thresholds"))
+    if not thresholds:
+        raise context.error(
+            gate.line,
+            _join(where, "thresholds"),
+            "is required: the characteristics every window or cell must reach",
+            hint="for example thresholds: {mae: 0.9}",
+        )
+    return LocalGate(
+        thresholds=thresholds,
+        share=context.get(gate, "share", where, context.unit_interval, 1.0),
+        line=gate.line,
+    )
+
+
+def _local(context: _Context, top: LineDict) -> LocalSpec | None:
+    if "local" not in top or top["local"] is None:
+        return None
+    key = "local"
+    mapping = context.mapping(top[key], top.line_of(key), key)
+    context.check_keys(mapping, _LOCAL_KEYS, key)
+    conditions: list[ConditionSpec] = []
+    if mapping.get("conditions") is not None:
+        where = _join(key, "conditions")
+        table = context.mapping(mapping["conditions"], mapping.line_of("conditions"), where)
+        for name, value in table.items():
+            line = table.line_of(name)
+            entry = _join(where, str(name))
+            if isinstance(value, LineDict):
+                context.check_keys(value, _CONDITION_KEYS, entry)
+                if "when" not in value:
+                    raise context.error(line, _join(entry, "when"), "is required (an expression)")
+                expression = _expression(
+                    context, value["when"], value.line_of("when"), _join(entry, "when")
+                )
+                thresholds = _thresholds(context, value, "thresholds", _join(entry, "thresholds"))
+            else:
+                expression = _expression(context, value, line, entry)
+                thresholds = {}
+            conditions.append(ConditionSpec(str(name), expression, line, thresholds))
+    return LocalSpec(
+        window_s=context.get(mapping, "window_s", key, context.positive, LOCAL_WINDOW_S),
+        line=top.line_of(key),
+        phases=context.get(
+            mapping, "phases", key, lambda v, ln, k: _expression(context, v, ln, k), None
+        ),
+        conditions=tuple(conditions),
+        gate=_local_gate(context, mapping, key),
+    )
+
+
+def _region_bins(
+    context: _Context, mapping: LineDict, key: str, variables: int
+) -> tuple[tuple[float, ...] | int, ...]:
+    if mapping.get("bins") is None:
+        return (REGION_BINS,) * variables
+    where = _join(key, "bins")
+    raw = mapping["bins"]
+    line = mapping.line_of("bins")
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        raw = [raw] * variables
+    if not isinstance(raw, list) or len(raw) != variables:
+        raise context.error(
+            line,
+            where,
+            f"must give one entry per variable of by ({variables}): a bin count or a list of edges",
+            got=raw,
+        )
+    bins: list[tuple[float, ...] | int] = []
+    for i, item in enumerate(raw):
+        entry = _join(where, i)
+        if isinstance(item, int) and not isinstance(item, bool):
+            if item < 1:
+                raise context.error(line, entry, "a bin count must be at least 1", got=item)
+            bins.append(item)
+            continue
+        if not isinstance(item, list) or len(item) < 2:
+            raise context.error(
+                line, entry, "must be a bin count or a list of at least two edges", got=item
+            )
+        edges = tuple(context.number(x, line, _join(entry, j)) for j, x in enumerate(item))
+        if any(b <= a for a, b in itertools.pairwise(edges)):
+            raise context.error(line, entry, "bin edges must increase", got=list(edges))
+        bins.append(edges)
+    return tuple(bins)
+
+
+def _regions(context: _Context, top: LineDict) -> RegionSpec | None:
+    if "regions" not in top or top["regions"] is None:
+        return None
+    key = "regions"
+    mapping = context.mapping(top[key], top.line_of(key), key)
+    context.check_keys(mapping, _REGION_KEYS, key)
+    raw_by = mapping.get("by")
+    line = mapping.line_of("by") if "by" in mapping else mapping.line
+    if isinstance(raw_by, str):
+        raw_by = [raw_by]
+    if not isinstance(raw_by, list) or not 1 <= len(raw_by) <= 2:
+        raise context.error(
+            line,
+            _join(key, "by"),
+            "must name one or two operating variables (columns or expressions of the reference)",
+            got=raw_by,
+        )
+    by = tuple(
+        _expression(context, item, line, _join(_join(key, "by"), i))
+        for i, item in enumerate(raw_by)
+    )
+    min_samples = context.get(
+        mapping, "min_samples", key, context.positive, float(REGION_MIN_SAMPLES)
+    )
+    return RegionSpec(
+        by=by,
+        bins=_region_bins(context, mapping, key, len(by)),
+        min_samples=max(1, int(min_samples)),
+        line=top.line_of(key),
+        gate=_local_gate(context, mapping, key),
     )
 
 

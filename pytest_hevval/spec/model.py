@@ -16,9 +16,14 @@ __all__ = [
     "ROLES",
     "AlignmentSpec",
     "CampaignSpec",
+    "ConditionSpec",
+    "DiagnosisSpec",
     "Interpolation",
+    "LocalGate",
+    "LocalSpec",
     "ModelKind",
     "RecordingSpec",
+    "RegionSpec",
     "Role",
     "SignalSpec",
     "SourceSpec",
@@ -68,6 +73,19 @@ class SourceSpec:
 
 
 @dataclass(frozen=True)
+class DiagnosisSpec:
+    """The spec's ``diagnosis:`` settings (docs/spec.md, docs/diagnosis.md)."""
+
+    #: A significant effect is relevant when it removes at least this share of the residual;
+    #: None: the diagnosis default (``core.diagnosis.MIN_SHARE``).
+    min_share: float | None = None
+    #: Candidate names that echo the scored signal and are never offered as the missing effect.
+    responses: tuple[str, ...] = ()
+    #: Candidate names that are causes, whatever the response rule says.
+    causes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class AlignmentSpec:
     rate_hz: float | None = None
     window: tuple[float, float] | None = None
@@ -79,6 +97,70 @@ class AlignmentSpec:
     nan: NanPolicy = "raise"
     #: "time": both records' own time columns; "clock": their absolute start times.
     by: Literal["time", "clock"] = "time"
+
+
+@dataclass(frozen=True)
+class LocalGate:
+    """A gate over parts of a record: every window (or cell) must meet ``thresholds``.
+
+    ``share`` is the share of judged windows that must pass (1: every one). A node's own
+    ``local_thresholds`` / ``region_thresholds`` override the spec's, as for the record gate.
+    """
+
+    thresholds: Mapping[str, float]
+    share: float = 1.0
+    line: int = 1
+
+
+@dataclass(frozen=True)
+class ConditionSpec:
+    """A named condition on the reference: the segments where it holds are scored apart.
+
+    A gated window in which the condition holds for most samples is judged against
+    ``thresholds`` instead of the gate's own (a condition-dependent tolerance).
+    """
+
+    name: str
+    expression: Expression
+    line: int
+    thresholds: Mapping[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LocalSpec:
+    """``local:``: characteristics over time windows, driving phases and conditions."""
+
+    window_s: float
+    line: int
+    #: Speed (km/h) on the reference, from which driving phases are found.
+    phases: Expression | None = None
+    conditions: tuple[ConditionSpec, ...] = ()
+    gate: LocalGate | None = None
+
+    def columns(self) -> set[str]:
+        columns: set[str] = set(self.phases.columns) if self.phases else set()
+        for condition in self.conditions:
+            columns.update(condition.expression.columns)
+        return columns
+
+
+@dataclass(frozen=True)
+class RegionSpec:
+    """``regions:``: samples binned by one or two operating variables of the reference."""
+
+    by: tuple[Expression, ...]
+    #: Per variable: bin edges (the declared operating space) or a count of equal bins over
+    #: the measured range.
+    bins: tuple[tuple[float, ...] | int, ...]
+    min_samples: int
+    line: int
+    gate: LocalGate | None = None
+
+    def columns(self) -> set[str]:
+        columns: set[str] = set()
+        for expression in self.by:
+            columns.update(expression.columns)
+        return columns
 
 
 @dataclass(frozen=True)
@@ -104,6 +186,9 @@ class SignalSpec:
     sim_scale: float = 1.0
     sim_offset: float = 0.0
     children: tuple[SignalSpec, ...] = ()
+    #: Overrides of the spec's window and region gate thresholds for this node.
+    local_thresholds: Mapping[str, float] = field(default_factory=dict)
+    region_thresholds: Mapping[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -152,10 +237,14 @@ class Spec:
     correlation: Literal["xcorr", "pearson"] = "xcorr"
     emergent: Literal["V1", "V2"] = "V2"
     candidates: Mapping[str, Expression] = field(default_factory=dict)
+    diagnosis: DiagnosisSpec = field(default_factory=lambda: DiagnosisSpec())
     #: Limits and action of the data-quality gate on the reference channels.
     data_quality: QualityLimits = field(default_factory=QualityLimits)
     #: Threshold overrides from a ratchet sidecar file, keyed by signal path.
     ratchet: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    #: Where and when the model is wrong: windows, phases, conditions and region cells.
+    local: LocalSpec | None = None
+    regions: RegionSpec | None = None
     #: The campaign this spec covers (every recording's spec keeps it, to know its siblings).
     campaign: CampaignSpec | None = None
     #: The recording this spec scores, for one recording of a campaign.
@@ -205,6 +294,16 @@ class Spec:
                 merged[name] = value
         return merged
 
+    def local_thresholds_for(self, node: SignalSpec) -> dict[str, float]:
+        """Window-gate thresholds of one node: the spec's ``local.gate`` < the node's own."""
+        gate = self.local.gate if self.local else None
+        return {**(gate.thresholds if gate else {}), **node.local_thresholds}
+
+    def region_thresholds_for(self, node: SignalSpec) -> dict[str, float]:
+        """Cell-gate thresholds of one node: the spec's ``regions.gate`` < the node's own."""
+        gate = self.regions.gate if self.regions else None
+        return {**(gate.thresholds if gate else {}), **node.region_thresholds}
+
     def characteristics(self) -> tuple[Characteristic, ...]:
         """What this spec scores: the default characteristics plus its ``metrics``."""
         return select_characteristics(self.metrics)
@@ -223,6 +322,10 @@ class Spec:
         columns.update(self.model.fmu_inputs.values())
         if self.alignment.offset_from:
             columns.add(self.alignment.offset_from[0])
+        if self.local:
+            columns.update(self.local.columns())
+        if self.regions:
+            columns.update(self.regions.columns())
         return columns
 
     def model_columns(self) -> set[str]:

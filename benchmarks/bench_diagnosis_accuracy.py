@@ -1,0 +1,254 @@
+"""How often the diagnosis names an injected effect first, on the example's real i3 trips.
+
+    python benchmarks/bench_diagnosis_accuracy.py               # the published table, ~5 min
+    python benchmarks/bench_diagnosis_accuracy.py --draws 2     # a quick look
+    python benchmarks/bench_diagnosis_accuracy.py --json out.json
+
+For each trip the example ships (A01, A02, A12, B03, each with its model v2 spec in
+example_project/specs), the battery power ``E_batt/P_batt`` is scored once. Then, per draw, a
+reference is built from the model's output, a known effect and realistic noise:
+
+    reference = simulated + effect + noise
+
+The noise is the trip's real residual (measured − model v2), its mean removed, shifted in time
+by a random 20–80 % of the record (circularly): it keeps the real level, spectrum and
+autocorrelation of a vehicle model's error, and is unrelated to the channels and to the model
+output. The effects:
+
+* ``channel``: a scaled logged channel (heater, air conditioning, elevation, ambient
+  temperature, throttle), random sign; the elevation and the ambient temperature about their
+  mean (their zero is arbitrary; scaled as they are, they would be mostly a constant);
+* ``derivative``: a scaled derivative candidate (of the elevation, the throttle, the
+  air-conditioning power), exactly as the diagnosis builds it;
+* ``gain``: (g − 1) × simulated; ``offset``: a constant; ``lag``: the simulated signal delayed
+  or advanced by 0.3–2 s;
+* two of these at once (different kinds);
+* ``control``: no effect (``--controls`` per draw, 5 by default).
+
+Each effect's size is drawn so that it makes 20–60 % of the residual's mean square (15–40 %
+each for two; the lag is drawn by its delay). The candidates are those a user gets
+(``candidates_for``: the spec's own, every unscored channel and its derivative), with the spec's
+diagnosis settings (``diagnose_pair``).
+
+The first finding is right when the diagnosis' first relevant effect is the injected one (for
+two, one of the two). A control has a false finding when any effect is relevant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLE = ROOT / "example_project"
+SPECS = (
+    "specs/i3-A01-fit.hevval.yaml",
+    "specs/i3-A02-motorway-v2.hevval.yaml",
+    "specs/i3-A12-hills-v2.hevval.yaml",
+    "specs/i3-B03-winter-v2.hevval.yaml",
+)
+SIGNAL = "E_batt/P_batt"
+CHANNELS = (
+    "Heating Power CAN [kW]",
+    "AirCon Power [kW]",
+    "Elevation [m]",
+    "Ambient Temperature [°C]",
+    "Throttle [%]",
+)
+# Channels whose zero means "no effect" (a load that is off, a released pedal) are injected as
+# they are; a scaled elevation or ambient temperature in °C is mostly a constant, which no
+# diagnosis can tell from an offset, so those are injected about their mean.
+PHYSICAL_ZERO = ("Heating Power CAN [kW]", "AirCon Power [kW]", "Throttle [%]")
+DERIVATIVES = ("d/dt Elevation [m]", "d/dt Throttle [%]", "d/dt AirCon Power [kW]")
+KINDS = ("channel", "derivative", "gain", "offset", "lag")
+SHARE_ONE = (0.2, 0.6)
+SHARE_TWO = (0.15, 0.4)
+LAG_S = (0.3, 2.0)
+
+FloatArray = npt.NDArray[np.float64]
+
+
+class Trip:
+    """One scored trip: the model output, the real residual and the candidates."""
+
+    def __init__(self, spec: str) -> None:
+        from pytest_hevval.diagnose import candidates_for
+        from pytest_hevval.run import RunOptions, run_specs
+        from pytest_hevval.spec.load import load_spec
+
+        (outcome,) = run_specs([load_spec(spec)], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
+        if isinstance(outcome, Exception):
+            raise outcome
+        evaluation = outcome
+        assert evaluation.aligned is not None
+        self.name = Path(spec).name.split(".")[0]
+        self.evaluation = evaluation
+        measured, simulated = evaluation.arrays[SIGNAL]
+        self.simulated = np.asarray(simulated, dtype=np.float64)
+        residual = np.asarray(measured, dtype=np.float64) - self.simulated
+        self.residual = residual - float(np.mean(residual))
+        self.dt = evaluation.aligned.grid.dt
+        self.candidates = candidates_for(evaluation)
+        self.series = {c.name: np.asarray(c.values, dtype=np.float64) for c in self.candidates}
+        self.channels = [c for c in CHANNELS if c in self.series and np.std(self.series[c]) > 0]
+        self.derivatives = [d for d in DERIVATIVES if d in self.series]
+
+
+def _scaled(unit: FloatArray, share: float, noise_ms: float) -> FloatArray:
+    """``unit`` scaled so that it makes ``share`` of (its mean square + the noise's)."""
+    ms = float(np.mean(unit**2))
+    return np.asarray(unit * np.sqrt(share / (1.0 - share) * noise_ms / ms), dtype=np.float64)
+
+
+def _effect(
+    kind: str, trip: Trip, rng: np.random.Generator, share: float, noise_ms: float, avoid: str
+) -> tuple[str, FloatArray]:
+    """(expected name or kind, effect series)."""
+    sign = rng.choice((-1.0, 1.0))
+    if kind == "channel":
+        name = str(rng.choice([c for c in trip.channels if c != avoid]))
+        values = trip.series[name]
+        if name not in PHYSICAL_ZERO:
+            values = values - float(np.mean(values))
+        return name, sign * _scaled(values, share, noise_ms)
+    if kind == "derivative":
+        name = str(rng.choice([d for d in trip.derivatives if d != avoid]))
+        return name, sign * _scaled(trip.series[name], share, noise_ms)
+    if kind == "gain":
+        return "gain", sign * _scaled(trip.simulated, share, noise_ms)
+    if kind == "offset":
+        return "offset", sign * _scaled(np.ones_like(trip.simulated), share, noise_ms)
+    shift = max(1, round(rng.uniform(*LAG_S) / trip.dt)) * int(sign)
+    n = trip.simulated.shape[0]
+    moved = trip.simulated[np.clip(np.arange(n) - shift, 0, n - 1)]
+    return "lag", moved - trip.simulated
+
+
+def _first(diagnosis: Any) -> tuple[str, str] | None:
+    relevant = diagnosis.relevant
+    if not relevant:
+        return None
+    return relevant[0].name, relevant[0].kind
+
+
+def _matches(first: tuple[str, str] | None, expected: str) -> bool:
+    if first is None:
+        return False
+    name, kind = first
+    return name == expected if expected not in ("gain", "offset", "lag") else kind == expected
+
+
+def run(draws: int, controls: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
+    from pytest_hevval.diagnose import diagnose_pair
+
+    rng = np.random.default_rng(seed)
+    tally: dict[str, list[int]] = defaultdict(lambda: [0, 0])
+    misses: list[dict[str, Any]] = []
+    started = time.perf_counter()
+    cases = [*([k] for k in KINDS), *([a, b] for i, a in enumerate(KINDS) for b in KINDS[i + 1 :])]
+    for spec in SPECS:
+        trip = Trip(spec)
+        log(f"{trip.name}: {trip.simulated.shape[0]} samples, {len(trip.candidates)} candidates")
+        for _ in range(draws):
+            for case in [*([] for _ in range(controls)), *cases]:
+                shift = int(
+                    rng.integers(int(0.2 * len(trip.residual)), int(0.8 * len(trip.residual)))
+                )
+                noise = np.roll(trip.residual, shift)
+                noise_ms = float(np.mean(noise**2))
+                shares = SHARE_ONE if len(case) == 1 else SHARE_TWO
+                expected: list[str] = []
+                effect = np.zeros_like(noise)
+                for kind in case:
+                    name, series = _effect(
+                        kind,
+                        trip,
+                        rng,
+                        rng.uniform(*shares),
+                        noise_ms,
+                        expected[0] if expected else "",
+                    )
+                    expected.append(name)
+                    effect += series
+                found = diagnose_pair(
+                    trip.evaluation,
+                    trip.simulated + effect + noise,
+                    trip.simulated,
+                    trip.candidates,
+                )
+                first = _first(found)
+                label = "control" if not case else "+".join(case)
+                if not case:
+                    wrong = first is not None
+                else:
+                    wrong = not any(_matches(first, e) for e in expected)
+                tally[label][0] += int(not wrong)
+                tally[label][1] += 1
+                if wrong:
+                    misses.append(
+                        {"trip": trip.name, "case": label, "injected": expected, "first": first}
+                    )
+    elapsed = time.perf_counter() - started
+    return {"tally": dict(tally), "misses": misses, "seconds": elapsed, "draws": draws}
+
+
+def table(result: dict[str, Any]) -> str:
+    rows = [
+        "| injected | diagnoses | first finding right | false finding |",
+        "|---|---:|---:|---:|",
+    ]
+    singles = [k for k in KINDS]
+    pairs = [k for k in result["tally"] if "+" in k]
+    total_right = total = 0
+    for label in [*singles, *pairs]:
+        right, n = result["tally"][label]
+        total_right += right
+        total += n
+        rows.append(f"| {label} | {n} | {100 * right / n:.0f} % | |")
+    rows.append(f"| **all effects** | {total} | **{100 * total_right / total:.1f} %** | |")
+    ok, n = result["tally"]["control"]
+    rows.append(f"| control (none) | {n} | | **{100 * (n - ok) / n:.1f} %** |")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--draws", type=int, default=20, help="draws per case and trip")
+    parser.add_argument("--controls", type=int, default=5, help="controls per draw and trip")
+    parser.add_argument("--seed", type=int, default=2026)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--misses", action="store_true", help="list every wrong first finding")
+    args = parser.parse_args()
+    # The example's model package is imported from the example folder, as its specs expect.
+    os.chdir(EXAMPLE)
+    sys.path.insert(0, str(EXAMPLE))
+
+    def log(text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
+    result = run(args.draws, args.controls, args.seed, log)
+    print(table(result))
+    print(
+        f"\n{sum(n for _, n in result['tally'].values())} diagnoses in "
+        f"{result['seconds']:.0f} s (draws {args.draws}, controls {args.controls}, "
+        f"seed {args.seed})"
+    )
+    if args.misses:
+        for miss in result["misses"]:
+            print(miss)
+    if args.json:
+        args.json.write_text(json.dumps(result, indent=1), encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,296 @@
+"""The optional compiled kernel: which path scores a record, numba or numpy.
+
+The numpy code in :mod:`~pytest_hevval.core.characteristics` and :mod:`~pytest_hevval.core.lag`
+is the reference. With the ``fast`` extra (numba) installed, the main pass (the sums behind
+λ1–λ6, the extremes, the λ2 sign count and the first pyramid levels) and the exact lag window
+run as compiled loops instead, parallel over chunks and combined in chunk order, so a result
+is the same for any thread count and agrees with numpy to rounding.
+
+Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
+kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
+on-disk cache is already warm. numba writes that cache next to this module (``__pycache__``)
+or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that folder.
+
+``HEVVAL_KERNEL`` forces a path: ``numpy``, ``numba`` (an error if numba cannot be loaded) or
+``auto`` (the default). numba is imported only when the kernel is about to run, and any
+failure to import it (not installed, or built for an older numpy) leaves the numpy path.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import os
+import sys
+import threading
+from pathlib import Path
+from types import ModuleType
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import HevvalError, MissingExtraError
+
+__all__ = [
+    "KERNEL_ENV",
+    "KERNEL_MIN_SAMPLES",
+    "KernelPath",
+    "active_path",
+    "describe",
+    "kernel_for",
+    "load_or_raise",
+]
+
+KernelPath = Literal["auto", "numpy", "numba"]
+
+#: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
+KERNEL_ENV = "HEVVAL_KERNEL"
+#: On the auto path with a cold cache, records shorter than this stay on numpy. A first
+#: compile costs about as much as the kernel saves on 10^8 samples (see docs/performance.md),
+#: so only records long enough to be costly on numpy wait for it.
+KERNEL_MIN_SAMPLES = 1 << 24
+#: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
+#: centred copies, stay in a 1 MiB L2 cache.
+KERNEL_CHUNK = 1 << 15
+
+#: Columns of one chunk's row of sums from the compiled main pass.
+FIELDS = 15
+(
+    N,
+    ABS_ERROR,
+    SQ_ERROR,
+    ERROR_SUM,
+    ERROR_M2,
+    REF_SUM,
+    SIM_SUM,
+    REF_SQ,
+    SIM_SQ,
+    CROSS,
+    REF_MIN,
+    REF_MAX,
+    SIM_MIN,
+    SIM_MAX,
+    SIGN_MATCHES,
+) = range(FIELDS)
+
+_PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
+_lock = threading.Lock()
+_loaded: dict[str, ModuleType | None] = {}
+_failure: dict[str, str] = {}
+
+FloatArray = npt.NDArray[np.float64]
+AnyFloatArray = npt.NDArray[np.floating]
+
+
+def requested_path() -> KernelPath:
+    """The path ``HEVVAL_KERNEL`` asks for (``auto`` when unset)."""
+    value = os.environ.get(KERNEL_ENV, "auto").strip().lower() or "auto"
+    for path in _PATHS:
+        if value == path:
+            return path
+    raise HevvalError(
+        f"{value!r} is not a kernel path",
+        key=KERNEL_ENV,
+        hint="set it to auto, numpy or numba, or unset it",
+    )
+
+
+def _load() -> ModuleType | None:
+    """The compiled module, or None (the reason kept for :func:`describe`)."""
+    with _lock:
+        if "module" not in _loaded:
+            try:
+                _loaded["module"] = importlib.import_module(f"{__package__}._fused")
+            except Exception as error:
+                _loaded["module"] = None
+                _failure["reason"] = f"{type(error).__name__}: {error}".splitlines()[0]
+        return _loaded["module"]
+
+
+def _cache_folders() -> list[Path]:
+    here = Path(__file__).resolve().parent
+    folders = [here / "__pycache__"]
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    if custom:
+        # numba files a module's cache under the module's folder path inside NUMBA_CACHE_DIR.
+        folders.insert(0, Path(custom) / here.relative_to(here.anchor))
+    return folders
+
+
+def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
+    """Whether numba's on-disk cache already holds the kernel for this Python.
+
+    A stale entry (another numba version or an edited source) costs one compile, after which
+    the cache is warm again.
+    """
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    for folder in _cache_folders():
+        if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
+            return True
+    return False
+
+
+def _numba_installed() -> bool:
+    return importlib.util.find_spec("numba") is not None
+
+
+def load_or_raise() -> ModuleType:
+    """The compiled module, or a clear error where numba cannot be loaded."""
+    module = _load()
+    if module is None:
+        raise MissingExtraError(
+            f"the compiled kernel cannot be loaded ({_failure.get('reason', 'unknown reason')})",
+            key=KERNEL_ENV,
+            hint=f'install the extra (pip install "pytest-hevval[fast]") or unset {KERNEL_ENV}',
+        )
+    return module
+
+
+def kernel_for(
+    samples: int, functions: tuple[str, ...] = ("main_pass", "lag_window")
+) -> ModuleType | None:
+    """The compiled module if it should score a record of ``samples`` samples, else None.
+
+    ``functions`` are the compiled functions the caller will run: on the auto path a short
+    record takes the kernel only when all of them are already in numba's cache.
+    """
+    path = requested_path()
+    if path == "numpy":
+        return None
+    if path == "numba":
+        return load_or_raise()
+    if samples < KERNEL_MIN_SAMPLES and not cache_warm(functions):
+        return None
+    if not _numba_installed():
+        return None
+    return _load()
+
+
+def active_path() -> str:
+    """``numba`` or ``numpy``: the path a long record takes now (loads numba if installed)."""
+    if requested_path() == "numpy" or not _numba_installed():
+        return "numpy"
+    return "numba" if _load() is not None else "numpy"
+
+
+def describe() -> str:
+    """One line for ``hevval --version``: the active path and why."""
+    path = requested_path()
+    if path == "numpy":
+        return f"kernel: numpy ({KERNEL_ENV}=numpy)"
+    if not _numba_installed():
+        return 'kernel: numpy (numba not installed; pip install "pytest-hevval[fast]")'
+    if _load() is None:
+        return f"kernel: numpy (numba unusable: {_failure.get('reason', 'unknown reason')})"
+    import numba
+
+    version = getattr(numba, "__version__", "?")
+    if path == "numba":
+        return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
+    warm = "cache warm: every record" if cache_warm() else "cache cold"
+    return (
+        f"kernel: numba {version} for records of ≥ {KERNEL_MIN_SAMPLES:,} samples ({warm}); "
+        "numpy otherwise"
+    )
+
+
+def _threads(workers: int) -> None:
+    numba: Any = importlib.import_module("numba")
+    numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
+
+
+def accepts(*arrays: AnyFloatArray) -> bool:
+    """Whether the kernel's one compiled signature takes these arrays (float64, contiguous)."""
+    return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
+
+
+def main_pass(
+    module: ModuleType,
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    scale: float,
+    workers: int,
+    levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+) -> FloatArray:
+    """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
+    _threads(workers)
+    empty = np.empty(0, dtype=np.float64)
+    ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
+    rows: FloatArray = module.main_pass(
+        ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
+    )
+    return rows
+
+
+def lag_window(
+    module: ModuleType,
+    r: AnyFloatArray,
+    s: AnyFloatArray,
+    lo: int,
+    count: int,
+    r_mean: float,
+    s_mean: float,
+    scale: float,
+    window: tuple[int, int],
+    workers: int,
+) -> FloatArray:
+    """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
+    per-chunk rows summed in chunk order."""
+    _threads(workers)
+    rows: FloatArray = module.lag_window(
+        r,
+        s,
+        int(lo),
+        int(count),
+        float(r_mean),
+        float(s_mean),
+        float(scale),
+        int(window[0]),
+        int(window[1]),
+        KERNEL_CHUNK,
+    )
+    total = np.zeros(count + 1, dtype=np.float64)
+    for row in rows:
+        total += row
+    return total
+
+
+def interpolate(
+    module: ModuleType,
+    values: AnyFloatArray,
+    index: npt.NDArray[np.intp],
+    right: npt.NDArray[np.intp],
+    offset: FloatArray,
+    step: FloatArray,
+    exact: npt.NDArray[np.bool_],
+    workers: int = 2,
+) -> FloatArray:
+    """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
+    _threads(workers)
+    out: FloatArray = module.interpolate(values, index, right, offset, step, exact)
+    return out
+
+
+def grouped_sums(
+    module: ModuleType,
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    labels: npt.NDArray[np.int64],
+    groups: int,
+    shift: float,
+) -> npt.NDArray[np.float64]:
+    """The (groups, 10) table of ``core.local.SUM_COLUMNS``, in one sequential compiled pass.
+
+    Sequential per signal, so the table is bit-for-bit repeatable; signals run side by side on
+    the engine's threads (the loop releases the GIL).
+    """
+    out = np.zeros((groups, 10), dtype=np.float64)
+    module.grouped_sums(
+        np.ascontiguousarray(ref, dtype=np.float64),
+        np.ascontiguousarray(sim, dtype=np.float64),
+        np.ascontiguousarray(labels, dtype=np.int64),
+        float(shift),
+        out,
+    )
+    return out

@@ -1,0 +1,66 @@
+"""The input rules every standard metric shares: those of λ1–λ6, checked once."""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+from ...errors import DegenerateSignalError
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def checked_pair(
+    reference: npt.ArrayLike, simulated: npt.ArrayLike, *, metric: str, min_samples: int = 3
+) -> tuple[FloatArray, FloatArray]:
+    """Both signals as float64, or DegenerateSignalError for the inputs λ1–λ6 refuse too.
+
+    Refused: shapes other than two equal one-dimensional arrays, fewer than ``min_samples``
+    samples, NaN or inf, and a constant reference (every standard metric normalises by the
+    reference's spread, magnitude or slope).
+    """
+    ref = np.asarray(reference)
+    sim = np.asarray(simulated)
+    if ref.ndim != 1 or sim.ndim != 1 or ref.shape != sim.shape:
+        raise DegenerateSignalError(
+            f"{metric}: signals must be one-dimensional and of equal length "
+            f"(got shapes {ref.shape} and {sim.shape})",
+            hint="align both onto one time grid first",
+        )
+    if ref.shape[0] < min_samples:
+        raise DegenerateSignalError(
+            f"{metric}: at least {min_samples} samples are needed (got {ref.shape[0]})",
+            hint="widen the window or raise the sample rate",
+        )
+    ref = ref.astype(np.float64, copy=False)
+    sim = sim.astype(np.float64, copy=False)
+    for name, arr in (("reference", ref), ("simulated", sim)):
+        bad = np.flatnonzero(~np.isfinite(arr))
+        if bad.size:
+            raise DegenerateSignalError(
+                f"{metric}: {name} signal contains NaN or inf (first at sample {int(bad[0])})",
+                hint="set a gap policy (nan: omit) or clean the data",
+            )
+    if float(np.ptp(ref)) == 0.0:
+        raise DegenerateSignalError(
+            f"{metric}: the reference is constant, so the metric is undefined",
+            hint="compare a signal that varies, or leave this metric off for it",
+        )
+    return ref, sim
+
+
+# A mean below this fraction of the peak is round-off: a signal that swings about zero.
+_ZERO_MEAN = 1e-12
+
+
+def reference_mean(ref: FloatArray, metric: str, hint: str) -> float:
+    """The reference's mean, refused when it is 0 up to round-off (the metric divides by it)."""
+    mean = float(ref.mean())
+    if abs(mean) <= _ZERO_MEAN * float(np.max(np.abs(ref))):
+        raise degenerate(metric, "the reference's mean is 0, so the metric divides by zero", hint)
+    return mean
+
+
+def degenerate(metric: str, problem: str, hint: str) -> DegenerateSignalError:
+    """The error for an input on which ``metric``'s formula divides by zero."""
+    return DegenerateSignalError(f"{metric}: {problem}", hint=hint)

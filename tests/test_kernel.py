@@ -1,0 +1,171 @@
+"""The compiled kernel against the numpy reference path, and how a path is chosen."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+from pytest_hevval import signal_characteristics
+from pytest_hevval.core import kernel
+from pytest_hevval.core.characteristics import SignalCharacteristics
+from pytest_hevval.errors import DegenerateSignalError, HevvalError
+from tests.conftest import _kernel_unavailable
+from tests.strategies import signal_pairs
+
+ROOT = Path(__file__).resolve().parents[1]
+TRIPS = sorted((ROOT / "example_project" / "data" / "i3").glob("*.parquet"))
+
+needs_kernel = pytest.mark.skipif(
+    _kernel_unavailable() is not None, reason=str(_kernel_unavailable())
+)
+
+
+def _on(
+    path: str, monkeypatch: pytest.MonkeyPatch, *args: np.ndarray, **kw: object
+) -> SignalCharacteristics:
+    monkeypatch.setenv(kernel.KERNEL_ENV, path)
+    return signal_characteristics(*args, **kw)  # type: ignore[arg-type]
+
+
+def _assert_agree(a: SignalCharacteristics, b: SignalCharacteristics, lag: bool = True) -> None:
+    """Agreement to 1e-12 relative. A quantity that is a small difference of large ones is
+    held to 1e-12 of the scale it was computed at: λ = 1 − E/R to 1e-12 of 1, the mean error
+    and ΔE to 1e-12 of the RMS error."""
+    if lag:
+        assert a.lag_s == b.lag_s
+        assert a.peak_correlation == pytest.approx(b.peak_correlation, rel=1e-12, abs=1e-300)
+    assert a.n_samples == b.n_samples
+    for x, y in zip(a.lambdas, b.lambdas, strict=True):
+        assert x == pytest.approx(y, rel=1e-12, abs=1e-12)
+    for name in ("mae", "rms", "error_std", "reference_range"):
+        assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-12, abs=1e-300), name
+    assert a.delta_e == pytest.approx(b.delta_e, rel=1e-12, abs=1e-12 * a.rms)
+    assert a.mean_error == pytest.approx(b.mean_error, rel=1e-12, abs=1e-12 * a.rms)
+
+
+@needs_kernel
+@given(signal_pairs(max_size=2000))
+@settings(max_examples=60, deadline=None)
+def test_kernel_agrees_with_numpy_on_random_pairs(pair: tuple[np.ndarray, np.ndarray]) -> None:
+    # A constant simulation has no timing: its lag is decided by the last bit of its mean,
+    # which the two paths round differently. Its λ values are still compared below.
+    simulated = pair[1]
+    timed = np.ptp(simulated) > 1e-6 * (np.abs(simulated).max() + 1)
+    with pytest.MonkeyPatch.context() as patch:
+        reference = _on("numpy", patch, *pair, dt=0.1)
+        compiled = _on("numba", patch, *pair, dt=0.1)
+    _assert_agree(reference, compiled, lag=timed)
+
+
+@needs_kernel
+@pytest.mark.parametrize("n", [300_001, 1_000_003])  # pyramid lag path, odd chunk tails
+def test_kernel_agrees_with_numpy_on_long_records(n: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(n)
+    reference = np.cumsum(rng.normal(size=n)) + 50.0
+    simulated = np.roll(reference, 9) * 1.01 + rng.normal(0.3, 0.5, size=n)
+    numpy_path = _on("numpy", monkeypatch, reference, simulated, dt=0.01)
+    compiled = _on("numba", monkeypatch, reference, simulated, dt=0.01)
+    assert compiled.lag_search is not None
+    assert compiled.lag_search.method == "pyramid"
+    assert compiled.lag_s == pytest.approx(-0.09)
+    _assert_agree(numpy_path, compiled)
+
+
+@needs_kernel
+@pytest.mark.skipif(not TRIPS, reason="the i3 example data is not in this checkout")
+def test_kernel_agrees_with_numpy_on_real_data(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The measured i3 trips: torque against current (short, exact FFT lag search), and the
+    trips' speeds laid end to end past the pyramid limit against a delayed, scaled copy."""
+    pd = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    trips = [pd.read_parquet(path) for path in TRIPS]
+    torque = trips[0]["Motor Torque [Nm]"].to_numpy(np.float64)
+    current = trips[0]["Battery Current [A]"].to_numpy(np.float64) * -1.0
+    pairs = [(torque, current)]
+    speed = np.concatenate([t["Velocity [km/h]"].to_numpy(np.float64) for t in trips] * 8)
+    assert speed.shape[0] > 1 << 18
+    pairs.append((speed, np.roll(speed, 4) * 0.98 + 0.2))
+    for reference, simulated in pairs:
+        numpy_path = _on("numpy", monkeypatch, reference, simulated, dt=0.1)
+        compiled = _on("numba", monkeypatch, reference, simulated, dt=0.1)
+        _assert_agree(numpy_path, compiled)
+
+
+@needs_kernel
+def test_kernel_is_bit_identical_across_thread_counts(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(3)
+    n = 700_001
+    reference = np.cumsum(rng.normal(size=n))
+    simulated = reference + rng.normal(size=n)
+    one = _on("numba", monkeypatch, reference, simulated, dt=1.0, workers=1)
+    two = _on("numba", monkeypatch, reference, simulated, dt=1.0, workers=2)
+    assert one.as_dict() == two.as_dict()
+
+
+@needs_kernel
+@pytest.mark.parametrize("where", ["reference", "simulated"])
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_kernel_reports_non_finite_samples(
+    where: str, bad: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    signals = {"reference": np.linspace(0.0, 1.0, 5000), "simulated": np.linspace(0.0, 1.1, 5000)}
+    signals[where][1234] = bad
+    with pytest.raises(DegenerateSignalError, match=rf"{where} signal contains NaN or inf.*1234"):
+        _on("numba", monkeypatch, signals["reference"], signals["simulated"], dt=1.0)
+
+
+def test_auto_path_keeps_short_records_on_numpy_while_the_cache_is_cold(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
+    assert kernel.kernel_for(kernel.KERNEL_MIN_SAMPLES - 1) is None
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
+    assert kernel.kernel_for(10 * kernel.KERNEL_MIN_SAMPLES) is None
+
+
+def test_auto_path_falls_back_to_numpy_when_numba_cannot_load(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
+    monkeypatch.setattr(kernel, "_load", lambda: None)
+    assert kernel.kernel_for(10 * kernel.KERNEL_MIN_SAMPLES) is None
+    got = signal_characteristics(np.arange(10.0), np.arange(10.0) + 1, dt=1.0)
+    assert got.mae == pytest.approx(1.0)
+
+
+def test_forcing_an_unknown_path_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(kernel.KERNEL_ENV, "gpu")
+    with pytest.raises(
+        HevvalError, match=r"HEVVAL_KERNEL: 'gpu' is not a kernel path.*auto, numpy or numba"
+    ):
+        signal_characteristics(np.arange(10.0), np.arange(10.0), dt=1.0)
+
+
+def test_forcing_numba_without_it_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numba")
+    monkeypatch.setattr(kernel, "_load", lambda: None)
+    with pytest.raises(HevvalError, match=r"pytest-hevval\[fast\]"):
+        kernel.kernel_for(100)
+
+
+@pytest.mark.parametrize("path", ["numpy", "auto"])
+def test_version_names_the_active_path(path: str) -> None:
+    env = {"HEVVAL_KERNEL": path, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run(
+        [sys.executable, "-m", "pytest_hevval", "--version"],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, **env},
+    ).stdout
+    assert out.startswith("pytest-hevval ")
+    compiled = path == "auto" and _kernel_unavailable() is None
+    assert ("kernel: numba" if compiled else "kernel: numpy") in out

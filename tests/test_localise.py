@@ -1,0 +1,344 @@
+"""Where and when the model is wrong, from a spec: ``local:`` and ``regions:`` end to end."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_hevval import cli
+from pytest_hevval.core.local import (
+    LOCAL_CHARACTERISTICS,
+    labelled_sums,
+    merge_groups,
+    segment_sums,
+)
+from pytest_hevval.engine import evaluate_spec
+from pytest_hevval.errors import SpecError
+from pytest_hevval.spec.load import load_spec, parse_spec_text
+from tests.strategies import signal_pairs
+
+pytest_plugins = ["pytester"]
+
+RATE_HZ = 10.0
+DURATION_S = 1800.0
+# The injected error: a 60 s stretch, and every sample above 100 km/h.
+STRETCH_S = (1200.0, 1260.0)
+FAST_KMH = 100.0
+
+
+def write_trip(folder: Path, *, stretch: bool, fast: bool) -> None:
+    """A half-hour 10 Hz trip whose model is exact except where an error is injected."""
+    t = np.arange(0.0, DURATION_S, 1.0 / RATE_HZ)
+    rng = np.random.default_rng(1)
+    # Speed sweeps 0–138 km/h several times; power follows speed and acceleration.
+    speed = 69.0 - 69.0 * np.cos(2 * np.pi * t / 300.0) + rng.normal(0, 0.05, t.size)
+    speed = np.clip(speed, 0.0, 138.0)
+    power = 0.4 * speed + 5.0 * np.sin(2 * np.pi * t / 37.0) + rng.normal(0, 0.3, t.size)
+    modelled = power.copy()
+    if stretch:
+        inside = (t >= STRETCH_S[0]) & (t < STRETCH_S[1])
+        modelled[inside] += 8.0
+    if fast:
+        modelled[speed > FAST_KMH] += 8.0
+    lines = ["time,speed,power,heater"]
+    heater = (t < 300.0).astype(float)
+    lines += [
+        f"{a:.1f},{b:.6f},{c:.6f},{h:g}" for a, b, c, h in zip(t, speed, power, heater, strict=True)
+    ]
+    (folder / "measured.csv").write_text("\n".join(lines) + "\n")
+    lines = ["time,power"] + [f"{a:.1f},{c:.6f}" for a, c in zip(t, modelled, strict=True)]
+    (folder / "model.csv").write_text("\n".join(lines) + "\n")
+
+
+SPEC = """\
+name: localised
+reference: {path: measured.csv, time: time}
+model: {path: model.csv, time: time}
+local:
+  window_s: 30
+  phases: speed
+  conditions:
+    heater_on: {when: "heater > 0.5", thresholds: {mae: 0.5}}
+  gate: {thresholds: {mae: 0.97}}
+regions:
+  by: [speed]
+  bins: [[0, 20, 40, 60, 80, 100, 120, 140, 160]]
+  min_samples: 50
+  gate: {thresholds: {mae: 0.97}}
+sets:
+  - {signal: P, ref: power, sim: power, unit: kW}
+"""
+
+
+def _evaluate(folder: Path, spec_text: str = SPEC) -> object:
+    path = folder / "trip.hevval.yaml"
+    path.write_text(spec_text)
+    return evaluate_spec(load_spec(path), rootdir=folder)
+
+
+def test_an_error_in_one_stretch_is_found_in_exactly_that_stretch(tmp_path: Path) -> None:
+    write_trip(tmp_path, stretch=True, fast=False)
+    evaluation = _evaluate(tmp_path)
+    (signal,) = evaluation.result.signals  # type: ignore[attr-defined]
+    assert signal.failures == []  # the record as a whole passes: the error averages out
+    (window_miss,) = [f for f in signal.local_failures if f.scope == "windows"]
+    assert window_miss.characteristic == "mae"
+    assert set(window_miss.where) == {"1200–1230 s", "1230–1260 s"}
+    assert signal.local.concentration["spans_s"] == [[1200.0, 1260.0]]
+    assert "in 2 windows: 1200–1260 s" in signal.local.concentration["sentence"]
+    assert not signal.passed
+
+
+def test_an_error_above_100_kmh_fails_exactly_those_cells(tmp_path: Path) -> None:
+    write_trip(tmp_path, stretch=False, fast=True)
+    evaluation = _evaluate(tmp_path)
+    (signal,) = evaluation.result.signals  # type: ignore[attr-defined]
+    (cell_miss,) = [f for f in signal.local_failures if f.scope == "regions"]
+    assert set(cell_miss.where) == {"speed 100–120", "speed 120–140"}
+    grid = evaluation.result.local["regions"]  # type: ignore[attr-defined]
+    assert grid["unvisited"] == [[7]]  # 140–160 km/h is declared but never driven
+    assert grid["phi"][7] is None
+    mae = dict(zip(grid["labels"], signal.local.regions.lambdas["mae"], strict=True))
+    assert all(mae[label] > 0.99 for label in grid["labels"][:5])
+
+
+def test_a_condition_loosens_the_windows_where_it_holds(tmp_path: Path) -> None:
+    write_trip(tmp_path, stretch=False, fast=False)
+    # Inject the error where the heater runs (the first 300 s): the condition's looser MAE
+    # threshold applies there, so the window gate passes; without it, it fails there.
+    measured = (tmp_path / "measured.csv").read_text().splitlines()
+    model_lines = (tmp_path / "model.csv").read_text().splitlines()
+    out = [model_lines[0]]
+    for row in model_lines[1:]:
+        t, p = row.split(",")
+        out.append(f"{t},{float(p) + (8.0 if float(t) < 300 else 0.0):.6f}")
+    (tmp_path / "model.csv").write_text("\n".join(out) + "\n")
+    assert measured
+    loose = _evaluate(tmp_path)
+    assert [f.scope for f in loose.result.signals[0].local_failures] == []  # type: ignore[attr-defined]
+    strict = _evaluate(tmp_path, SPEC.replace("thresholds: {mae: 0.5}", "thresholds: {}"))
+    (miss,) = strict.result.signals[0].local_failures  # type: ignore[attr-defined]
+    assert miss.scope == "windows"
+    assert len(miss.where) == 10  # the ten 30 s windows of the first 300 s
+
+
+def test_share_lets_a_few_windows_miss(tmp_path: Path) -> None:
+    write_trip(tmp_path, stretch=True, fast=False)
+    spec = SPEC.replace(
+        "gate: {thresholds: {mae: 0.97}}\nregions",
+        "gate: {thresholds: {mae: 0.97}, share: 0.95}\nregions",
+    )
+    evaluation = _evaluate(tmp_path, spec)
+    assert evaluation.result.signals[0].local_failures == []  # type: ignore[attr-defined]
+
+
+def test_phases_and_conditions_are_tabled(tmp_path: Path) -> None:
+    write_trip(tmp_path, stretch=False, fast=False)
+    (signal,) = _evaluate(tmp_path).result.signals  # type: ignore[attr-defined]
+    assert signal.local.phases.labels == ("stop", "accelerate", "cruise", "brake")
+    assert sum(signal.local.phases.n) == signal.n_samples
+    heater = signal.local.conditions["heater_on"]
+    assert heater.n[0] == 3000  # 300 s at 10 Hz
+    assert heater.n[0] + heater.n[1] == signal.n_samples
+
+
+def test_the_json_result_round_trips(tmp_path: Path) -> None:
+    from pytest_hevval.result import SpecResult
+
+    write_trip(tmp_path, stretch=True, fast=True)
+    result = _evaluate(tmp_path).result  # type: ignore[attr-defined]
+    data = json.loads(json.dumps(result.to_dict()))
+    again = SpecResult.from_dict(data)
+    assert again.to_dict() == data
+    assert not again.signals[0].passed
+
+
+@pytest.mark.parametrize(
+    ("fragment", "key", "problem"),
+    [
+        ("local: {windows: 30}", "local.windows", "unknown key"),
+        ("local: {window_s: -1}", "local.window_s", "greater than 0"),
+        ("local: {gate: {share: 0.9}}", "local.gate.thresholds", "is required"),
+        (
+            "local: {gate: {thresholds: {emergent: 0.9}}}",
+            "local.gate.thresholds.emergent",
+            "not scored over windows",
+        ),
+        ("regions: {by: []}", "regions.by", "one or two operating variables"),
+        ("regions: {by: [a, b], bins: [3]}", "regions.bins", "one entry per variable"),
+        ("regions: {by: [a], bins: [[3, 1]]}", "regions.bins[0]", "must increase"),
+        (
+            "local: {conditions: {cold: {thresholds: {mae: 0.5}}}}",
+            "local.conditions.cold.when",
+            "is required",
+        ),
+    ],
+)
+def test_bad_local_keys_are_spec_errors(fragment: str, key: str, problem: str) -> None:
+    text = "reference: {path: a.csv}\nmodel: {path: b.csv}\n" + fragment + "\nsets: [{signal: x}]\n"
+    with pytest.raises(SpecError) as raised:
+        parse_spec_text(text, Path("bad.hevval.yaml"))
+    assert raised.value.key == key
+    assert problem in str(raised.value)
+    assert "bad.hevval.yaml:" in str(raised.value)
+
+
+def test_a_node_overrides_the_local_gate() -> None:
+    text = SPEC.replace(
+        "{signal: P, ref: power, sim: power, unit: kW}",
+        "{signal: P, ref: power, sim: power, local_thresholds: {mae: 0.5}}",
+    )
+    spec = parse_spec_text(text, Path("x.hevval.yaml"))
+    (node,) = spec.sets
+    assert spec.local_thresholds_for(node) == {"mae": 0.5}
+    assert spec.region_thresholds_for(node) == {"mae": 0.97}
+
+
+# -- the one-pass sums ---------------------------------------------------------------------
+
+
+@given(signal_pairs(min_size=12), st.integers(2, 9), st.integers(1, 5))
+@settings(max_examples=80, deadline=None)
+def test_one_pass_fine_sums_merge_to_the_window_sums(
+    pair: tuple[np.ndarray, np.ndarray], size: int, cells: int
+) -> None:
+    ref, sim = pair
+    n = ref.shape[0]
+    window = np.arange(n) // size
+    cell = np.arange(n) % cells
+    fine = labelled_sums(
+        ref, sim, window * cells + cell, int(window[-1] + 1) * cells, compiled=False
+    )
+    windows = int(window[-1]) + 1
+    merged = merge_groups(fine, np.arange(windows * cells) // cells, windows)
+    starts = np.arange(windows) * size
+    direct = segment_sums(ref, sim, starts, np.minimum(starts + size, n))
+    scale = float(np.max(np.abs(np.concatenate([ref, sim])))) + 1.0
+    for name in ("n", "error_sum", "abs_error", "sq_error", "ref_sum", "cross", "sign_matches"):
+        np.testing.assert_allclose(
+            getattr(merged, name), getattr(direct, name), rtol=1e-9, atol=1e-9 * scale**2
+        )
+    np.testing.assert_allclose(merged.error_m2, direct.error_m2, rtol=1e-6, atol=1e-7 * scale**2)
+
+
+def test_the_compiled_pass_matches_numpy() -> None:
+    pytest.importorskip("numba", reason="the compiled pass needs the fast extra (numba)")
+    from pytest_hevval.core import kernel
+
+    if kernel.active_path() != "numba":
+        pytest.skip("numba is installed but cannot be loaded with this numpy")
+    rng = np.random.default_rng(3)
+    n = 20_000
+    ref = np.cumsum(rng.normal(size=n))
+    sim = ref + rng.normal(0, 0.2, n) + 3.0
+    labels = (np.arange(n) // 700) * 4 + rng.integers(0, 4, n)
+    labels[::97] = -1
+    groups = int(labels.max()) + 1
+    fast = labelled_sums(ref, sim, labels, groups, compiled=True)
+    plain = labelled_sums(ref, sim, labels, groups, compiled=False)
+    for name in ("n", "error_sum", "abs_error", "sq_error", "error_m2", "ref_sq", "cross"):
+        np.testing.assert_allclose(getattr(fast, name), getattr(plain, name), rtol=1e-12)
+    assert np.array_equal(fast.sign_matches, plain.sign_matches)
+    assert LOCAL_CHARACTERISTICS
+
+
+# -- through pytest and the command line ----------------------------------------------------
+
+
+@pytest.mark.parametrize("xdist", [False, True])
+def test_pytest_reports_the_windows_and_cells_that_missed(
+    pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, xdist: bool
+) -> None:
+    monkeypatch.delenv("CI", raising=False)
+    write_trip(pytester.path, stretch=True, fast=True)
+    pytester.makefile(".hevval.yaml", trip=SPEC)
+    args = ["--hevval", "-p", "no:cacheprovider", "--hevval-report=json"]
+    if xdist:
+        args += ["-n", "2"]
+    outcome = pytester.runpytest_subprocess(*args)
+    outcome.assert_outcomes(failed=1, passed=1)
+    text = outcome.stdout.str()
+    assert "λ3 MAE ≥ 0.97 missed in " in text
+    assert " of 60 windows" in text
+    assert "1200–1230 s" in text
+    assert "speed 100–120" in text
+    assert "where: " in text
+    (report,) = (pytester.path / ".hevval" / "report").glob("report.json")
+    data = json.loads(report.read_text())
+    (spec,) = data["specs"]
+    assert spec["local"]["regions"]["labels"][5] == "speed 100–120"
+    assert len(spec["signals"][0]["local"]["windows"]["n"]) == 60
+
+
+def test_hevval_run_writes_windows_and_regions_to_json(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_trip(tmp_path, stretch=True, fast=False)
+    (tmp_path / "trip.hevval.yaml").write_text(SPEC)
+    monkeypatch.chdir(tmp_path)
+    code = cli.main(["run", "trip.hevval.yaml", "--no-history", "--quiet", "--json", "out.json"])
+    assert code == 1
+    data = json.loads((tmp_path / "out.json").read_text())
+    (spec,) = data.get("results", [data])
+    local = spec["signals"][0]["local"]
+    assert set(local) >= {"windows", "concentration", "phases", "conditions", "regions"}
+    assert spec["signals"][0]["local_failures"][0]["where"] == ["1200–1230 s", "1230–1260 s"] or (
+        set(spec["signals"][0]["local_failures"][0]["where"]) == {"1200–1230 s", "1230–1260 s"}
+    )
+    assert "mae <0.97 in 2 windows" in capsys.readouterr().out
+
+
+def test_html_report_draws_the_strip_and_the_maps(tmp_path: Path) -> None:
+    pytest.importorskip("jinja2")
+    from pytest_hevval.report.html import render_html
+
+    write_trip(tmp_path, stretch=True, fast=True)
+    result = _evaluate(tmp_path).result  # type: ignore[attr-defined]
+    page = render_html([result.to_dict()], title="t", generated_utc="now")
+    assert "Where and when" in page
+    assert 'aria-label="characteristics per time window"' in page
+    assert "Φ per cell" in page
+    assert "coverage: samples per cell" in page
+    assert "Never visited: speed 140–160" in page
+    assert page.count('stroke="#000" stroke-width="2"') == 2  # the two cells that missed
+
+
+# -- history and compare --------------------------------------------------------------------
+
+
+def test_compare_names_the_windows_and_cells_a_model_change_fixed(tmp_path: Path) -> None:
+    from pytest_hevval.history.compare import compare
+    from pytest_hevval.history.records import make_record
+    from pytest_hevval.history.render import comparison_table
+
+    before_dir, after_dir = tmp_path / "before", tmp_path / "after"
+    before_dir.mkdir()
+    after_dir.mkdir()
+    write_trip(before_dir, stretch=True, fast=False)
+    write_trip(after_dir, stretch=False, fast=True)
+    before = _evaluate(before_dir).result.to_dict()  # type: ignore[attr-defined]
+    after = _evaluate(after_dir).result.to_dict()  # type: ignore[attr-defined]
+    from datetime import datetime, timezone
+
+    record = make_record([before], model_version="v1", started_utc=datetime.now(timezone.utc))
+    kept = record["specs"][0]["signals"][0]["local"]
+    assert "lambdas" not in kept["windows"]  # history keeps the windows' errors, not their λ
+    assert kept["regions"]["lambdas"]["mae"]
+    comparison = compare([after], record, pair_single=True)
+    (signal,) = comparison.specs[0].signals
+    assert {c.label for c in signal.better if c.grouping == "windows"} == {
+        "1200–1230 s",
+        "1230–1260 s",
+    }
+    assert {c.label for c in signal.worse if c.grouping == "regions"} == {
+        "speed 100–120",
+        "speed 120–140",
+    }
+    text = comparison_table(comparison)
+    assert "better in: 1200–1230 s" in text or "better in: 1230–1260 s" in text
+    assert "worse in:" in text
