@@ -4,6 +4,7 @@ Run from the repository root:
 
     python benchmarks/bench_core.py                      # quick: 2·10^6 samples
     python benchmarks/bench_core.py --samples 1e7 1e8    # the figures in docs/performance.md
+    python benchmarks/bench_core.py --paths --samples 5e7 1e8   # numpy path against the kernel
 
 For every size and test signal it prints, measured side by side in one process:
 
@@ -803,6 +804,46 @@ def run_stages(n: int, args: argparse.Namespace, report: dict[str, Any]) -> None
                 )
 
 
+def run_paths(n: int, args: argparse.Namespace, report: dict[str, Any]) -> None:
+    """The numpy path and the compiled kernel side by side with the floor, on 2 threads.
+
+    Rounds are interleaved (floor, numpy, kernel, floor, …) so that a neighbour's load falls
+    on all three alike; then each path's stages show where the remaining time goes.
+    """
+    from pytest_hevval.core import kernel
+
+    reference, simulated = load_pair(cached_pair("noise", n, args.cache_dir))
+    os.environ[kernel.KERNEL_ENV] = "numba"
+    compile_s = timed(ours, reference[: 1 << 19], simulated[: 1 << 19], args.max_lag_s)
+    print(f"  first kernel call (compile or load from cache): {_fmt_s(compile_s)}")
+    paths = ("numpy", "numba")
+    rows: dict[str, list[float]] = {"floor": [], "numpy": [], "numba": []}
+    results: dict[str, dict[str, float]] = {}
+    with section(f"paths, noise signal, n = {n:.3g}, 2 threads; {args.repeat} interleaved rounds"):
+        for _ in range(args.repeat):
+            rows["floor"].append(timed(floor, reference, simulated))
+            for path in paths:
+                os.environ[kernel.KERNEL_ENV] = path
+                seconds, results[path] = timed_result(ours, reference, simulated, args.max_lag_s)
+                rows[path].append(seconds)
+        for name, times in rows.items():
+            print(_line(name, times))
+        for path in paths:
+            ratio = min(rows[path]) / min(rows["floor"])
+            print(f"  {path + ' / floor, of the minima':31s} {ratio:7.2f}x")
+        mismatches = agree(results["numpy"], results["numba"])
+        print(f"  numpy and kernel agree: {mismatches or 'yes'}")
+        entry: dict[str, Any] = {"n": n, "compile_s": compile_s, **rows, "agree": not mismatches}
+        for path in paths:
+            os.environ[kernel.KERNEL_ENV] = path
+            stages = _stage_times(reference, simulated, 2, args)
+            entry[f"{path}_stages"] = stages
+            for name, (cpu, wall) in stages.items():
+                print(f"  {path:5s} {name:36s} CPU {_fmt_s(cpu)}   wall {_fmt_s(wall)}")
+        report["paths"].append(entry)
+    os.environ.pop(kernel.KERNEL_ENV, None)
+
+
 def _count(text: str) -> int:
     return int(float(text))
 
@@ -844,6 +885,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--stages", action="store_true", help="only the per-stage CPU/wall breakdown of ours"
     )
+    parser.add_argument(
+        "--paths",
+        action="store_true",
+        help="only the numpy path against the compiled kernel (needs the fast extra)",
+    )
     parser.add_argument("--child", nargs=3, metavar=("WHAT", "REF", "SIM"), help=argparse.SUPPRESS)
     parser.add_argument("--child-traced", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -862,13 +908,14 @@ def main(argv: list[str] | None = None) -> int:
         "num_regression": [],
     }
     print("machine:", json.dumps(report["machine"]))
-    if args.stages:
-        report["stages"] = []
-        for n in args.samples:
-            run_stages(n, args, report)
-        if args.json:
-            args.json.write_text(json.dumps(report, indent=2, default=str))
-        return 0
+    for part, run_part in (("paths", run_paths), ("stages", run_stages)):
+        if getattr(args, part):
+            report[part] = []
+            for n in args.samples:
+                run_part(n, args, report)
+            if args.json:
+                args.json.write_text(json.dumps(report, indent=2, default=str))
+            return 0
     for n in args.samples:
         for kind in args.signals:
             run_size(kind, n, args, report)

@@ -13,8 +13,11 @@ Three parts, each printed with the sizes it ran at:
     from Parquet and from MF4, each timed in a fresh process as ``hevval run`` would evaluate
     it: wall and CPU time (read + score), peak RSS (``VmHWM``) against the bytes of the loaded
     column values, and how often each data file was read (``DataCache.reads``, must be 1).
-    Targets: ≤ 60 s on two cores, peak RSS ≤ 2 × the loaded columns. The files are read once
-    before the run so that it starts from a warm page cache; that read is timed and printed.
+    Beside it, alternating, the yardstick in a fresh process: the used columns read with the
+    format's own library (pyarrow, asammdf) plus ``signal_characteristics`` per pair on two
+    threads. Targets: end to end ≤ 1.1 × that read + core and ≤ 8 s for Parquet on two cores,
+    peak RSS ≤ 1.3 × the loaded column values. The files are read once before the runs so
+    that they start from a warm page cache; that read is timed and printed.
 ``dask``
     100 specs of 10 min at 10 Hz with 20 signals each: serial in one process against
     :func:`pytest_hevval.distributed.evaluate_on_dask` on a ``LocalCluster`` of 2 worker
@@ -225,6 +228,62 @@ def child_e2e(spec_path: str) -> None:
     )
 
 
+def child_floor(spec_path: str) -> None:
+    """The budget's yardstick: read the used columns with the format's own library, then
+    score each pair with the core on two threads; print measurements as JSON."""
+    from pytest_hevval.core.characteristics import signal_characteristics
+    from pytest_hevval.spec.load import load_spec
+
+    started = time.perf_counter()
+    spec = load_spec(spec_path)
+    folder = Path(spec_path).parent
+    columns = sorted(spec.reference_columns())
+    fmt = Path(str(spec.reference.path)).suffix
+    sides = []
+    for side in ("ref", "sim"):
+        path = folder / f"{side}{fmt}"
+        if fmt == ".parquet":
+            import pyarrow.parquet as pq
+
+            table = pq.read_table(path, columns=["time", *columns])
+            time_s = table.column("time").to_numpy()
+            values = {c: table.column(c).to_numpy() for c in columns}
+            del table
+        else:
+            from asammdf import MDF
+
+            with MDF(str(path)) as mdf:
+                signals = mdf.select(columns)
+            time_s = signals[0].timestamps
+            values = {c: s.samples for c, s in zip(columns, signals, strict=True)}
+        sides.append((time_s, values))
+    read_done = time.perf_counter()
+    dt = float(sides[0][0][1] - sides[0][0][0])
+    for name in columns:
+        signal_characteristics(sides[0][1][name], sides[1][1][name], dt=dt, max_lag_s=5, workers=2)
+    finished = time.perf_counter()
+    print(
+        json.dumps(
+            {
+                "read_s": read_done - started,
+                "core_s": finished - read_done,
+                "wall_s": finished - started,
+                "cpu_s": sum(resource.getrusage(resource.RUSAGE_SELF)[:2]),
+                "hwm_mib": _rss_kib("VmHWM") / 1024,
+            }
+        )
+    )
+
+
+def _timed_child(*arguments: str) -> tuple[float, dict[str, float]]:
+    """(process wall time from start to exit, the child's JSON line)."""
+    started = time.perf_counter()
+    output = subprocess.run(
+        [sys.executable, __file__, *arguments], check=True, capture_output=True, text=True
+    ).stdout
+    return time.perf_counter() - started, json.loads(output.strip().splitlines()[-1])
+
+
 def _read_through(path: Path) -> None:
     with path.open("rb") as handle:
         while handle.read(1 << 24):
@@ -244,13 +303,15 @@ def part_e2e(signals: int, duration_s: float, rate_hz: float) -> None:
         for path in paths:
             _read_through(path)
         raw_read = time.perf_counter() - started
-        output = subprocess.run(
-            [sys.executable, __file__, "--child-e2e", str(spec)],
-            check=True,
-            capture_output=True,
-            text=True,
-        ).stdout
-        m = json.loads(output.strip().splitlines()[-1])
+        # The run and its yardstick alternate, each in a fresh process, best of two each.
+        runs = []
+        floors = []
+        for _ in range(2):
+            runs.append(_timed_child("--child-e2e", str(spec)))
+            floors.append(_timed_child("--child-floor", str(spec)))
+        process_s, m = min(runs, key=lambda r: r[0])
+        floor_process_s, f = min(floors, key=lambda r: r[0])
+        yardstick = f["read_s"] + f["core_s"]
         reads_ok = all(v == 1 for v in m["reads"].values()) and len(m["reads"]) == 2
         print(
             f"{fmt}: {files / 2**30:.2f} GiB of files (sequential read {raw_read:.1f} s, "
@@ -262,7 +323,14 @@ def part_e2e(signals: int, duration_s: float, rate_hz: float) -> None:
             f"{m['hwm_mib'] / m['loaded_mib']:.2f} × all arrays the readers returned "
             f"({m['loaded_mib'] / 1024:.2f} GiB with the time arrays); "
             f"RSS after imports {m['baseline_mib']:.0f} MiB\n"
-            f"  reads {m['reads']}: {'each file once' if reads_ok else 'FAIL: not once each'}"
+            f"  reads {m['reads']}: {'each file once' if reads_ok else 'FAIL: not once each'}\n"
+            f"  end to end {process_s:.1f} s (process start to exit; {m['wall_s']:.1f} s after "
+            f"imports) against read the used columns + core {yardstick:.1f} s "
+            f"(read {f['read_s']:.1f} s + core {f['core_s']:.1f} s, "
+            f"process {floor_process_s:.1f} s):"
+            f" {m['wall_s'] / yardstick:.2f}× after imports, {process_s / floor_process_s:.2f}× "
+            f"process to process; CPU {m['cpu_s']:.1f} s against {f['cpu_s']:.1f} s; "
+            f"yardstick peak RSS {f['hwm_mib'] / 1024:.2f} GiB"
         )
 
 
@@ -425,9 +493,13 @@ def main() -> None:
     size.add_argument("--full", action="store_true", help="the target sizes")
     parser.add_argument("--only", default="e2e,dask,compare", help="comma-separated parts")
     parser.add_argument("--child-e2e", help=argparse.SUPPRESS)
+    parser.add_argument("--child-floor", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child_e2e:
         child_e2e(args.child_e2e)
+        return
+    if args.child_floor:
+        child_floor(args.child_floor)
         return
     sizes = SIZES["full" if args.full else "quick"]
     parts = {p.strip() for p in args.only.split(",") if p.strip()}

@@ -85,7 +85,7 @@ class RecordingOutcome:
     role: str
     phi: float
     passed: bool
-    #: The measured data file's digest, and the hash that made it (see pytest_hevval.digest).
+    #: The recording's measured data file: the hash used and its digest.
     hash: str
     digest: str
     failed_signals: tuple[str, ...]

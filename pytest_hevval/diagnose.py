@@ -223,6 +223,11 @@ def _lambda_change(before: Mapping[str, Any], after: Mapping[str, Any]) -> str:
     )
 
 
+def _share_text(share: float) -> str:
+    # A negative share: adding the term alone would make the fit worse (it only compensates).
+    return f"{100 * share:.1f} %" if share >= 0 else "worse alone"
+
+
 def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     effects = found.get("effects") or []
     unit = f" {found['unit']}" if found.get("unit") else ""
@@ -257,7 +262,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     if minor:
         lines.append(
             f"  minor (significant, under {100 * share:.0f} % each): "
-            + "; ".join(f"{e['text']} ({100 * e['share']:.1f} %)" for e in minor)
+            + "; ".join(f"{e['text']} ({_share_text(e['share'])})" for e in minor)
         )
     if len(relevant) > 1 and found.get("predicted") and before:
         lines.append(

@@ -195,13 +195,14 @@ class Effect:
         From the joint model, in the signal's units per unit of the candidate (for the
         offset: in the signal's units).
     share:
-        Share of the residual's mean square this effect explains beyond all the others (the
-        others refitted without it, the offset held at the value left over), at the original
-        sample rate.
+        Share of the residual's mean square this effect explains: the smaller of what it
+        explains beyond all the others (the others refitted without it, the offset held at the
+        value left over) and what adding it alone removes, at the original sample rate.
     offset_explained:
         The mean shift this effect is credited with, in the signal's units: coefficient × mean
-        of the candidate when that brings the offset left over closer to zero, else 0 (always
-        0 for gain and lag, whose mean goes to the offset, as in the headline fit).
+        of the candidate when that brings the offset left over closer to zero, else 0. The gain
+        always carries its mean (the offset is the one at simulated = 0, as in the headline
+        fit); the lag never does.
     significant:
         The coefficient passed its family-wise level (Holm level at selection; α/2 and
         material for the offset).
@@ -1565,7 +1566,8 @@ def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]
     mean shift coefficient × mean(channel) when that brings the offset left over closer to
     zero: a missing heater load explains the mean shift it causes. A term whose mean would
     only have to be cancelled by a larger opposite offset (the throttle position, whose zero
-    is far from its working range) keeps its mean out, as gain and lag always do.
+    is far from its working range) keeps its mean out, as the lag always does. The gain always
+    carries its mean: the offset is then the one at simulated = 0, as in the headline fit.
     """
     columns = [(s.grid - s.mean) / s.std for s in chosen]
     design = np.column_stack([np.ones_like(r_g), *columns])
@@ -1574,7 +1576,9 @@ def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]
     centres: list[float] = []
     for pos, s in enumerate(chosen, start=1):
         carried = float(beta[pos]) / s.std * s.mean
-        if s.kind not in ("gain", "lag") and abs(left - carried) < abs(left):
+        # The gain term is the simulated signal itself: as in the headline fit, the offset is
+        # the one at simulated = 0, so a pure gain error shows no offset.
+        if s.kind == "gain" or (s.kind != "lag" and abs(left - carried) < abs(left)):
             centres.append(0.0)
             left -= carried
         else:
@@ -1729,9 +1733,13 @@ def _effects(
         r, [s.full - c for s, c in zip(chosen, centres, strict=True)], float(intercept)
     )
     effects: list[Effect] = []
-    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), share in zip(
+    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), unique in zip(
         raw, shares, strict=True
     ):
+        # An effect must explain its share both beyond the others and on its own: a term that
+        # only helps together with one that compensates it (a throttle term and a gain error
+        # that cancel) makes the fit worse when added alone.
+        share = min(unique, _removed_share(r, term))
         effects.append(
             Effect(
                 name=name,

@@ -46,13 +46,18 @@ KernelPath = Literal["auto", "numpy", "numba"]
 
 #: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
 KERNEL_ENV = "HEVVAL_KERNEL"
-#: On the auto path with a cold cache, records shorter than this stay on numpy. A first
-#: compile costs about as much as the kernel saves on 10^8 samples (see docs/performance.md),
-#: so only records long enough to be costly on numpy wait for it.
-KERNEL_MIN_SAMPLES = 1 << 24
+#: On the auto path with a cold cache, records shorter than this stay on numpy. The compile
+#: (5.4 s, once per environment: it is cached) is then at most a few times what numpy spends
+#: on one such record (1.1 s at 5·10^7 samples, docs/performance.md), never a surprise on
+#: short records.
+KERNEL_MIN_SAMPLES = 1 << 26
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
+#: Shorter loops run on the calling thread alone. Waking numba's second thread costs up to a
+#: scheduler time slice on a busy machine (measured 8 ms with the load at 5 on 2 cores), more
+#: than the whole loop over a million samples.
+KERNEL_PARALLEL_MIN = 1 << 21
 
 #: Columns of one chunk's row of sums from the compiled main pass.
 FIELDS = 15
@@ -78,6 +83,7 @@ _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
 _failure: dict[str, str] = {}
+_warm_found = threading.Event()
 
 FloatArray = npt.NDArray[np.float64]
 AnyFloatArray = npt.NDArray[np.floating]
@@ -124,9 +130,12 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     A stale entry (another numba version or an edited source) costs one compile, after which
     the cache is warm again.
     """
+    if _warm_found.is_set():
+        return True  # numba only adds to its cache
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
     for folder in _cache_folders():
         if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
+            _warm_found.set()
             return True
     return False
 
@@ -195,8 +204,10 @@ def describe() -> str:
     )
 
 
-def _threads(workers: int) -> None:
+def _threads(workers: int, samples: int) -> None:
     numba: Any = importlib.import_module("numba")
+    if samples < KERNEL_PARALLEL_MIN:
+        workers = 1
     numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
 
 
@@ -214,7 +225,7 @@ def main_pass(
     levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
 ) -> FloatArray:
     """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
-    _threads(workers)
+    _threads(workers, ref.shape[0])
     empty = np.empty(0, dtype=np.float64)
     ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
     rows: FloatArray = module.main_pass(
@@ -237,7 +248,7 @@ def lag_window(
 ) -> FloatArray:
     """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
     per-chunk rows summed in chunk order."""
-    _threads(workers)
+    _threads(workers, window[1] - window[0])
     rows: FloatArray = module.lag_window(
         r,
         s,
@@ -267,7 +278,7 @@ def interpolate(
     workers: int = 2,
 ) -> FloatArray:
     """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
-    _threads(workers)
+    _threads(workers, index.shape[0])
     out: FloatArray = module.interpolate(values, index, right, offset, step, exact)
     return out
 

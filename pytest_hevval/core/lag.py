@@ -28,7 +28,6 @@ from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
-from scipy import signal as sps
 
 from . import kernel
 
@@ -384,13 +383,44 @@ def _best(values: npt.NDArray[np.float64], energy: npt.NDArray[np.float64], lo: 
     return int(candidates[np.argmin(np.abs(candidates))])
 
 
+def _fast_length(n: int) -> int:
+    """The smallest 2^a·3^b·5^c ≥ n: a length pocketfft transforms quickly."""
+    best = 1 << max(0, (n - 1).bit_length())
+    power5 = 1
+    while power5 < best:
+        power35 = power5
+        while power35 < best:
+            length = power35
+            while length < n:
+                length *= 2
+            best = min(best, length)
+            power35 *= 3
+        power5 *= 5
+    return best
+
+
+def _correlate_valid(
+    a: npt.NDArray[np.float64], b: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]:
+    """Σ_j a[j + k]·b[j] for k in 0 … len(a) − len(b) (scipy.signal.correlate's 'valid').
+
+    numpy's FFT, so scoring needs no scipy.signal (over a second to import): with both
+    padded to at least len(a), the circular correlation does not wrap for these k.
+    """
+    n = a.shape[0]
+    size = _fast_length(n)
+    spectrum = np.fft.rfft(a, size) * np.conj(np.fft.rfft(b, size))
+    valid: npt.NDArray[np.float64] = np.fft.irfft(spectrum, size)[: n - b.shape[0] + 1]
+    return valid
+
+
 def _fft_search(
     r: FloatArray, s: FloatArray, max_lag: int, r_mean: float, s_mean: float, scale: float
 ) -> int:
     rc = _centred(r, r_mean, scale)
     sc = _centred(s[max_lag : s.shape[0] - max_lag], s_mean, scale)
     # 'valid' slides the fixed simulation window over the reference: index k is lag k − max_lag.
-    window = sps.correlate(rc, sc, mode="valid", method="fft")
+    window = _correlate_valid(rc, sc)
     cumulative = np.concatenate(([0.0], np.cumsum(rc * rc)))
     n = r.shape[0]
     lags = np.arange(-max_lag, max_lag + 1)
@@ -540,6 +570,8 @@ def correlation_curve(
         step_lags = max_lag
     r64 = np.asarray(r, dtype=np.float64)
     s64 = np.asarray(s, dtype=np.float64)
+    from scipy import signal as sps
+
     full = sps.correlate(r64, s64, mode="full", method="fft")
     norm = math.sqrt(_dot(r64, r64) * _dot(s64, s64)) or 1.0
     zero = s64.shape[0] - 1

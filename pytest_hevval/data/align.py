@@ -452,7 +452,11 @@ class _Plan:
         assert self.offset is not None
         assert self.step is not None
         assert self.exact is not None
-        compiled = kernel.kernel_for(self.index.shape[0]) if kernel.accepts(values) else None
+        compiled = (
+            kernel.kernel_for(self.index.shape[0], ("interpolate",))
+            if kernel.accepts(values)
+            else None
+        )
         if compiled is not None:
             return kernel.interpolate(
                 compiled, values, self.index, self.right, self.offset, self.step, self.exact

@@ -281,8 +281,8 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
             lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
-    lines += _campaign_markdown(spec_results)
     lines += _standard_metrics_markdown(spec_results)
+    lines += _campaign_markdown(spec_results)
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
         quality = (spec.get("data") or {}).get("quality")

@@ -24,7 +24,6 @@ from typing import Any, TypeGuard
 
 import numpy as np
 import numpy.typing as npt
-from scipy.integrate import cumulative_trapezoid
 
 from pytest_hevval.errors import ExpressionError, did_you_mean
 
@@ -98,6 +97,9 @@ def _integrate(args: Sequence[_Value], context: _Context) -> _Value:
     x = _full(args[0], context)
     if x.size == 0:
         return x
+    # Imported here: scipy costs a noticeable part of start-up, and few specs integrate.
+    from scipy.integrate import cumulative_trapezoid
+
     result: FloatArray = cumulative_trapezoid(x, context.time, initial=0.0)
     return result
 
