@@ -166,6 +166,11 @@ def _clean(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
+def _identity(result: SpecResult) -> tuple[str, str]:
+    """(hash, digest) of a recording's measured data file; empty when it was not hashed."""
+    return identity(result.data.get("reference") or {}) or ("", "")
+
+
 def _mean_lambda(result: SpecResult, name: str) -> float:
     """α-weighted mean of one characteristic over a recording's signals (Φ's own weighting)."""
     weighted = [(s.alpha, s.lambdas[name]) for s in result.signals if name in s.lambdas]
@@ -187,8 +192,8 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
             role=result.role,
             phi=result.phi,
             passed=result.passed,
-            hash=(identity(result.data.get("reference", {})) or ("", ""))[0],
-            digest=(identity(result.data.get("reference", {})) or ("", ""))[1],
+            hash=_identity(result)[0],
+            digest=_identity(result)[1],
             failed_signals=tuple(s.path for s in result.signals if not s.passed),
         )
         for recording in declared
