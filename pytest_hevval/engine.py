@@ -18,9 +18,11 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from .confidence import spec_confidence
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from .core.uncertainty import BlockSums, block_sums, fine_block_size, fine_labels
 from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
@@ -382,6 +384,7 @@ def _evaluate(
         if keep_arrays:
             arrays[signals[-1].path] = (ref, sim)
     result = _spec_result(spec, signals, aligned, model_info, cache)
+    _add_intervals(spec, result, roots, node_specs, fused, _block_sums(values, workers))
     result.local = spec_local_summary(
         spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
     )
@@ -494,6 +497,48 @@ def _local_results(
         return signature, score_local(labels, ref, sim, chars.reference_range, spec.correlation)
 
     return dict(_per_signal(score, list(unique), _scoring_threads(workers)))
+
+
+def _block_sums(
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]], workers: int | None
+) -> dict[Signature, BlockSums]:
+    """Each distinct signal's sums over consecutive fine blocks, for its bootstrap intervals."""
+    if not values:
+        return {}
+    n = next(iter(values.values()))[0].shape[0]
+    labels = fine_labels(n, fine_block_size(n))
+
+    def sums(signature: Signature) -> tuple[Signature, BlockSums]:
+        ref, sim = values[signature]
+        return signature, block_sums(ref, sim, labels)
+
+    return dict(_per_signal(sums, list(values), _scoring_threads(workers)))
+
+
+def _add_intervals(
+    spec: Spec,
+    result: SpecResult,
+    roots: list[ScoredNode],
+    node_specs: Mapping[NodePath, SignalSpec],
+    fused: Mapping[Signature, SignalCharacteristics],
+    blocks: Mapping[Signature, BlockSums],
+) -> None:
+    """Every λ and Φ of ``result`` gets its bootstrap interval."""
+    confidence = spec_confidence(
+        roots,
+        lambda path: _signature(node_specs[path]),
+        blocks,
+        {signature: chars.reference_range for signature, chars in fused.items()},
+        result.phi,
+        result.weights,
+        correlation=spec.correlation,
+        variant=spec.emergent,
+    )
+    result.phi_interval = confidence.phi
+    # result.signals were made in iter_nodes order (a name may itself hold a "/").
+    for node, signal in zip(iter_nodes(roots), result.signals, strict=True):
+        signal.intervals = confidence.signals[node.path]
+        signal.block_samples = confidence.block_samples[node.path]
 
 
 def _signal_arrays(
@@ -712,6 +757,7 @@ def _spec_result(
         phi=phi,
         min_phi=spec.min_phi,
         min_phi_line=spec.min_phi_line,
+        min_phi_on=spec.min_phi_on,
         weights=weights,
         signals=signals,
         data={

@@ -31,7 +31,7 @@ from .core.local import (
     labelled_table,
     region_grid,
 )
-from .core.tree import global_metric
+from .core.tree import global_metric_arrays
 from .spec.model import LocalGate, SignalSpec, Spec
 
 __all__ = [
@@ -538,7 +538,7 @@ def local_phi(
     ]
     beta = {name: weights.get(name, 1.0) for name in LOCAL_CHARACTERISTICS}
     try:
-        phi = np.asarray(global_metric(arrays, beta), dtype=np.float64)  # type: ignore[arg-type]
+        phi = global_metric_arrays(arrays, beta)
     except ValueError:
         return []
     return [_json_float(float(v)) for v in np.atleast_1d(phi)]

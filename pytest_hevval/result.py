@@ -14,9 +14,16 @@ from typing import Any
 
 from .core.characteristics import SignalCharacteristics
 from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
+from .core.uncertainty import Interval
 from .localise import LocalFailure, LocalResult
 
-__all__ = ["RESULT_SCHEMA_VERSION", "Failure", "SignalResult", "SpecResult"]
+__all__ = [
+    "RESULT_SCHEMA_VERSION",
+    "Failure",
+    "SignalResult",
+    "SpecResult",
+    "judged_value",
+]
 
 RESULT_SCHEMA_VERSION = 2
 
@@ -88,6 +95,10 @@ class SignalResult:
     local_failures: list[LocalFailure] = field(default_factory=list)
     #: A campaign recording's distribution of u = F_model(measured) on core.upooling.U_GRID.
     u_distribution: list[float] | None = None
+    #: 95 % bootstrap intervals of λ1–λ7 by name (see core/uncertainty.py); empty when unknown.
+    intervals: dict[str, Interval] = field(default_factory=dict)
+    #: The bootstrap block length of this signal's λ1–λ6, in samples.
+    block_samples: int | None = None
 
     @property
     def passed(self) -> bool:
@@ -165,6 +176,12 @@ class SignalResult:
             out["local_failures"] = [f.to_dict() for f in self.local_failures]
         if self.u_distribution is not None:
             out["u_distribution"] = list(self.u_distribution)
+        if self.intervals:
+            out["intervals"] = {
+                name: {"low": _clean(i.low), "high": _clean(i.high)}
+                for name, i in self.intervals.items()
+            }
+            out["block_samples"] = self.block_samples
         return out
 
     @classmethod
@@ -201,6 +218,8 @@ class SignalResult:
             local=LocalResult.from_dict(data["local"]) if data.get("local") else None,
             local_failures=[LocalFailure.from_dict(f) for f in data.get("local_failures", [])],
             u_distribution=data.get("u_distribution"),
+            intervals=_intervals(data.get("intervals"), lambdas),
+            block_samples=data.get("block_samples"),
         )
 
     def failure_lines(self) -> list[str]:
@@ -213,8 +232,10 @@ class SignalResult:
             parts = self.components.get(failure.characteristic)
             if not meaning and parts:
                 meaning = ", ".join(f"{k} {v:.4g}" for k, v in parts.items())
+            interval = self.intervals.get(failure.characteristic)
+            bounds = f" {interval.bounds}" if interval is not None else ""
             lines.append(
-                f"{characteristic.title} = {failure.value:.4f} < {failure.threshold:.4g}"
+                f"{characteristic.title} = {failure.value:.4f}{bounds} < {failure.threshold:.4g}"
                 + (f" ({meaning})" if meaning else "")
             )
         for local in self.local_failures:
@@ -259,10 +280,26 @@ class SpecResult:
     recording: str | None = None
     role: str = "validation"
     campaign: dict[str, Any] | None = None
+    #: Φ's 95 % bootstrap interval; None for results recorded without one.
+    phi_interval: Interval | None = None
+    #: What ``min_phi`` judges: Φ itself, or the lower or upper bound of its interval.
+    min_phi_on: str = "value"
+
+    @property
+    def phi_judged(self) -> float:
+        """The value ``min_phi`` is compared with (Φ where no interval is known)."""
+        return judged_value(self.phi, self.phi_interval, self.min_phi_on)
 
     @property
     def phi_passed(self) -> bool:
-        return self.min_phi is None or self.phi >= self.min_phi
+        return self.min_phi is None or self.phi_judged >= self.min_phi
+
+    @property
+    def phi_text(self) -> str:
+        """``0.9257 [0.9190, 0.9311]``, or the bare value where no interval is known."""
+        if self.phi_interval is None:
+            return f"{self.phi:.4f}"
+        return f"{self.phi:.4f} {self.phi_interval.bounds}"
 
     @property
     def passed(self) -> bool:
@@ -299,6 +336,13 @@ class SpecResult:
             "phi": self.phi,
             "min_phi": self.min_phi,
             "min_phi_line": self.min_phi_line,
+            **(
+                {"phi_interval": {"low": self.phi_interval.low, "high": self.phi_interval.high}}
+                if self.phi_interval is not None
+                else {}
+            ),
+            **({"min_phi_on": self.min_phi_on} if self.min_phi_on != "value" else {}),
+            "phi_passed": self.phi_passed,
             "passed": self.passed,
             "weights": dict(self.weights),
             "data": self.data,
@@ -333,7 +377,34 @@ class SpecResult:
             recording=data.get("recording"),
             role=str(data.get("role", "validation")),
             campaign=data.get("campaign"),
+            phi_interval=_interval(float(data["phi"]), data.get("phi_interval")),
+            min_phi_on=str(data.get("min_phi_on", "value")),
         )
+
+
+def judged_value(value: float, interval: Interval | None, on: str) -> float:
+    """The value a gate judges: ``value`` itself, or the ``lower``/``upper`` bound of its interval.
+
+    Where no interval is known the point value is judged whatever ``on`` says.
+    """
+    if interval is None or on == "value":
+        return value
+    return interval.low if on == "lower" else interval.high
+
+
+def _interval(value: float, bounds: Mapping[str, Any] | None) -> Interval | None:
+    if not bounds or bounds.get("low") is None or bounds.get("high") is None:
+        return None
+    return Interval(value, float(bounds["low"]), float(bounds["high"]))
+
+
+def _intervals(data: Mapping[str, Any] | None, lambdas: Mapping[str, float]) -> dict[str, Interval]:
+    out: dict[str, Interval] = {}
+    for name, bounds in dict(data or {}).items():
+        interval = _interval(lambdas.get(name, math.nan), bounds)
+        if interval is not None:
+            out[name] = interval
+    return out
 
 
 def worst_first(signals: Sequence[SignalResult]) -> list[SignalResult]:

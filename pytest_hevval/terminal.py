@@ -69,12 +69,20 @@ def signal_failure_report(
     return "\n".join(lines)
 
 
+def _phi_gate(result: SpecResult) -> str:
+    """``min_phi 0.9``, or ``min_phi 0.9 on the lower bound`` when a bound is judged."""
+    if result.min_phi is None:
+        return "no min_phi set"
+    on = "" if result.min_phi_on == "value" else f" on the {result.min_phi_on} bound"
+    return f"min_phi {result.min_phi:g}{on}"
+
+
 def phi_report(result: SpecResult) -> str:
-    gate = "no min_phi set" if result.min_phi is None else f"min_phi {result.min_phi:g}"
+    gate = _phi_gate(result)
     lines = [
-        f"Φ = {result.phi:.4f} < {gate} ({_location(result.spec, result.min_phi_line)})"
+        f"Φ = {result.phi_text} < {gate} ({_location(result.spec, result.min_phi_line)})"
         if not result.phi_passed
-        else f"Φ = {result.phi:.4f} ({gate})",
+        else f"Φ = {result.phi_text} ({gate})",
         "  signals that pull Φ down most (share of 1 − Φ):",
     ]
     deficit = max(1.0 - result.phi, 1e-12)
@@ -94,8 +102,8 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
     lines: list[str] = []
     for result in results:
         verdict = "PASS" if result.passed else "FAIL"
-        gate = "" if result.min_phi is None else f" (min {result.min_phi:g})"
-        lines.append(f"{result.name}: Φ = {result.phi:.4f}{gate} {verdict}  [{result.spec}]")
+        gate = "" if result.min_phi is None else f" ({_phi_gate(result)})"
+        lines.append(f"{result.name}: Φ = {result.phi_text}{gate} {verdict}  [{result.spec}]")
         names = list(result.signals[0].lambdas) if result.signals else []
         if details:
             lines.append("    " + " " * 28 + "  ".join(f"{describe(n).symbol:>6}" for n in names))

@@ -9,15 +9,20 @@ import pytest
 from hypothesis import given, settings
 from scipy.signal import lfilter
 
-from pytest_hevval.core.local import fixed_windows, group_lambdas, segment_sums
+from pytest_hevval.core.characteristics import signal_characteristics
+from pytest_hevval.core.local import group_lambdas, labelled_table
 from pytest_hevval.core.uncertainty import (
+    FINE_BLOCKS,
     MIN_BLOCKS,
+    BlockSums,
     block_length,
-    bootstrap_draws,
-    lag1_autocorrelation,
+    block_sums,
+    coarsen,
+    fine_block_size,
     percentile_interval,
-    replicate_lambdas,
-    replicate_sums,
+    replicate_table,
+    resample_counts,
+    signal_intervals,
 )
 from tests.strategies import signal_pairs
 
@@ -30,16 +35,13 @@ def _ar1(n: int, rho: float, sigma: float, rng: np.random.Generator) -> np.ndarr
     return np.asarray(out)
 
 
-def _interval_of(reference: np.ndarray, simulated: np.ndarray, name: str) -> tuple[float, float]:
-    n = reference.shape[0]
-    b = block_length(n, lag1_autocorrelation(reference - simulated))
-    starts, stops = fixed_windows(n, 1.0, float(b))
-    blocks = segment_sums(reference, simulated, starts, stops)
+def _intervals(reference: np.ndarray, simulated: np.ndarray, *, rho: float | None = None):
+    blocks = block_sums(reference, simulated)
+    if rho is not None:  # pretend the residual had this correlation
+        blocks = BlockSums(blocks.table, blocks.fine, blocks.n, rho)
     span = float(np.ptp(reference))
-    whole = group_lambdas(segment_sums(reference, simulated, np.array([0]), np.array([n])), span)
-    replicates = replicate_lambdas(blocks, bootstrap_draws(starts.shape[0], 400), span)
-    found = percentile_interval(float(whole[name][0]), replicates[name])
-    return found.low, found.high
+    point = signal_characteristics(reference, simulated, dt=1.0, max_lag_s=0.0).values
+    return signal_intervals(blocks, point, span)
 
 
 def test_nominal_95_percent_intervals_cover_ar1_truth_90_to_99_percent_of_the_time() -> None:
@@ -55,15 +57,15 @@ def test_nominal_95_percent_intervals_cover_ar1_truth_90_to_99_percent_of_the_ti
     covered = dict.fromkeys(truth, 0)
     for _ in range(repeats):
         simulated = reference - _ar1(n, rho, sigma, rng)
+        found = _intervals(reference, simulated)
         for name, value in truth.items():
-            low, high = _interval_of(reference, simulated, name)
-            covered[name] += low <= value <= high
+            covered[name] += found[name].low <= value <= found[name].high
     for name in truth:
         assert 0.90 <= covered[name] / repeats <= 0.99, (name, covered[name] / repeats)
 
 
 def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
-    """The same simulation with one-sample blocks: the check above can fail."""
+    """The same simulation with the shortest blocks (ρ taken as 0): the check above can fail."""
     rng = np.random.default_rng(5)
     n, rho, repeats = 20_000, 0.9, 60
     reference = 50.0 * np.sin(np.arange(n) / 500.0)
@@ -71,10 +73,7 @@ def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
     covered = 0
     for _ in range(repeats):
         simulated = reference - _ar1(n, rho, 1.0, rng)
-        starts, stops = fixed_windows(n, 1.0, 1.0)
-        blocks = segment_sums(reference, simulated, starts, stops)
-        replicates = replicate_lambdas(blocks, bootstrap_draws(n, 200), float(np.ptp(reference)))
-        interval = percentile_interval(float(np.median(replicates["mae"])), replicates["mae"])
+        interval = _intervals(reference, simulated, rho=0.0)["mae"]
         covered += interval.low <= truth <= interval.high
     assert covered / repeats < 0.8
 
@@ -95,33 +94,55 @@ def test_block_length(n: int, rho: float, expected: int) -> None:
     assert n // block_length(n, rho) >= MIN_BLOCKS or block_length(n, rho) == 1
 
 
+def test_blocks_are_whole_fine_blocks_at_least_as_long_as_the_rule_asks() -> None:
+    n = 360_000
+    fine = fine_block_size(n)
+    assert fine == math.ceil(n / FINE_BLOCKS) == 88
+    rows = math.ceil(n / fine)
+    blocks = BlockSums(
+        labelled_table(np.zeros(n), np.zeros(n), np.zeros(n, np.int64), rows), fine, n, 0.99
+    )
+    # 1,749 samples by the rule → 20 fine blocks of 88 = 1,760 samples
+    assert blocks.per_block == 20
+    assert blocks.block_samples == 1_760
+
+
 @given(signal_pairs(min_size=20))
 @settings(max_examples=60, deadline=None)
 def test_a_replicate_of_every_block_once_is_the_whole_record(
     pair: tuple[np.ndarray, np.ndarray],
 ) -> None:
     ref, sim = pair
-    starts, stops = fixed_windows(ref.shape[0], 1.0, 4.0)
-    blocks = segment_sums(ref, sim, starts, stops)
-    identity = np.arange(starts.shape[0])[None, :]
-    whole = segment_sums(ref, sim, np.array([0]), np.array([ref.shape[0]]))
-    again = replicate_sums(blocks, identity)
-    assert again.n[0] == whole.n[0]
+    n = ref.shape[0]
+    table = coarsen(block_sums(ref, sim).table, 4)
+    once = np.ones((1, table.values.shape[0]))
+    again = replicate_table(table, once).sums()
+    whole = labelled_table(ref, sim, np.zeros(n, np.int64), 1).sums()
+    assert again.n[0] == whole.n[0] == n
     assert again.sign_matches[0] == whole.sign_matches[0]
     scale = float(np.sum((ref - sim) ** 2)) + 1.0
     assert again.error_m2[0] == pytest.approx(whole.error_m2[0], rel=1e-9, abs=1e-9 * scale)
     assert again.sq_error[0] == pytest.approx(whole.sq_error[0], rel=1e-9, abs=1e-9 * scale)
+    span = float(np.ptp(ref)) or 1.0
+    for name, values in group_lambdas(again, span).items():
+        expected = group_lambdas(whole, span)[name][0]
+        assert values[0] == pytest.approx(expected, rel=1e-9, abs=1e-12, nan_ok=True)
 
 
-def test_draws_are_reproducible() -> None:
-    assert np.array_equal(bootstrap_draws(50, 10), bootstrap_draws(50, 10))
-    assert bootstrap_draws(50, 10).shape == (10, 50)
+def test_draws_are_reproducible_and_draw_every_replicate_full() -> None:
+    counts = resample_counts(50, 10)
+    assert np.array_equal(counts, resample_counts(50, 10, seed=20_140_601))
+    assert counts.shape == (10, 50)
+    assert np.all(counts.sum(axis=1) == 50)
+    assert not counts.flags.writeable
+    assert not np.array_equal(counts, resample_counts(50, 10, seed=1))
 
 
 def test_interval_holds_its_value_and_prints_as_documented() -> None:
     interval = percentile_interval(0.9257, np.linspace(0.919, 0.9311, 1001))
     assert interval.low <= interval.value <= interval.high
     assert str(interval) == "0.9257 [0.9193, 0.9308]"
+    assert interval.bounds == "[0.9193, 0.9308]"
     assert percentile_interval(0.5, np.array([np.nan])).to_dict() == {
         "value": 0.5,
         "low": 0.5,

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
 
 from .registry import FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS, describe, get_characteristic
 
@@ -19,11 +22,14 @@ __all__ = [
     "TreeNode",
     "error_origins",
     "global_metric",
+    "global_metric_arrays",
     "iter_nodes",
+    "replicate_tree",
     "score_tree",
 ]
 
 EmergentVariant = Literal["V1", "V2"]
+FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -98,16 +104,45 @@ def emergent(
     ``1 − |mean(parent λ1..λ6) − mean(children)|`` clipped to [0, 1]; a leaf gets 1. Only the
     paper's λ1..λ6 enter, whatever other characteristics are registered.
     """
+    return float(_emergent_rule(parent, children, variant))
+
+
+def _emergent_rule(parent: Any, children: Sequence[tuple[Any, bool]], variant: str) -> Any:
+    """Eq. 13 on floats or, elementwise, on arrays of bootstrap replicates."""
     if not children:
         return 1.0
     parent_mean = sum(_basis(parent)) / 6.0
-    values: list[float] = []
+    values: list[Any] = []
     for lambdas, has_children in children:
         values.extend(_basis(lambdas))
         if variant == "V2" and has_children:
             values.append(_own_emergent(lambdas))
     child_mean = sum(values) / len(values)
-    return float(min(1.0, max(0.0, 1.0 - abs(parent_mean - child_mean))))
+    return np.clip(1.0 - np.abs(parent_mean - child_mean), 0.0, 1.0)
+
+
+def replicate_tree(
+    root: ScoredNode,
+    base: Callable[[tuple[str, ...]], Mapping[str, Any]],
+    *,
+    variant: EmergentVariant = "V2",
+) -> dict[tuple[str, ...], dict[str, Any]]:
+    """Every node's characteristics with λ7, on arrays of replicates (one entry per replicate).
+
+    ``base(path)`` gives a node's own characteristics as arrays (or fixed floats); λ7 follows
+    the same rule as :func:`emergent`, elementwise.
+    """
+    out: dict[tuple[str, ...], dict[str, Any]] = {}
+
+    def visit(node: ScoredNode) -> dict[str, Any]:
+        own = dict(base(node.path))
+        kids = [(visit(child), bool(child.children)) for child in node.children]
+        own["emergent"] = _emergent_rule(own, kids, variant)
+        out[node.path] = own
+        return own
+
+    visit(root)
+    return out
 
 
 def score_tree(
@@ -178,8 +213,22 @@ def global_metric(
     seven values in order. ``beta`` maps name to weight (missing = the characteristic's
     ``default_weight``, 1 for all built-ins), or is seven weights in paper order.
     """
+    return float(_weighted_mean(rows, beta))
+
+
+def global_metric_arrays(
+    rows: Iterable[tuple[float, Mapping[str, Any]]],
+    beta: Sequence[float] | Mapping[str, float] | None = None,
+) -> FloatArray:
+    """:func:`global_metric` elementwise: Φ per bootstrap replicate, per window or per cell."""
+    return np.asarray(_weighted_mean(rows, beta), dtype=np.float64)
+
+
+def _weighted_mean(
+    rows: Iterable[tuple[float, Any]], beta: Sequence[float] | Mapping[str, float] | None
+) -> Any:
     weights = _beta_mapping(beta)
-    numerator = 0.0
+    numerator: Any = 0.0
     denominator = 0.0
     count = 0
     for alpha, lambdas in rows:

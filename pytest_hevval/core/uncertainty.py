@@ -6,45 +6,54 @@ too narrow. A block bootstrap keeps that dependence: the record is cut into non-
 blocks of ``b`` samples, a replicate record is made of blocks drawn with replacement, and its
 characteristics are computed again. Because λ1–λ6 are ratios of sums (see
 :mod:`pytest_hevval.core.local`), a replicate needs only the blocks' sums, not the samples:
-the interval costs a few thousand additions per signal, whatever the record's length.
+each signal is read once more, into at most :data:`FINE_BLOCKS` rows of sums, and every
+replicate is then a weighted sum of those rows.
 
 Choices, each documented in ``docs/uncertainty.md``:
 
 * **Block length** from the residual's lag-1 autocorrelation ρ, the plug-in rule for the block
   bootstrap of a mean under an AR(1) model (Politis & White 2004, with the correction of
   Patton, Politis & White 2009): b = (√6·ρ / (1 − ρ²))^(2/3) · n^(1/3), at least 1 and at most
-  n / :data:`MIN_BLOCKS`.
+  n / :data:`MIN_BLOCKS`; rounded up to whole fine blocks of ⌈n / FINE_BLOCKS⌉ samples.
 * **Non-overlapping blocks** (Carlstein 1986), so replicates are sums of stored block sums.
 * **Percentile intervals** from :data:`REPLICATES` replicates drawn with a fixed seed, so one
   record always gives one interval (CI runs are reproducible).
 * **The normalising range R is held fixed**: it is the reference's range, a property of the
   measurement the characteristics are scaled by, not an estimate.
 * **What is not bootstrapped:** the lag (a search over shifts, not a ratio of sums) keeps its
-  point value. λ7 and Φ are computed per replicate from the λ1–λ6 of every signal of the spec
-  drawn with the *same* blocks, so their intervals carry the dependence between signals.
+  point value, and so do registered characteristics that are not ratios of these sums.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
 
-from .local import CorrelationKind, GroupSums, group_lambdas
+from .local import CorrelationKind, SumTable, group_lambdas, labelled_table
 
 __all__ = [
     "CONFIDENCE",
+    "FINE_BLOCKS",
     "MIN_BLOCKS",
     "REPLICATES",
+    "BlockSums",
     "Interval",
     "block_length",
-    "bootstrap_draws",
+    "block_sums",
+    "coarsen",
+    "fine_block_size",
+    "fine_labels",
     "lag1_autocorrelation",
     "percentile_interval",
     "replicate_lambdas",
-    "replicate_sums",
+    "replicate_table",
+    "resample_counts",
+    "signal_intervals",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -53,10 +62,12 @@ IntArray = npt.NDArray[np.int64]
 #: Nominal coverage of every interval.
 CONFIDENCE = 0.95
 #: Bootstrap replicates: enough for the 2.5 % and 97.5 % quantiles to settle to about ±0.1 of
-#: the interval's width, cheap because a replicate is a sum of block sums.
+#: the interval's width, cheap because a replicate is a weighted sum of block sums.
 REPLICATES = 1000
 #: A record is cut into at least this many blocks; fewer cannot show its variability.
 MIN_BLOCKS = 10
+#: At most this many rows of sums are kept per signal; a bootstrap block is a run of them.
+FINE_BLOCKS = 4096
 #: The seed of the draws: one record, one interval.
 SEED = 20_140_601
 
@@ -72,8 +83,17 @@ class Interval:
     def __str__(self) -> str:
         return f"{self.value:.4f} [{self.low:.4f}, {self.high:.4f}]"
 
+    @property
+    def bounds(self) -> str:
+        """``[low, high]`` as printed beside a value."""
+        return f"[{self.low:.4f}, {self.high:.4f}]"
+
     def to_dict(self) -> dict[str, float]:
         return {"value": self.value, "low": self.low, "high": self.high}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, float]) -> Interval:
+        return cls(float(data["value"]), float(data["low"]), float(data["high"]))
 
 
 def lag1_autocorrelation(x: FloatArray) -> float:
@@ -83,7 +103,7 @@ def lag1_autocorrelation(x: FloatArray) -> float:
         return 0.0
     centred = values - values.mean()
     power = float(np.dot(centred, centred))
-    if power <= 0.0:
+    if not (power > 0.0 and math.isfinite(power)):
         return 0.0
     return float(np.dot(centred[1:], centred[:-1]) / power)
 
@@ -102,53 +122,126 @@ def block_length(n: int, rho: float) -> int:
     return int(max(1, min(math.ceil(length), n // MIN_BLOCKS or 1)))
 
 
-def bootstrap_draws(blocks: int, replicates: int = REPLICATES, seed: int = SEED) -> IntArray:
-    """Block indices of every replicate, shape (replicates, blocks), drawn with replacement."""
-    rng = np.random.default_rng(seed)
-    return rng.integers(0, blocks, size=(replicates, blocks), dtype=np.int64)
+def fine_block_size(n: int) -> int:
+    """Samples per row of sums: one row per sample up to :data:`FINE_BLOCKS` samples."""
+    return max(1, math.ceil(n / FINE_BLOCKS))
 
 
-def replicate_sums(blocks: GroupSums, draws: IntArray) -> GroupSums:
-    """The sums of every replicate record (one entry per row of ``draws``).
+def fine_labels(n: int, fine: int) -> IntArray:
+    """The fine block of every sample, shared by every signal of a record."""
+    return np.arange(n, dtype=np.int64) // max(1, fine)
 
-    The spread term Σ(e − ē)² of a replicate is rebuilt from each block's own Σ(e − ē_block)²
-    and its mean, by the parallel-variance rule, so a large bias does not cancel it.
+
+@dataclass(frozen=True)
+class BlockSums:
+    """One signal's sums over consecutive fine blocks, and its residual's lag-1 correlation."""
+
+    table: SumTable
+    fine: int
+    n: int
+    rho: float
+
+    @property
+    def per_block(self) -> int:
+        """Fine blocks per bootstrap block: :func:`block_length` rounded up to whole rows."""
+        rows = self.table.values.shape[0]
+        wanted = math.ceil(block_length(self.n, self.rho) / self.fine)
+        return int(max(1, min(wanted, rows // MIN_BLOCKS or 1)))
+
+    @property
+    def block_samples(self) -> int:
+        return self.per_block * self.fine
+
+
+def block_sums(
+    ref: FloatArray,
+    sim: FloatArray,
+    labels: IntArray | None = None,
+    *,
+    compiled: bool | None = None,
+) -> BlockSums:
+    """A signal's rows of sums over fine blocks (one pass), with its residual's ρ.
+
+    ``labels`` are :func:`fine_labels` of the record, passed in when many signals share it.
     """
-    n = blocks.n[draws].sum(axis=1)
-    error_sum = blocks.error_sum[draws].sum(axis=1)
-    safe_n = np.maximum(blocks.n, 1).astype(np.float64)
-    block_mean = blocks.error_sum / safe_n
-    replicate_mean = error_sum / np.maximum(n, 1)
-    between = blocks.n[draws] * (block_mean[draws] - replicate_mean[:, None]) ** 2
-    return GroupSums(
-        n=n,
-        error_sum=error_sum,
-        abs_error=blocks.abs_error[draws].sum(axis=1),
-        sq_error=blocks.sq_error[draws].sum(axis=1),
-        error_m2=blocks.error_m2[draws].sum(axis=1) + between.sum(axis=1),
-        ref_sum=blocks.ref_sum[draws].sum(axis=1),
-        sim_sum=blocks.sim_sum[draws].sum(axis=1),
-        ref_sq=blocks.ref_sq[draws].sum(axis=1),
-        sim_sq=blocks.sim_sq[draws].sum(axis=1),
-        cross=blocks.cross[draws].sum(axis=1),
-        sign_matches=blocks.sign_matches[draws].sum(axis=1),
-    )
+    n = int(np.asarray(ref).shape[0])
+    fine = fine_block_size(n)
+    if labels is None:
+        labels = fine_labels(n, fine)
+    rows = math.ceil(n / fine)
+    table = labelled_table(ref, sim, labels, rows, compiled=compiled)
+    residual = np.subtract(ref, sim, dtype=np.float64)
+    return BlockSums(table, fine, n, lag1_autocorrelation(residual))
+
+
+def coarsen(table: SumTable, per_block: int) -> SumTable:
+    """Runs of ``per_block`` consecutive rows summed into one (the last run may be short)."""
+    values = table.values
+    rows, columns = values.shape
+    if per_block <= 1:
+        return table
+    blocks = math.ceil(rows / per_block)
+    padded = np.zeros((blocks * per_block, columns), dtype=np.float64)
+    padded[:rows] = values
+    return SumTable(padded.reshape(blocks, per_block, columns).sum(axis=1), table.shift)
+
+
+@lru_cache(maxsize=32)
+def resample_counts(blocks: int, replicates: int = REPLICATES, seed: int = SEED) -> FloatArray:
+    """How often each block is drawn into each replicate, shape (replicates, blocks).
+
+    Every replicate draws ``blocks`` blocks with replacement. One seed, one matrix: signals of
+    one record drawn with the same matrix share their blocks, so quantities combining them
+    (λ7, Φ) keep the dependence between signals. Read-only, as it is shared.
+    """
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, blocks, size=(replicates, blocks), dtype=np.int64)
+    flat = (draws + blocks * np.arange(replicates, dtype=np.int64)[:, None]).ravel()
+    counts = np.bincount(flat, minlength=replicates * blocks).astype(np.float64)
+    counts = counts.reshape(replicates, blocks)
+    counts.flags.writeable = False
+    return counts
+
+
+def replicate_table(blocks: SumTable, counts: FloatArray) -> SumTable:
+    """The sums of every replicate record: one row per row of ``counts``."""
+    return SumTable(counts @ blocks.values, blocks.shift)
 
 
 def replicate_lambdas(
-    blocks: GroupSums, draws: IntArray, reference_range: float, correlation: str = "xcorr"
+    blocks: SumTable, counts: FloatArray, reference_range: float, correlation: str = "xcorr"
 ) -> dict[str, FloatArray]:
     """λ1–λ6 of every replicate, keyed by characteristic name."""
     kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
-    return group_lambdas(replicate_sums(blocks, draws), reference_range, kind)
+    return group_lambdas(replicate_table(blocks, counts).sums(), reference_range, kind)
+
+
+def signal_intervals(
+    blocks: BlockSums,
+    point: Mapping[str, float],
+    reference_range: float,
+    correlation: str = "xcorr",
+    *,
+    per_block: int | None = None,
+) -> dict[str, Interval]:
+    """λ1–λ6 of one signal with their intervals, from its own block length by default."""
+    table = coarsen(blocks.table, blocks.per_block if per_block is None else per_block)
+    replicates = replicate_lambdas(
+        table, resample_counts(table.values.shape[0]), reference_range, correlation
+    )
+    return {name: percentile_interval(point[name], replicates[name]) for name in replicates}
 
 
 def percentile_interval(
     value: float, replicates: FloatArray, confidence: float = CONFIDENCE
 ) -> Interval:
-    """The point value with the central ``confidence`` quantiles of its replicates."""
-    finite = replicates[np.isfinite(replicates)]
-    if finite.size == 0:
+    """The point value with the central ``confidence`` quantiles of its replicates.
+
+    Widened to hold the point value where the percentiles would exclude it.
+    """
+    finite = np.asarray(replicates, dtype=np.float64)
+    finite = finite[np.isfinite(finite)]
+    if finite.size == 0 or not math.isfinite(value):
         return Interval(value, value, value)
     tail = (1.0 - confidence) / 2.0
     low, high = np.quantile(finite, [tail, 1.0 - tail])

@@ -98,7 +98,12 @@ def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
     for (spec, signal), series in row_series(rows).items():
         fields = ["phi"] if signal is None else ["phi", *characteristic_names(series)]
         for field in fields:
-            for step in detect_steps([r.value(field) for r in series], min_size=min_size):
+            steps = detect_steps(
+                [r.value(field) for r in series],
+                min_size=min_size,
+                intervals=[r.interval(field) for r in series],
+            )
+            for step in steps:
                 if not step.regression:
                     continue
                 at = series[step.index]

@@ -5,11 +5,15 @@
     expr   := rule ("," rule)*
     rule   := field ":" amount
     field  := "phi" | "lambda" | "lag" | <characteristic> | "lambda1" … "lambda7"
-    amount := number          an absolute drop, in the field's own unit
+    amount := drop ["+noise"] | "noise"
+    drop   := number          an absolute drop, in the field's own unit
             | number "%"      a drop relative to the baseline value
 
 ``phi:0.01,lambda:0.02`` fails when any Φ drops by more than 0.01 or any λ of any signal by
 more than 0.02; ``mae:1%`` fails when λ3 drops by more than 1 % of its baseline value.
+``+noise`` also asks the drop to be beyond noise: the two runs' 95 % intervals do not overlap
+(``phi:0.005+noise``); ``phi:noise`` fails on any drop beyond noise. Where either run has no
+interval (the lag; records made before intervals existed) the drop alone decides.
 """
 
 from __future__ import annotations
@@ -65,7 +69,8 @@ RULE_FIELDS: dict[str, str] = {
 }
 _ALIASES = LAMBDA_ALIASES
 _AMOUNT = re.compile(r"^(?P<number>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<percent>%?)$")
-_EXAMPLE = "phi:0.01,lambda:0.02 or mae:1%"
+_EXAMPLE = "phi:0.01,lambda:0.02, mae:1% or phi:0.005+noise"
+_NOISE = "noise"
 # Float noise from re-running the same model must never count as a drop.
 _TOLERANCE = 1e-12
 
@@ -78,6 +83,8 @@ class Rule:
     amount: float
     relative: bool
     text: str
+    #: Also require the change to be beyond noise (the runs' intervals do not overlap).
+    beyond_noise: bool = False
 
     def allowed(self, before: float) -> float:
         """The largest acceptable worsening from ``before``."""
@@ -116,7 +123,13 @@ def parse_compare_fail(expr: str, *, option: str = "--hevval-compare-fail") -> l
                 key=option,
                 hint="valid fields: " + ", ".join(RULE_FIELDS),
             )
-        match = _AMOUNT.match(amount_text.strip())
+        amount_text = amount_text.strip()
+        beyond_noise = amount_text.lower() == _NOISE or amount_text.lower().endswith("+" + _NOISE)
+        if amount_text.lower() == _NOISE:
+            amount_text = "0"
+        elif beyond_noise:
+            amount_text = amount_text[: -len(_NOISE) - 1].strip()
+        match = _AMOUNT.match(amount_text)
         if match is None:
             raise HistoryError(
                 f"amount {amount_text.strip()!r} in {clause!r} is not a non-negative number "
@@ -135,6 +148,7 @@ def parse_compare_fail(expr: str, *, option: str = "--hevval-compare-fail") -> l
                 amount=amount,
                 relative=bool(match["percent"]),
                 text=clause,
+                beyond_noise=beyond_noise,
             )
         )
     return rules
@@ -150,6 +164,9 @@ class FieldDelta:
     field: str
     before: float | None
     after: float | None
+    #: The 95 % intervals (low, high) of both runs, where recorded.
+    before_interval: tuple[float, float] | None = None
+    after_interval: tuple[float, float] | None = None
 
     @property
     def delta(self) -> float | None:
@@ -157,8 +174,26 @@ class FieldDelta:
             return None
         return self.after - self.before
 
+    @property
+    def beyond_noise(self) -> bool | None:
+        """Whether the runs' intervals are disjoint; None where either has none."""
+        if self.before_interval is None or self.after_interval is None:
+            return None
+        (low_before, high_before), (low_after, high_after) = (
+            self.before_interval,
+            self.after_interval,
+        )
+        return high_after < low_before or low_after > high_before
+
     def to_dict(self) -> dict[str, Any]:
-        return {"before": self.before, "after": self.after, "delta": self.delta}
+        out: dict[str, Any] = {"before": self.before, "after": self.after, "delta": self.delta}
+        if self.beyond_noise is not None:
+            out["intervals"] = {
+                "before": list(self.before_interval or ()),
+                "after": list(self.after_interval or ()),
+            }
+            out["beyond_noise"] = self.beyond_noise
+        return out
 
 
 #: A window, phase, condition or cell counts as better or worse when its RMS error changed
@@ -569,10 +604,35 @@ def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
 
 
 def _lambda_deltas(
-    before: Mapping[str, float | None], after: Mapping[str, float | None]
+    before: Mapping[str, float | None],
+    after: Mapping[str, float | None],
+    before_intervals: Mapping[str, Any] | None = None,
+    after_intervals: Mapping[str, Any] | None = None,
 ) -> tuple[FieldDelta, ...]:
     names = order_names([*before, *after])
-    return tuple(FieldDelta(name, before.get(name), after.get(name)) for name in names)
+    return tuple(
+        FieldDelta(
+            name,
+            before.get(name),
+            after.get(name),
+            _bounds((before_intervals or {}).get(name)),
+            _bounds((after_intervals or {}).get(name)),
+        )
+        for name in names
+    )
+
+
+def _bounds(raw: Any) -> tuple[float, float] | None:
+    """(low, high) of a recorded interval, or None where it is missing or not numeric."""
+    if not isinstance(raw, Mapping):
+        return None
+    low, high = _number(raw.get("low")), _number(raw.get("high"))
+    return None if low is None or high is None else (low, high)
+
+
+def _intervals_of(signal: Mapping[str, Any]) -> Mapping[str, Any]:
+    raw = signal.get("intervals")
+    return raw if isinstance(raw, Mapping) else {}
 
 
 def _compare_spec(
@@ -595,7 +655,12 @@ def _compare_spec(
                 path=path,
                 name=str(sig_after.get("name", path.rsplit("/", 1)[-1])),
                 unit=sig_after.get("unit") if isinstance(sig_after.get("unit"), str) else None,
-                lambdas=_lambda_deltas(_lambdas(sig_before), _lambdas(sig_after)),
+                lambdas=_lambda_deltas(
+                    _lambdas(sig_before),
+                    _lambdas(sig_after),
+                    _intervals_of(sig_before),
+                    _intervals_of(sig_after),
+                ),
                 errors=tuple(
                     FieldDelta(name, _number(sig_before.get(name)), _number(sig_after.get(name)))
                     for name in ERROR_FIELDS
@@ -609,7 +674,13 @@ def _compare_spec(
     return SpecComparison(
         key=key,
         name=str(after.get("name", key)),
-        phi=FieldDelta("phi", _number(before.get("phi")), _number(after.get("phi"))),
+        phi=FieldDelta(
+            "phi",
+            _number(before.get("phi")),
+            _number(after.get("phi")),
+            _bounds(before.get("phi_interval")),
+            _bounds(after.get("phi_interval")),
+        ),
         passed_before=_flag(before.get("passed")),
         passed_after=_flag(after.get("passed")),
         signals=tuple(signals),
@@ -698,7 +769,13 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
     for spec in comparison.specs:
         for rule in rules:
             if rule.applies_to("phi"):
-                hit = _worsened(spec.phi.before, spec.phi.after, rule, higher_is_better=True)
+                hit = _worsened(
+                    spec.phi.before,
+                    spec.phi.after,
+                    rule,
+                    higher_is_better=True,
+                    beyond_noise=spec.phi.beyond_noise,
+                )
                 if hit is not None:
                     found.append(
                         Regression(spec.key, None, "phi", spec.phi.before or 0.0, *hit, rule.text)
@@ -708,7 +785,13 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
                 for delta in signal.lambdas:
                     if not rule.applies_to(delta.field):
                         continue
-                    hit = _worsened(delta.before, delta.after, rule, higher_is_better=True)
+                    hit = _worsened(
+                        delta.before,
+                        delta.after,
+                        rule,
+                        higher_is_better=True,
+                        beyond_noise=delta.beyond_noise,
+                    )
                     if hit is not None:
                         found.append(
                             Regression(
@@ -733,7 +816,12 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
 
 
 def _worsened(
-    before: float | None, after: float | None, rule: Rule, *, higher_is_better: bool
+    before: float | None,
+    after: float | None,
+    rule: Rule,
+    *,
+    higher_is_better: bool,
+    beyond_noise: bool | None = None,
 ) -> tuple[float | None, float] | None:
     if before is None:
         return None
@@ -741,6 +829,8 @@ def _worsened(
     if after is None:
         return (None, allowed)
     change = (before - after) if higher_is_better else (after - before)
+    if rule.beyond_noise and beyond_noise is False:
+        return None  # within noise: the intervals overlap
     if change > allowed + _TOLERANCE:
         return (after, allowed)
     return None

@@ -54,6 +54,9 @@ _SPEC_KEYS = (
     "phi",
     "min_phi",
     "min_phi_line",
+    "min_phi_on",
+    "phi_interval",
+    "phi_passed",
     "passed",
     "weights",
     "data",
@@ -79,6 +82,8 @@ _SIGNAL_KEYS = (
     "origin",
     "origins",
     "children",
+    "intervals",
+    "block_samples",
 )
 _HINT_CORRUPT = (
     "the file was not written by pytest-hevval or was edited by hand; "

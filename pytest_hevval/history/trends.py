@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any
@@ -49,6 +49,11 @@ class HistoryRow:
     lambdas: Mapping[str, float | None]
     lag_s: float | None
     passed: bool | None
+    #: 95 % intervals (low, high) by field (``"phi"`` or a characteristic name), where recorded.
+    intervals: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+    def interval(self, name: str) -> tuple[float, float] | None:
+        return self.intervals.get(name)
 
     def value(self, field: str) -> float | None:
         """``"phi"``, ``"lag_s"`` or a characteristic name."""
@@ -118,6 +123,7 @@ def history_table(
                 lambdas={},
                 lag_s=None,
                 passed=passed if isinstance(passed, bool) else None,
+                intervals=_recorded_intervals({"phi": spec_result.get("phi_interval")}),
             )
             if signal is None:
                 rows.append(spec_row)
@@ -134,9 +140,23 @@ def history_table(
                         lambdas={k: _number(v) for k, v in keyed_lambdas(lambdas).items()},
                         lag_s=_number(sig.get("lag_s")),
                         passed=passed if isinstance(passed, bool) else None,
+                        intervals={
+                            **spec_row.intervals,
+                            **_recorded_intervals(sig.get("intervals")),
+                        },
                     )
                 )
     return rows
+
+
+def _recorded_intervals(raw: Any) -> dict[str, tuple[float, float]]:
+    out: dict[str, tuple[float, float]] = {}
+    for name, bounds in (raw or {}).items() if isinstance(raw, Mapping) else ():
+        if isinstance(bounds, Mapping):
+            low, high = _number(bounds.get("low")), _number(bounds.get("high"))
+            if low is not None and high is not None:
+                out[str(name)] = (low, high)
+    return out
 
 
 def characteristic_names(rows: Sequence[HistoryRow]) -> list[str]:
@@ -229,6 +249,7 @@ def detect_steps(
     threshold: float = 5.0,
     min_segment: int = 2,
     higher_is_better: bool = True,
+    intervals: Sequence[tuple[float, float] | None] | None = None,
 ) -> list[Step]:
     """Find lasting level changes in ``series`` by binary segmentation.
 
@@ -249,6 +270,10 @@ def detect_steps(
         Fewest points on each side of a step, so that a single outlier is not a step.
     higher_is_better:
         Whether a drop (True, for Φ and λ) or a rise (False, for errors) is a regression.
+    intervals:
+        Each point's 95 % interval (low, high), or None where unknown. A step is then kept
+        only when it is beyond noise: larger than the median half-widths of the intervals on
+        its two sides together, so that the typical intervals before and after do not overlap.
     """
     if not math.isfinite(min_size) or min_size < 0:
         raise HistoryError(f"min_size must be a finite number ≥ 0 (got {min_size!r})")
@@ -283,8 +308,34 @@ def detect_steps(
         n_right = bounds[k + 1] - bounds[k]
         score = abs(after - before) / (sigma * math.sqrt(1 / n_left + 1 / n_right))
         worse = after < before if higher_is_better else after > before
+        left = positions[bounds[k - 1] : bounds[k]]
+        right = positions[bounds[k] : bounds[k + 1]]
+        if intervals is not None and not _beyond_noise(after - before, intervals, left, right):
+            continue
         steps.append(Step(int(positions[bounds[k]]), before, after, score, worse))
     return steps
+
+
+def _beyond_noise(
+    change: float,
+    intervals: Sequence[tuple[float, float] | None],
+    left: npt.NDArray[np.intp],
+    right: npt.NDArray[np.intp],
+) -> bool:
+    """Whether a change exceeds the typical half-widths of the intervals on both sides."""
+
+    def half_width(where: npt.NDArray[np.intp]) -> float | None:
+        widths = [
+            (bounds[1] - bounds[0]) / 2.0
+            for i in where.tolist()
+            if i < len(intervals) and (bounds := intervals[i]) is not None
+        ]
+        return float(np.median(widths)) if widths else None
+
+    before, after = half_width(left), half_width(right)
+    if before is None or after is None:
+        return True  # no interval recorded: the series' own noise decides
+    return abs(change) > before + after
 
 
 def _best_split(

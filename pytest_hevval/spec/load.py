@@ -130,6 +130,9 @@ _SIGNAL_KEYS = (
 _LOCAL_KEYS = ("window_s", "phases", "conditions", "gate")
 _REGION_KEYS = ("by", "bins", "min_samples", "gate")
 _GATE_KEYS = ("thresholds", "share")
+_MIN_PHI_KEYS = ("value", "on")
+#: What ``min_phi: {on: …}`` may judge: Φ itself or a bound of its confidence interval.
+_MIN_PHI_ON = ("value", "lower", "upper")
 _CONDITION_KEYS = ("when", "thresholds")
 
 T = TypeVar("T")
@@ -347,7 +350,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     thresholds = _thresholds(context, top, "thresholds", "thresholds")
     _check_scored(context, thresholds, scored, top.line_of("thresholds"), "thresholds")
     weights = _weights(context, top, scored)
-    min_phi = context.get(top, "min_phi", "", context.unit_interval, None)
+    min_phi, min_phi_on = _min_phi(context, top)
     correlation = context.get(top, "correlation", "", context.choice(("xcorr", "pearson")), "xcorr")
     emergent = context.get(top, "emergent", "", context.choice(("V2", "V1")), "V2")
     candidates = _candidates(context, top)
@@ -394,6 +397,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         metrics=metrics,
         min_phi=min_phi,
         min_phi_line=top.line_of("min_phi"),
+        min_phi_on=min_phi_on,  # type: ignore[arg-type]
         correlation=correlation,  # type: ignore[arg-type]
         emergent=emergent,  # type: ignore[arg-type]
         candidates=candidates,
@@ -909,6 +913,26 @@ def _check_local_scored(
                 f"{name!r} is not scored over windows or region cells",
                 hint="use one of " + ", ".join(LOCAL_CHARACTERISTICS),
             )
+
+
+def _min_phi(context: _Context, top: LineDict) -> tuple[float | None, str]:
+    """``min_phi: 0.9`` or ``min_phi: {value: 0.9, on: lower}``."""
+    if "min_phi" not in top or top["min_phi"] is None:
+        return None, "value"
+    if not isinstance(top["min_phi"], dict):
+        return context.get(top, "min_phi", "", context.unit_interval, None), "value"
+    gate = context.mapping(top["min_phi"], top.line_of("min_phi"), "min_phi")
+    context.check_keys(gate, _MIN_PHI_KEYS, "min_phi")
+    if gate.get("value") is None:
+        raise context.error(
+            gate.line,
+            "min_phi.value",
+            "is required: the lowest acceptable Φ",
+            hint="for example min_phi: {value: 0.9, on: lower}",
+        )
+    value = context.get(gate, "value", "min_phi", context.unit_interval, None)
+    on = context.get(gate, "on", "min_phi", context.choice(_MIN_PHI_ON), "value")
+    return value, on
 
 
 def _local_gate(context: _Context, mapping: LineDict, key: str) -> LocalGate | None:

@@ -234,6 +234,8 @@ class Spec:
     metrics: tuple[str, ...] = ()
     min_phi: float | None = None
     min_phi_line: int = 1
+    #: Which value of Φ's interval ``min_phi`` judges: the point value, or a bound.
+    min_phi_on: Literal["value", "lower", "upper"] = "value"
     correlation: Literal["xcorr", "pearson"] = "xcorr"
     emergent: Literal["V1", "V2"] = "V2"
     candidates: Mapping[str, Expression] = field(default_factory=dict)
