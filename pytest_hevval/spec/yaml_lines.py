@@ -60,8 +60,9 @@ class _LineLoader(yaml.SafeLoader):
         for key_node, value_node in node.value:
             key = self.construct_object(key_node, deep=True)
             if not isinstance(key, str):
-                # Keep non-string keys visible to the validator as text.
-                key = str(key)
+                # Keys are names: keep them as written, so that YAML 1.1's booleans do not
+                # turn `on:` into True; other non-string keys reach the validator as text.
+                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else str(key)
             if key in mapping:
                 raise yaml.constructor.ConstructorError(
                     "while constructing a mapping",
