@@ -66,6 +66,7 @@ def _run(args: argparse.Namespace) -> int:
         workers=args.workers,
         dask=args.dask,
         data_hash=args.hash,
+        intervals=not args.no_intervals,
     )
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
     done = [0]
@@ -220,6 +221,7 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "dask", metavar="ADDRESS")
     _shared(run, "workers", type=_workers)
     _shared(run, "hash")
+    _shared(run, "no-intervals")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     diagnose = commands.add_parser(

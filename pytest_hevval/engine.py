@@ -321,10 +321,16 @@ def evaluate_spec(
     figures: bool = False,
     keep_arrays: bool = False,
     workers: int | None = None,
+    intervals: bool = True,
 ) -> Evaluation:
-    """Score every signal of ``spec`` against its reference. Raises HevvalError on bad input."""
+    """Score every signal of ``spec`` against its reference. Raises HevvalError on bad input.
+
+    ``intervals``: give every λ and Φ its bootstrap interval (one more pass per signal).
+    """
     try:
-        return _evaluate(spec, cache or DataCache(), rootdir, figures, keep_arrays, workers)
+        return _evaluate(
+            spec, cache or DataCache(), rootdir, figures, keep_arrays, workers, intervals
+        )
     except HevvalError as exc:
         raise exc.with_context(file=str(spec.path)) from None
 
@@ -340,6 +346,7 @@ def _evaluate(
     figures: bool,
     keep_arrays: bool,
     workers: int | None,
+    intervals: bool = True,
 ) -> Evaluation:
     folders = [spec.path.parent] + ([rootdir] if rootdir else [])
     reference = cache.read(spec.reference, spec.reference_columns())
@@ -384,7 +391,8 @@ def _evaluate(
         if keep_arrays:
             arrays[signals[-1].path] = (ref, sim)
     result = _spec_result(spec, signals, aligned, model_info, cache)
-    _add_intervals(spec, result, roots, node_specs, fused, _block_sums(values, workers))
+    if intervals:
+        _add_intervals(spec, result, roots, node_specs, fused, _block_sums(values, workers))
     result.local = spec_local_summary(
         spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
     )

@@ -94,6 +94,12 @@ OPTIONS: tuple[Option, ...] = (
         DEFAULT_HASH,
         HASH_CHOICES,
     ),
+    Option(
+        "no-intervals",
+        "bool",
+        "skip the 95 % bootstrap intervals of λ and Φ (gates on a bound then judge the value)",
+        False,
+    ),
 )
 
 _BY_NAME = {o.name: o for o in OPTIONS}

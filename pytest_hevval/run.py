@@ -41,6 +41,8 @@ class RunOptions:
     dask: str | None = None
     #: How data files are identified in results: "fast" or "sha256" (see digest.py).
     data_hash: str = DEFAULT_HASH
+    #: Give every λ and Φ its bootstrap interval (core/uncertainty.py).
+    intervals: bool = True
 
 
 def relative_to(rootdir: Path, path: str) -> str:
@@ -101,6 +103,7 @@ def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
             figures=options.figures,
             keep_arrays=options.keep_arrays,
             workers=options.workers,
+            intervals=options.intervals,
         )
     except HevvalError as exc:
         return exc

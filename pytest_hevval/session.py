@@ -161,6 +161,7 @@ class HevvalSession:
                 workers=self.workers(),
                 dask=str(self.option("dask")) if self.option("dask") else None,
                 data_hash=str(self.option("hash")),
+                intervals=not self.option("no-intervals"),
             )
             self.cache.data_hash = self._run_options.data_hash
         return self._run_options

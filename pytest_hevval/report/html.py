@@ -132,7 +132,13 @@ def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
     signals = list(views.values())
     phi = spec.get("phi")
     min_phi = spec.get("min_phi")
+    phi_low, phi_high = model.interval_bounds(spec.get("phi_interval"))
     return {
+        "phi_low": phi_low,
+        "phi_high": phi_high,
+        "phi_low_bar": _percent(phi_low) if phi_low is not None else None,
+        "phi_high_bar": _percent(phi_high) if phi_high is not None else None,
+        "min_phi_bound": model.min_phi_bound(spec),
         "spec": spec,
         "index": index,
         "anchor": f"spec{index}",

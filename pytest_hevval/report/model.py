@@ -132,6 +132,9 @@ class Cell:
     value: float | None
     threshold: float | None
     status: Status
+    #: The value's 95 % interval, where the result carries one.
+    low: float | None = None
+    high: float | None = None
 
     @property
     def label(self) -> str:
@@ -147,6 +150,8 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
     values = _lambdas(signal)
     gates = _thresholds(signal)
     failed = _failed_names(signal)
+    raw = signal.get("intervals")
+    intervals: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
     out: list[Cell] = []
     for i, (name, value) in enumerate(values.items(), 1):
         threshold = gates.get(name)
@@ -159,8 +164,33 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
             status = "fail"
         else:
             status = "pass"
-        out.append(Cell(name, i, value, threshold, status))
+        low, high = interval_bounds(intervals.get(name))
+        out.append(Cell(name, i, value, threshold, status, low, high))
     return out
+
+
+def interval_bounds(raw: Any) -> tuple[float | None, float | None]:
+    """(low, high) of a result's ``{"low", "high"}`` interval; (None, None) where absent."""
+    if not isinstance(raw, Mapping):
+        return None, None
+    low, high = raw.get("low"), raw.get("high")
+    if is_finite_number(low) and is_finite_number(high):
+        return float(low), float(high)
+    return None, None
+
+
+def phi_failed(spec: Mapping[str, Any]) -> bool:
+    """Whether Φ missed ``min_phi`` (the engine's verdict where recorded, else Φ < min Φ)."""
+    if isinstance(spec.get("phi_passed"), bool):
+        return not spec["phi_passed"]
+    phi, min_phi = spec.get("phi"), spec.get("min_phi")
+    return is_finite_number(phi) and is_finite_number(min_phi) and float(phi) < float(min_phi)
+
+
+def min_phi_bound(spec: Mapping[str, Any]) -> str:
+    """`` on the lower bound`` when ``min_phi`` judges a bound of Φ's interval, else empty."""
+    on = spec.get("min_phi_on", "value")
+    return "" if on == "value" else f" on the {on} bound"
 
 
 @dataclass(frozen=True)

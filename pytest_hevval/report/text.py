@@ -181,6 +181,17 @@ def _code(text: object) -> str:
     return f"`{body}`"
 
 
+def _phi(spec: Mapping[str, Any]) -> str:
+    """Φ with its 95 % interval where the result carries one: ``0.9248 [0.9225, 0.9272]``."""
+    low, high = model.interval_bounds(spec.get("phi_interval"))
+    bounds = f" [{_num(low)}, {_num(high)}]" if low is not None else ""
+    return f"{_num(spec.get('phi'))}{bounds}"
+
+
+def _min_phi(spec: Mapping[str, Any]) -> str:
+    return f"{_num(spec.get('min_phi'))}{model.min_phi_bound(spec)}"
+
+
 def _below(signal: Mapping[str, Any]) -> list[str]:
     parts = []
     for c in model.cells(signal):
@@ -249,26 +260,19 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
         failing = model.failing_signals(spec)
         lines.append(
             f"| {'❌' if spec.get('passed') is False else '✅'} | {_md(spec.get('name', ''))} "
-            f"| {_num(spec.get('phi'))} | {_num(spec.get('min_phi'))} "
+            f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
             f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
         )
     for spec in spec_results:
         failing = model.failing_signals(spec)
         if spec.get("passed") is not False and not failing:
             continue
-        phi, min_phi = spec.get("phi"), spec.get("min_phi")
-        relation = (
-            "<"
-            if model.is_finite_number(phi)
-            and model.is_finite_number(min_phi)
-            and float(phi) < float(min_phi)
-            else "≥"
-        )
+        relation = "<" if model.phi_failed(spec) else "≥"
         mark = "❌" if spec.get("passed") is False else "✅"
         lines += [
             "",
-            f"**{mark} {_md(spec.get('name', ''))}** — Φ {_num(phi)} {relation} min Φ "
-            f"{_num(min_phi)} ({_code(spec.get('spec', ''))})",
+            f"**{mark} {_md(spec.get('name', ''))}** — Φ {_phi(spec)} {relation} min Φ "
+            f"{_min_phi(spec)} ({_code(spec.get('spec', ''))})",
         ]
         if not failing:
             continue
@@ -328,13 +332,8 @@ def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path 
     for spec in spec_results:
         name = str(spec.get("name", ""))
         file = _escape_property(_relative(split_key(str(spec.get("spec", "")))[0], rootdir))
-        phi, min_phi = spec.get("phi"), spec.get("min_phi")
-        if (
-            model.is_finite_number(phi)
-            and model.is_finite_number(min_phi)
-            and float(phi) < float(min_phi)
-        ):
-            message = f"{name}: Φ {_num(phi)} is below min Φ {_num(min_phi)}"
+        if model.phi_failed(spec):
+            message = f"{name}: Φ {_phi(spec)} is below min Φ {_min_phi(spec)}"
             out.append(f"::error file={file},title=hevval::{_escape_data(message)}")
         for signal in model.failing_signals(spec):
             below = "; ".join(_below(signal)) or "failed"
