@@ -111,7 +111,7 @@ def prepare(count: int) -> tuple[list[Path], Path]:
     return singles, campaign
 
 
-def score(specs: list[Path], *, campaign: bool) -> tuple[float, float]:
+def score(specs: list[Path], *, campaign: bool, intervals: bool = True) -> tuple[float, float]:
     """(wall, CPU) time of loading and scoring ``specs`` (and the verdict, for a campaign)."""
     from pytest_hevval.campaign import campaign_verdicts
     from pytest_hevval.engine import Evaluation
@@ -120,7 +120,7 @@ def score(specs: list[Path], *, campaign: bool) -> tuple[float, float]:
 
     started, cpu = time.perf_counter(), time.process_time()
     loaded = [spec for path in specs for spec in load_specs(path)]
-    outcomes = run_specs(loaded, RunOptions(rootdir=ROOT))
+    outcomes = run_specs(loaded, RunOptions(rootdir=ROOT, intervals=intervals))
     results = [o.result for o in outcomes if isinstance(o, Evaluation)]
     if len(results) != len(loaded):
         raise SystemExit(f"only {len(results)} of {len(loaded)} recordings scored")
@@ -128,6 +128,30 @@ def score(specs: list[Path], *, campaign: bool) -> tuple[float, float]:
         (verdict,) = campaign_verdicts(results)
         assert len(verdict.recordings) == len(loaded)
     return time.perf_counter() - started, time.process_time() - cpu
+
+
+def interval_cost(campaign: Path, repeat: int) -> None:
+    """The campaign scored with and without intervals, alternating within each repetition."""
+    score([campaign], campaign=True)  # warm the file cache and imports
+    rows = []
+    for repetition in range(1, repeat + 1):
+        order = (False, True) if repetition % 2 else (True, False)
+        timed = {flag: score([campaign], campaign=True, intervals=flag) for flag in order}
+        rows.append((timed[False], timed[True]))
+        print(
+            f"  repetition {repetition}: wall without {timed[False][0]:.2f} s, with "
+            f"{timed[True][0]:.2f} s ({timed[True][0] / timed[False][0]:.3f}); CPU without "
+            f"{timed[False][1]:.2f} s, with {timed[True][1]:.2f} s "
+            f"({timed[True][1] / timed[False][1]:.3f})"
+        )
+    for index, what in enumerate(("wall", "CPU")):
+        without = min(r[0][index] for r in rows)
+        with_ = min(r[1][index] for r in rows)
+        median = statistics.median(r[1][index] / r[0][index] for r in rows)
+        print(
+            f"intervals, {what}: fastest without {without:.2f} s, with {with_:.2f} s, ratio "
+            f"{with_ / without:.3f}; median ratio per repetition {median:.3f}"
+        )
 
 
 def u_distribution_timing(calls: int = 300) -> None:
@@ -155,6 +179,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recordings", type=int, default=100)
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument(
+        "--part",
+        choices=("all", "campaign", "intervals"),
+        default="all",
+        help="campaign: campaign against single specs; intervals: the campaign with and "
+        "without the bootstrap intervals",
+    )
     args = parser.parse_args()
     singles, campaign = prepare(args.recordings)
     sys.path.insert(0, str(ROOT))
@@ -162,6 +193,10 @@ def main() -> None:
         f"{args.recordings} recordings of {SECONDS / 60:g} min at {RATE_HZ:g} Hz, "
         f"{CHANNELS} signals; load average {os.getloadavg()[0]:.2f}"
     )
+    if args.part in ("all", "intervals"):
+        interval_cost(campaign, args.repeat)
+    if args.part == "intervals":
+        return
     rows: list[tuple[tuple[float, float], tuple[float, float]]] = []
     for repetition in range(1, args.repeat + 1):
         single = score(singles, campaign=False)
