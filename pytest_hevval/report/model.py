@@ -15,6 +15,7 @@ from typing import Any, Literal, TypeGuard, cast
 
 from ..core.characteristics import CHARACTERISTICS
 from ..core.registry import describe, keyed_lambdas, order_names, registered_characteristics
+from ..measurement import ErrorCheck, failure_sentence
 
 __all__ = [
     "CHARACTERISTICS",
@@ -32,6 +33,7 @@ __all__ = [
     "is_finite_number",
     "items",
     "margin",
+    "measurement_lines",
     "ordered_signals",
     "signal_order",
     "standard_metric_rows",
@@ -75,7 +77,8 @@ def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
     return order_names(names) if names else list(CHARACTERISTICS)
 
 
-Status = Literal["pass", "fail", "ungated"]
+#: "within": missed within the measurement uncertainty, and passing by the spec's choice.
+Status = Literal["pass", "fail", "ungated", "within"]
 
 
 def is_finite_number(value: object) -> TypeGuard[float]:
@@ -147,12 +150,15 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
     values = _lambdas(signal)
     gates = _thresholds(signal)
     failed = _failed_names(signal)
+    excused = _failed_names({"failures": signal.get("within_uncertainty")})
     out: list[Cell] = []
     for i, (name, value) in enumerate(values.items(), 1):
         threshold = gates.get(name)
         status: Status
         if name in failed:
             status = "fail"
+        elif name in excused:
+            status = "within"
         elif threshold is None:
             status = "ungated"
         elif value is None or value < threshold:
@@ -161,6 +167,32 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
             status = "pass"
         out.append(Cell(name, i, value, threshold, status))
     return out
+
+
+def measurement_lines(signal: Mapping[str, Any]) -> list[str]:
+    """Each miss of ``signal`` checked against its declared measurement uncertainty.
+
+    Failing misses first, then those passing within the uncertainty (ending "; passes").
+    """
+    unit = signal.get("unit")
+    lines: list[str] = []
+    for key, suffix in (("failures", ""), ("within_uncertainty", "; passes")):
+        for found in items(signal.get(key)):
+            if not isinstance(found, Mapping) or not isinstance(found.get("measurement"), Mapping):
+                continue
+            try:
+                check = ErrorCheck.from_dict(found["measurement"])
+                name = str(found["characteristic"])
+                value, threshold = float(found["value"]), float(found["threshold"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if check.uncertainty is None:
+                continue
+            sentence = failure_sentence(
+                describe(name).title, name, value, threshold, check, unit if unit else None
+            )
+            lines.append(sentence + suffix)
+    return lines
 
 
 @dataclass(frozen=True)
