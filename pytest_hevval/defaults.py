@@ -9,6 +9,8 @@ __all__ = [
     "REGION_MIN_SAMPLES",
     "REPORT_DIR",
     "SPEC_GLOBS",
+    "UNCERTAINTY_SIGMA",
+    "WITHIN_UNCERTAINTY",
 ]
 
 #: Spec files, as pytest's ``python_files`` globs (ini ``hevval_files`` overrides them).
@@ -24,3 +26,9 @@ REGION_BINS = 10
 #: A region cell with fewer samples is shown but neither judged by the gate nor coloured as
 #: failing: at 10 Hz, 10 s of driving.
 REGION_MIN_SAMPLES = 100
+#: The coverage factor k a signal's declared ``uncertainty`` is stated at when it gives no
+#: ``sigma``: ±2σ, the customary ~95 % statement of instrument accuracy (ASME V&V 20, GUM).
+UNCERTAINTY_SIGMA = 2.0
+#: What a threshold missed by less than the measurement uncertainty does when the spec's
+#: ``measurement.within_uncertainty`` does not say: it still fails.
+WITHIN_UNCERTAINTY = "fail"

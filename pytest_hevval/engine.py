@@ -11,7 +11,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -362,6 +362,7 @@ def _evaluate(
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
+    within = _measurement_checks(spec, failures, node_specs, fused, values)
     missed_locally = {
         path: local_failures(spec, node, labels, local.get(_signature(node)))
         for path, node in node_specs.items()
@@ -390,6 +391,8 @@ def _evaluate(
         characteristics[signals[-1].path] = chars
         if keep_arrays:
             arrays[signals[-1].path] = (ref, sim)
+    for signal in signals:
+        signal.within_uncertainty = within.get(signal.path, [])
     result = _spec_result(spec, signals, aligned, model_info, cache)
     if intervals:
         _add_intervals(spec, result, roots, node_specs, fused, _block_sums(values, workers))
@@ -690,6 +693,55 @@ def _gate(
             if scored_node.lambdas[name] < limit
         ]
     return failures
+
+
+def _measurement_checks(
+    spec: Spec,
+    failures: dict[NodePath, list[Failure]],
+    node_specs: Mapping[NodePath, SignalSpec],
+    fused: Mapping[Signature, SignalCharacteristics],
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+) -> dict[str, list[Failure]]:
+    """Each missed error threshold (λ3–λ6) with its limit, margin and measurement uncertainty.
+
+    Rewrites ``failures`` in place. With ``measurement.within_uncertainty: pass`` a miss within
+    the uncertainty leaves ``failures`` and is returned instead, by signal path.
+    """
+    from .measurement import ERROR_CHARACTERISTICS, check_error
+
+    passing = spec.measurement.within_uncertainty == "pass"
+    within: dict[str, list[Failure]] = {}
+    for path, missed in failures.items():
+        if not any(f.characteristic in ERROR_CHARACTERISTICS for f in missed):
+            continue
+        node = node_specs[path]
+        signature = _signature(node)
+        errors = fused[signature].as_dict()
+        declared = node.uncertainty
+        reference_rms = 0.0
+        if declared is not None and declared.rel > 0:
+            reference = values[signature][0]
+            reference_rms = float(np.sqrt(np.mean(np.square(reference))))
+        kept: list[Failure] = []
+        for failure in missed:
+            if failure.characteristic in ERROR_CHARACTERISTICS:
+                error_key, _ = ERROR_CHARACTERISTICS[failure.characteristic]
+                failure = replace(
+                    failure,
+                    check=check_error(
+                        float(errors[error_key]),  # type: ignore[arg-type]
+                        failure.threshold,
+                        float(errors["reference_range"]),  # type: ignore[arg-type]
+                        declared,
+                        reference_rms,
+                    ),
+                )
+                if passing and failure.within_uncertainty:
+                    within.setdefault("/".join(path), []).append(failure)
+                    continue
+            kept.append(failure)
+        failures[path] = kept
+    return within
 
 
 def _figures(

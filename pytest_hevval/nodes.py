@@ -142,6 +142,14 @@ class SignalItem(_SpecItem):
         result = self.result
         signal = result.signal(self.name)
         self._record(signal)
+        if signal.within_uncertainty:
+            # Passing by the spec's choice; the misses stay visible in the JUnit XML too.
+            self.user_properties.append(
+                (
+                    "within_measurement_uncertainty",
+                    ",".join(f.characteristic for f in signal.within_uncertainty),
+                )
+            )
         diagnosis = self.state.diagnosis_for(self.evaluation, signal)
         if diagnosis is not None:
             self.hevval_diagnosis = {"spec": result.spec, **diagnosis}

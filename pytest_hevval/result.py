@@ -16,6 +16,7 @@ from .core.characteristics import SignalCharacteristics
 from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
 from .core.uncertainty import Interval
 from .localise import LocalFailure, LocalResult
+from .measurement import ErrorCheck, failure_sentence
 
 __all__ = [
     "RESULT_SCHEMA_VERSION",
@@ -52,13 +53,48 @@ class Failure:
     characteristic: str
     value: float
     threshold: float
+    #: An error characteristic's limit and margin in the signal's unit, with the measurement
+    #: uncertainty beside them when the signal declares one (see measurement.py).
+    check: ErrorCheck | None = None
+
+    @property
+    def within_uncertainty(self) -> bool:
+        """Missed by no more than the signal's declared measurement uncertainty."""
+        return self.check is not None and self.check.within is True
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "characteristic": self.characteristic,
             "value": self.value,
             "threshold": self.threshold,
         }
+        if self.check is not None:
+            out["measurement"] = self.check.to_dict()
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Failure:
+        """The inverse of :meth:`to_dict`; records without ``measurement`` load too."""
+        check = data.get("measurement")
+        return cls(
+            characteristic=data["characteristic"],
+            value=float(data["value"]),
+            threshold=float(data["threshold"]),
+            check=ErrorCheck.from_dict(check) if check else None,
+        )
+
+    def sentence(self, unit: str | None) -> str | None:
+        """The miss in the signal's unit and against the measurement uncertainty, if known."""
+        if self.check is None:
+            return None
+        return failure_sentence(
+            describe(self.characteristic).title,
+            self.characteristic,
+            self.value,
+            self.threshold,
+            self.check,
+            unit,
+        )
 
 
 @dataclass
@@ -99,6 +135,9 @@ class SignalResult:
     intervals: dict[str, Interval] = field(default_factory=dict)
     #: The bootstrap block length of this signal's λ1–λ6, in samples.
     block_samples: int | None = None
+    #: Thresholds missed by no more than the measurement uncertainty that the spec lets pass
+    #: (``measurement.within_uncertainty: pass``); kept to be shown, never failing.
+    within_uncertainty: list[Failure] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
@@ -182,6 +221,8 @@ class SignalResult:
                 for name, i in self.intervals.items()
             }
             out["block_samples"] = self.block_samples
+        if self.within_uncertainty:
+            out["within_uncertainty"] = [f.to_dict() for f in self.within_uncertainty]
         return out
 
     @classmethod
@@ -207,7 +248,7 @@ class SignalResult:
                 for k, parts in dict(data.get("components") or {}).items()
             },
             thresholds=dict(data.get("thresholds", {})),
-            failures=[Failure(**f) for f in data.get("failures", [])],
+            failures=[Failure.from_dict(f) for f in data.get("failures", [])],
             unit=data.get("unit"),
             description=data.get("description"),
             origin=bool(data.get("origin", False)),
@@ -220,6 +261,7 @@ class SignalResult:
             u_distribution=data.get("u_distribution"),
             intervals=_intervals(data.get("intervals"), lambdas),
             block_samples=data.get("block_samples"),
+            within_uncertainty=[Failure.from_dict(f) for f in data.get("within_uncertainty") or []],
         )
 
     def failure_lines(self) -> list[str]:
@@ -227,6 +269,10 @@ class SignalResult:
         errors = self.characteristics.as_dict()
         lines = []
         for failure in self.failures:
+            measured = failure.sentence(self.unit)
+            if measured is not None and failure.check and failure.check.uncertainty is not None:
+                lines.append(measured)
+                continue
             characteristic = describe(failure.characteristic)
             meaning = characteristic.explain(errors, self.unit)
             parts = self.components.get(failure.characteristic)
@@ -241,6 +287,14 @@ class SignalResult:
         for local in self.local_failures:
             lines.append(local.sentence(describe(local.characteristic).title))
         return lines
+
+    def within_uncertainty_lines(self) -> list[str]:
+        """Thresholds missed within the measurement uncertainty that pass by the spec's choice."""
+        return [
+            f"{f.sentence(self.unit) or describe(f.characteristic).title}; passes by "
+            "measurement.within_uncertainty: pass"
+            for f in self.within_uncertainty
+        ]
 
     def where_lines(self) -> list[str]:
         """Where and when the error lies: its concentration and the worst windows."""

@@ -11,7 +11,7 @@ from collections.abc import Iterable
 from .core.registry import describe
 from .result import SignalResult, SpecResult
 
-__all__ = ["phi_report", "signal_failure_report", "tree_summary"]
+__all__ = ["measurement_notes", "phi_report", "signal_failure_report", "tree_summary"]
 
 
 def _location(spec: str, line: int) -> str:
@@ -108,7 +108,7 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
         if details:
             lines.append("    " + " " * 28 + "  ".join(f"{describe(n).symbol:>6}" for n in names))
         for signal in result.signals:
-            if not details and signal.passed:
+            if not details and signal.passed and not signal.within_uncertainty:
                 continue
             indent = "  " * signal.level
             mark = "✓" if signal.passed else "✗"
@@ -120,19 +120,36 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                 )
                 lines.append(f"  {label:<30}{values}{origin}")
                 lines.extend(_standard_metric_lines(signal, indent))
+                lines.extend(f"      {indent}{text}" for text in measurement_notes(signal))
             else:
                 failed = ", ".join(
-                    [f"{f.characteristic} {f.value:.4f}<{f.threshold:g}" for f in signal.failures]
+                    [
+                        f"{f.characteristic} {f.value:.4f}<{f.threshold:g}"
+                        + (" (within measurement uncertainty)" if f.within_uncertainty else "")
+                        for f in signal.failures + signal.within_uncertainty
+                    ]
                     + [
                         f"{f.characteristic} <{f.threshold:g} in {len(f.where)} {f.scope}"
                         for f in signal.local_failures
                     ]
                 )
                 lines.append(f"  {label} [{signal.path}] {failed}{origin}")
+                lines.extend(f"      {indent}{text}" for text in measurement_notes(signal))
         if not details and result.passed:
             lines.append(f"  all {len(result.signals)} signals pass")
         lines.extend(quality_lines(result))
     return lines
+
+
+def measurement_notes(signal: SignalResult) -> list[str]:
+    """Each miss of a signal that declares its measurement uncertainty, against it: the
+    failing ones, then those that pass within the uncertainty (the note kept)."""
+    lines = [
+        str(f.sentence(signal.unit))
+        for f in signal.failures
+        if f.check is not None and f.check.uncertainty is not None
+    ]
+    return lines + [f"note: {text}" for text in signal.within_uncertainty_lines()]
 
 
 def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:

@@ -84,6 +84,7 @@ _SIGNAL_KEYS = (
     "children",
     "intervals",
     "block_samples",
+    "within_uncertainty",
 )
 _HINT_CORRUPT = (
     "the file was not written by pytest-hevval or was edited by hand; "

@@ -66,6 +66,7 @@ def _signal_view(
         "anchor": anchors.get(path, f"spec{spec_index}-{_slug(path)}"),
         "cells": model.cells(signal),
         "standard_metrics": model.standard_metric_rows(signal),
+        "measurement": model.measurement_lines(signal),
         "failed": failed,
         "is_origin": failed and bool(signal.get("origin")),
         "origins": [(o, anchors.get(o)) for o in origins if o != path],

@@ -15,6 +15,7 @@ from typing import Any, Literal, TypeGuard, cast
 
 from ..core.characteristics import CHARACTERISTICS
 from ..core.registry import describe, keyed_lambdas, order_names, registered_characteristics
+from ..measurement import ErrorCheck, failure_sentence
 
 __all__ = [
     "CHARACTERISTICS",
@@ -32,6 +33,7 @@ __all__ = [
     "is_finite_number",
     "items",
     "margin",
+    "measurement_lines",
     "ordered_signals",
     "signal_order",
     "standard_metric_rows",
@@ -75,7 +77,8 @@ def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
     return order_names(names) if names else list(CHARACTERISTICS)
 
 
-Status = Literal["pass", "fail", "ungated"]
+#: "within": missed within the measurement uncertainty, and passing by the spec's choice.
+Status = Literal["pass", "fail", "ungated", "within"]
 
 
 def is_finite_number(value: object) -> TypeGuard[float]:
@@ -152,12 +155,15 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
     failed = _failed_names(signal)
     raw = signal.get("intervals")
     intervals: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
+    excused = _failed_names({"failures": signal.get("within_uncertainty")})
     out: list[Cell] = []
     for i, (name, value) in enumerate(values.items(), 1):
         threshold = gates.get(name)
         status: Status
         if name in failed:
             status = "fail"
+        elif name in excused:
+            status = "within"
         elif threshold is None:
             status = "ungated"
         elif value is None or value < threshold:
@@ -191,6 +197,32 @@ def min_phi_bound(spec: Mapping[str, Any]) -> str:
     """`` on the lower bound`` when ``min_phi`` judges a bound of Φ's interval, else empty."""
     on = spec.get("min_phi_on", "value")
     return "" if on == "value" else f" on the {on} bound"
+
+
+def measurement_lines(signal: Mapping[str, Any]) -> list[str]:
+    """Each miss of ``signal`` checked against its declared measurement uncertainty.
+
+    Failing misses first, then those passing within the uncertainty (ending "; passes").
+    """
+    unit = signal.get("unit")
+    lines: list[str] = []
+    for key, suffix in (("failures", ""), ("within_uncertainty", "; passes")):
+        for found in items(signal.get(key)):
+            if not isinstance(found, Mapping) or not isinstance(found.get("measurement"), Mapping):
+                continue
+            try:
+                check = ErrorCheck.from_dict(found["measurement"])
+                name = str(found["characteristic"])
+                value, threshold = float(found["value"]), float(found["threshold"])
+            except (KeyError, TypeError, ValueError):
+                continue
+            if check.uncertainty is None:
+                continue
+            sentence = failure_sentence(
+                describe(name).title, name, value, threshold, check, unit if unit else None
+            )
+            lines.append(sentence + suffix)
+    return lines
 
 
 @dataclass(frozen=True)

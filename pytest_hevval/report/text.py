@@ -217,6 +217,22 @@ def _where_text(signal: Mapping[str, Any]) -> str:
     return ", ".join((["here"] if here else []) + others)
 
 
+def _measurement_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Each miss checked against a declared measurement uncertainty, per spec."""
+    lines: list[str] = []
+    for spec in spec_results:
+        found = [
+            (signal, text)
+            for signal in model.ordered_signals(spec)
+            for text in model.measurement_lines(signal)
+        ]
+        if not found:
+            continue
+        lines += ["", f"**Measurement uncertainty of {_md(spec.get('name', ''))}**", ""]
+        lines += [f"- {_code(signal.get('path', ''))}: {_md(text)}" for signal, text in found]
+    return lines
+
+
 def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
     """A "standard metrics" table per spec that switched any on, one row per signal and metric."""
     lines: list[str] = []
@@ -285,6 +301,7 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
             lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
+    lines += _measurement_markdown(spec_results)
     lines += _standard_metrics_markdown(spec_results)
     lines += _campaign_markdown(spec_results)
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]

@@ -26,8 +26,15 @@ from ..core.registry import (
 from ..data.quality import QUALITY_ACTIONS, QualityLimits
 from ..data.record import SourceOptions
 from ..data.remote import is_url
-from ..defaults import LOCAL_WINDOW_S, REGION_BINS, REGION_MIN_SAMPLES
+from ..defaults import (
+    LOCAL_WINDOW_S,
+    REGION_BINS,
+    REGION_MIN_SAMPLES,
+    UNCERTAINTY_SIGMA,
+    WITHIN_UNCERTAINTY,
+)
 from ..errors import ExpressionError, SpecError, did_you_mean
+from ..measurement import MeasurementUncertainty
 from .expressions import Expression, parse_signal
 from .model import (
     ROLES,
@@ -38,6 +45,7 @@ from .model import (
     Interpolation,
     LocalGate,
     LocalSpec,
+    MeasurementSpec,
     RecordingSpec,
     RegionSpec,
     Role,
@@ -79,6 +87,7 @@ _TOP_KEYS = (
     "regions",
     "recordings",
     "campaign",
+    "measurement",
     "sets",
 )
 _DIAGNOSIS_KEYS = ("min_share", "responses", "causes")
@@ -125,6 +134,7 @@ _SIGNAL_KEYS = (
     "sim_offset",
     "local_thresholds",
     "region_thresholds",
+    "uncertainty",
     "children",
 )
 _LOCAL_KEYS = ("window_s", "phases", "conditions", "gate")
@@ -134,6 +144,10 @@ _MIN_PHI_KEYS = ("value", "on")
 #: What ``min_phi: {on: …}`` may judge: Φ itself or a bound of its confidence interval.
 _MIN_PHI_ON = ("value", "lower", "upper")
 _CONDITION_KEYS = ("when", "thresholds")
+_UNCERTAINTY_KEYS = ("abs", "rel", "sigma")
+_MEASUREMENT_KEYS = ("within_uncertainty",)
+#: The settings of ``measurement.within_uncertainty``, the default first.
+_WITHIN_UNCERTAINTY = (WITHIN_UNCERTAINTY, *sorted({"fail", "pass"} - {WITHIN_UNCERTAINTY}))
 
 T = TypeVar("T")
 
@@ -406,6 +420,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         local=local,
         regions=regions,
         campaign=campaign,
+        measurement=_measurement(context, top),
     )
 
 
@@ -896,7 +911,71 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         region_thresholds=_thresholds(
             context, mapping, "region_thresholds", _join(key, "region_thresholds")
         ),
+        uncertainty=_uncertainty(context, mapping, key),
     )
+
+
+def _uncertainty(
+    context: _Context, signal: LineDict, signal_key: str
+) -> MeasurementUncertainty | None:
+    """A signal's ``uncertainty: {abs, rel, sigma}``: its sensor's declared accuracy."""
+    if "uncertainty" not in signal or signal["uncertainty"] is None:
+        return None
+    key = _join(signal_key, "uncertainty")
+    line = signal.line_of("uncertainty")
+    mapping = context.mapping(signal["uncertainty"], line, key)
+    context.check_keys(mapping, _UNCERTAINTY_KEYS, key)
+    if "abs" not in mapping and "rel" not in mapping:
+        raise context.error(
+            mapping.line if mapping else line,
+            key,
+            "needs abs (in the signal's unit), rel (a fraction of the reading) or both",
+            hint="write e.g. uncertainty: {abs: 0.5, rel: 0.01, sigma: 2} for ±(0.5 + 1 %) at 2σ",
+        )
+    hints = {
+        "abs": "give the sensor's absolute accuracy in the signal's unit, e.g. abs: 0.5",
+        "rel": "give the accuracy as a fraction of the reading, e.g. rel: 0.01 for 1 %",
+        "sigma": "give the coverage factor the figures are stated at, e.g. sigma: 2 for ±2σ",
+    }
+
+    def figure(name: str, convert: Callable[[Any, int, str], float], default: float) -> float:
+        try:
+            return context.get(mapping, name, key, convert, default)
+        except SpecError as exc:
+            raise exc.with_context(hint=hints[name]) from None
+
+    rel = figure("rel", context.non_negative, 0.0)
+    if rel >= 1.0:
+        raise context.error(
+            mapping.line_of("rel"),
+            _join(key, "rel"),
+            "must be a fraction of the reading below 1",
+            got=rel,
+            hint="write 1 % as rel: 0.01",
+        )
+    return MeasurementUncertainty(
+        abs=figure("abs", context.non_negative, 0.0),
+        rel=rel,
+        sigma=figure("sigma", context.positive, UNCERTAINTY_SIGMA),
+        line=line,
+    )
+
+
+def _measurement(context: _Context, top: LineDict) -> MeasurementSpec:
+    """``measurement: {within_uncertainty: fail | pass}``."""
+    if "measurement" not in top or top["measurement"] is None:
+        return MeasurementSpec()
+    line = top.line_of("measurement")
+    mapping = context.mapping(top["measurement"], line, "measurement")
+    context.check_keys(mapping, _MEASUREMENT_KEYS, "measurement")
+    within = context.get(
+        mapping,
+        "within_uncertainty",
+        "measurement",
+        context.choice(_WITHIN_UNCERTAINTY),
+        WITHIN_UNCERTAINTY,
+    )
+    return MeasurementSpec(within_uncertainty=within, line=line)  # type: ignore[arg-type]
 
 
 def _check_local_scored(

@@ -10,6 +10,8 @@ from typing import Any, Literal
 from ..core.registry import Characteristic, is_registered, select_characteristics
 from ..data.quality import QualityLimits
 from ..data.record import SourceOptions
+from ..defaults import WITHIN_UNCERTAINTY
+from ..measurement import MeasurementUncertainty, WithinUncertainty
 from .expressions import Expression
 
 __all__ = [
@@ -21,6 +23,7 @@ __all__ = [
     "Interpolation",
     "LocalGate",
     "LocalSpec",
+    "MeasurementSpec",
     "ModelKind",
     "RecordingSpec",
     "RegionSpec",
@@ -189,6 +192,17 @@ class SignalSpec:
     #: Overrides of the spec's window and region gate thresholds for this node.
     local_thresholds: Mapping[str, float] = field(default_factory=dict)
     region_thresholds: Mapping[str, float] = field(default_factory=dict)
+    #: The sensor's declared accuracy (``uncertainty:``); None: not declared.
+    uncertainty: MeasurementUncertainty | None = None
+
+
+@dataclass(frozen=True)
+class MeasurementSpec:
+    """The spec's ``measurement:`` settings (docs/uncertainty.md, "Measurement uncertainty")."""
+
+    #: A threshold missed by no more than the measurement uncertainty: "fail" or "pass".
+    within_uncertainty: WithinUncertainty = WITHIN_UNCERTAINTY  # type: ignore[assignment]
+    line: int = 1
 
 
 @dataclass(frozen=True)
@@ -252,6 +266,8 @@ class Spec:
     #: The recording this spec scores, for one recording of a campaign.
     recording: str | None = None
     role: Role = "validation"
+    #: What a threshold missed within the measurement uncertainty does.
+    measurement: MeasurementSpec = field(default_factory=MeasurementSpec)
 
     @property
     def key(self) -> str:
