@@ -13,6 +13,7 @@ from pytest_hevval.core.characteristics import signal_characteristics
 from pytest_hevval.core.local import group_lambdas, labelled_table
 from pytest_hevval.core.uncertainty import (
     FINE_BLOCKS,
+    MAX_BLOCKS,
     MIN_BLOCKS,
     BlockSums,
     block_length,
@@ -35,13 +36,11 @@ def _ar1(n: int, rho: float, sigma: float, rng: np.random.Generator) -> np.ndarr
     return np.asarray(out)
 
 
-def _intervals(reference: np.ndarray, simulated: np.ndarray, *, rho: float | None = None):
+def _intervals(reference: np.ndarray, simulated: np.ndarray, *, per_block: int | None = None):
     blocks = block_sums(reference, simulated)
-    if rho is not None:  # pretend the residual had this correlation
-        blocks = BlockSums(blocks.table, blocks.fine, blocks.n, rho)
     span = float(np.ptp(reference))
     point = signal_characteristics(reference, simulated, dt=1.0, max_lag_s=0.0).values
-    return signal_intervals(blocks, point, span)
+    return signal_intervals(blocks, point, span, per_block=per_block)
 
 
 def test_nominal_95_percent_intervals_cover_ar1_truth_90_to_99_percent_of_the_time() -> None:
@@ -65,7 +64,8 @@ def test_nominal_95_percent_intervals_cover_ar1_truth_90_to_99_percent_of_the_ti
 
 
 def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
-    """The same simulation with the shortest blocks (ρ taken as 0): the check above can fail."""
+    """The same simulation with blocks of 5 samples, far shorter than the correlation: the check
+    above can fail."""
     rng = np.random.default_rng(5)
     n, rho, repeats = 20_000, 0.9, 60
     reference = 50.0 * np.sin(np.arange(n) / 500.0)
@@ -73,7 +73,7 @@ def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
     covered = 0
     for _ in range(repeats):
         simulated = reference - _ar1(n, rho, 1.0, rng)
-        interval = _intervals(reference, simulated, rho=0.0)["mae"]
+        interval = _intervals(reference, simulated, per_block=1)["mae"]
         covered += interval.low <= truth <= interval.high
     assert covered / repeats < 0.8
 
@@ -81,17 +81,19 @@ def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
 @pytest.mark.parametrize(
     ("n", "rho", "expected"),
     [
-        (10_000, 0.0, 1),  # white residual: single samples
+        (10_000, 0.0, 79),  # white residual: the rule's 1, raised to 10000 / MAX_BLOCKS
         # (√6·0.9/0.19)^(2/3) · 10000^(1/3) = 5.125 · 21.54 = 110.4 → 111
         (10_000, 0.9, 111),
-        # (√6·0.99/0.0199)^(2/3) · 360000^(1/3) = 24.58 · 71.14 = 1748.6 → 1749
-        (360_000, 0.99, 1_749),
+        # (√6·0.99/0.0199)^(2/3) · 360000^(1/3) = 24.58 · 71.14 = 1748.6, below 360000 / 128
+        (360_000, 0.99, 2_813),
+        (10**8, 0.99, 781_250),  # 24.58 · 464.2 = 11,410, raised to 10^8 / 128
         (50, 0.9, 5),  # 22 by the formula, clipped to 50 / MIN_BLOCKS
     ],
 )
 def test_block_length(n: int, rho: float, expected: int) -> None:
     assert block_length(n, rho) == expected
     assert n // block_length(n, rho) >= MIN_BLOCKS or block_length(n, rho) == 1
+    assert math.ceil(n / block_length(n, rho)) <= MAX_BLOCKS
 
 
 def test_blocks_are_whole_fine_blocks_at_least_as_long_as_the_rule_asks() -> None:
@@ -102,9 +104,9 @@ def test_blocks_are_whole_fine_blocks_at_least_as_long_as_the_rule_asks() -> Non
     blocks = BlockSums(
         labelled_table(np.zeros(n), np.zeros(n), np.zeros(n, np.int64), rows), fine, n, 0.99
     )
-    # 1,749 samples by the rule → 20 fine blocks of 88 = 1,760 samples
-    assert blocks.per_block == 20
-    assert blocks.block_samples == 1_760
+    # 2,813 samples (360000 / MAX_BLOCKS) → 32 fine blocks of 88 = 2,816 samples
+    assert blocks.per_block == 32
+    assert blocks.block_samples == 2_816
 
 
 @given(signal_pairs(min_size=20))

@@ -726,6 +726,14 @@ class Regression:
     after: float | None
     allowed: float
     rule: str
+    #: Both runs' 95 % intervals, when the rule asked for a change beyond noise.
+    intervals: tuple[tuple[float, float], tuple[float, float]] | None = None
+
+    def _noise_text(self) -> str:
+        if self.intervals is None:
+            return ""
+        (a, b), (c, d) = self.intervals
+        return f"; 95 % intervals [{a:.4g}, {b:.4g}] → [{c:.4g}, {d:.4g}] do not overlap"
 
     def __str__(self) -> str:
         where = self.spec if self.signal is None else f"{self.spec}::{self.signal}"
@@ -743,7 +751,7 @@ class Regression:
             label = self.field if symbol == self.field else f"{symbol} {self.field}"
         return (
             f"{where}: {label} dropped {self.before:.4g} → {after} "
-            f"(allowed drop {self.allowed:.4g}, rule {self.rule!r})"
+            f"(allowed drop {self.allowed:.4g}, rule {self.rule!r}{self._noise_text()})"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -755,6 +763,7 @@ class Regression:
             "after": self.after,
             "allowed": self.allowed,
             "rule": self.rule,
+            **({"intervals": [list(i) for i in self.intervals]} if self.intervals else {}),
         }
 
 
@@ -778,7 +787,15 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
                 )
                 if hit is not None:
                     found.append(
-                        Regression(spec.key, None, "phi", spec.phi.before or 0.0, *hit, rule.text)
+                        Regression(
+                            spec.key,
+                            None,
+                            "phi",
+                            spec.phi.before or 0.0,
+                            *hit,
+                            rule.text,
+                            _noise_intervals(spec.phi, rule),
+                        )
                     )
         for signal in spec.signals:
             for rule in rules:
@@ -801,6 +818,7 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
                                 delta.before or 0.0,
                                 *hit,
                                 rule.text,
+                                _noise_intervals(delta, rule),
                             )
                         )
                 if rule.applies_to("lag"):
@@ -813,6 +831,15 @@ def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regressio
                             Regression(spec.key, signal.path, "lag", before or 0.0, *hit, rule.text)
                         )
     return found
+
+
+def _noise_intervals(
+    delta: FieldDelta, rule: Rule
+) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The intervals that showed a change beyond noise, for a rule that asked."""
+    if not rule.beyond_noise or delta.before_interval is None or delta.after_interval is None:
+        return None
+    return (delta.before_interval, delta.after_interval)
 
 
 def _worsened(
