@@ -23,6 +23,7 @@ from .core.uncertainty import (
     Interval,
     coarsen,
     percentile_interval,
+    percentile_intervals,
     replicate_lambdas,
     resample_counts,
     signal_intervals,
@@ -62,19 +63,22 @@ def spec_confidence(
     share its sums); ``blocks`` and ``reference_range`` are keyed by that name.
     """
     nodes = list(iter_nodes(roots))
+    common = max(blocks[signature_of(node.path)].per_block for node in nodes)
     own: dict[Hashable, dict[str, Interval]] = {}
+    replicated: dict[Hashable, dict[str, Any]] = {}
     for node in nodes:
         key = signature_of(node.path)
-        if key not in own:
-            own[key] = signal_intervals(
-                blocks[key], node.lambdas, reference_range[key], correlation
-            )
-    common = max(blocks[signature_of(node.path)].per_block for node in nodes)
-    replicated: dict[Hashable, dict[str, Any]] = {}
-    for key in own:
+        if key in own:
+            continue
         table = coarsen(blocks[key].table, common)
         counts = resample_counts(table.values.shape[0])
         replicated[key] = replicate_lambdas(table, counts, reference_range[key], correlation)
+        if blocks[key].per_block == common:  # its own blocks are the common ones
+            own[key] = percentile_intervals(node.lambdas, replicated[key])
+        else:
+            own[key] = signal_intervals(
+                blocks[key], node.lambdas, reference_range[key], correlation
+            )
 
     def base(path: NodePath) -> dict[str, Any]:
         node = by_path[path]

@@ -184,14 +184,10 @@ def block_sums(
 
 def coarsen(table: SumTable, per_block: int) -> SumTable:
     """Runs of ``per_block`` consecutive rows summed into one (the last run may be short)."""
-    values = table.values
-    rows, columns = values.shape
     if per_block <= 1:
         return table
-    blocks = math.ceil(rows / per_block)
-    padded = np.zeros((blocks * per_block, columns), dtype=np.float64)
-    padded[:rows] = values
-    return SumTable(padded.reshape(blocks, per_block, columns).sum(axis=1), table.shift)
+    starts = np.arange(0, table.values.shape[0], per_block)
+    return SumTable(np.add.reduceat(table.values, starts, axis=0), table.shift)
 
 
 @lru_cache(maxsize=32)
