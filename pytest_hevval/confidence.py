@@ -72,7 +72,9 @@ def spec_confidence(
             continue
         table = coarsen(blocks[key].table, common)
         counts = resample_counts(table.values.shape[0])
-        replicated[key] = replicate_lambdas(table, counts, reference_range[key], correlation)
+        replicated[key] = replicate_lambdas(
+            table, counts, reference_range[key] * blocks[key].scale, correlation
+        )
         if blocks[key].per_block == common:  # its own blocks are the common ones
             own[key] = percentile_intervals(node.lambdas, replicated[key])
         else:

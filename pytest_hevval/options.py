@@ -97,7 +97,7 @@ OPTIONS: tuple[Option, ...] = (
     Option(
         "no-intervals",
         "bool",
-        "skip the 95 % bootstrap intervals of λ and Φ (gates on a bound then judge the value)",
+        "skip the bootstrap intervals of λ and Φ (a min_phi bound is then judged on Φ)",
         False,
     ),
 )

@@ -102,7 +102,8 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
     lines: list[str] = []
     for result in results:
         verdict = "PASS" if result.passed else "FAIL"
-        gate = "" if result.min_phi is None else f" ({_phi_gate(result)})"
+        on = "" if result.min_phi_on == "value" else f" on the {result.min_phi_on} bound"
+        gate = "" if result.min_phi is None else f" (min {result.min_phi:g}{on})"
         lines.append(f"{result.name}: Φ = {result.phi_text}{gate} {verdict}  [{result.spec}]")
         names = list(result.signals[0].lambdas) if result.signals else []
         if details:

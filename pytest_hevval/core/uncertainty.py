@@ -148,6 +148,9 @@ class BlockSums:
     fine: int
     n: int
     rho: float
+    #: The exact power of two the sums were taken at (1 unless the values' squares would
+    #: overflow or underflow); λ are scale-free, so a range is scaled alike.
+    scale: float = 1.0
 
     @property
     def per_block(self) -> int:
@@ -177,9 +180,26 @@ def block_sums(
     if labels is None:
         labels = fine_labels(n, fine)
     rows = math.ceil(n / fine)
+    scale = _power_of_two_scale(ref, sim)
+    if scale != 1.0:
+        ref = np.multiply(ref, scale, dtype=np.float64)
+        sim = np.multiply(sim, scale, dtype=np.float64)
     table = labelled_table(ref, sim, labels, rows, compiled=compiled)
     residual = np.subtract(ref, sim, dtype=np.float64)
-    return BlockSums(table, fine, n, lag1_autocorrelation(residual))
+    return BlockSums(table, fine, n, lag1_autocorrelation(residual), scale)
+
+
+#: Values beyond these magnitudes are summed at a power-of-two scale: their squares would
+#: overflow (or lose all precision) otherwise.
+_TOO_BIG = 2.0**400
+_TOO_SMALL = 2.0**-400
+
+
+def _power_of_two_scale(ref: FloatArray, sim: FloatArray) -> float:
+    peak = max(float(np.max(np.abs(ref), initial=0.0)), float(np.max(np.abs(sim), initial=0.0)))
+    if not math.isfinite(peak) or (_TOO_SMALL <= peak <= _TOO_BIG) or peak == 0.0:
+        return 1.0
+    return math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
 
 
 def coarsen(table: SumTable, per_block: int) -> SumTable:
@@ -231,7 +251,10 @@ def signal_intervals(
     """λ1–λ6 of one signal with their intervals, from its own block length by default."""
     table = coarsen(blocks.table, blocks.per_block if per_block is None else per_block)
     replicates = replicate_lambdas(
-        table, resample_counts(table.values.shape[0]), reference_range, correlation
+        table,
+        resample_counts(table.values.shape[0]),
+        reference_range * blocks.scale,
+        correlation,
     )
     return percentile_intervals(point, replicates)
 
