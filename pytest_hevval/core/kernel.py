@@ -287,6 +287,14 @@ def lag_window(
     return total
 
 
+def quarter_level(module: ModuleType, x: AnyFloatArray, workers: int) -> FloatArray:
+    """Block means by 4 of x (a trailing partial block dropped), in one parallel loop."""
+    _threads(workers, x.shape[0])
+    out = np.empty(x.shape[0] // 4, dtype=np.float64)
+    _launch(module.quarter_level, x, out, KERNEL_CHUNK)
+    return out
+
+
 def interpolate(
     module: ModuleType,
     values: AnyFloatArray,
