@@ -9,10 +9,11 @@ scalars, int64 counts), so each compiles once and its cache holds one entry.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
-from llvmlite import ir
+from llvmlite import ir  # type: ignore[import-untyped]
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
@@ -39,30 +40,33 @@ from .kernel import (
 _FAST = {"reassoc", "contract", "nnan", "nsz"}
 
 
-@intrinsic
-def _fmin(typingctx, a, b):  # type: ignore[no-untyped-def]
+def _minnum(typingctx, a, b):  # type: ignore[no-untyped-def]
     """llvm.minnum: the smaller of two floats, which LLVM vectorises as a reduction (a loop of
     ``min`` or of comparisons it does not)."""
     return _binary_intrinsic("llvm.minnum.f64")
 
 
-@intrinsic
-def _fmax(typingctx, a, b):  # type: ignore[no-untyped-def]
-    """llvm.maxnum: the larger of two floats (see :func:`_fmin`)."""
+def _maxnum(typingctx, a, b):  # type: ignore[no-untyped-def]
+    """llvm.maxnum: the larger of two floats (see :func:`_minnum`)."""
     return _binary_intrinsic("llvm.maxnum.f64")
 
 
-def _binary_intrinsic(name):  # type: ignore[no-untyped-def]
+def _binary_intrinsic(name: str) -> tuple[Any, Any]:
+    """The typing and code of a numba intrinsic calling LLVM's ``name`` on two float64."""
     signature = types.float64(types.float64, types.float64)
 
-    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
         double = ir.DoubleType()
-        function = cgutils.get_or_insert_function(
+        function = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
             builder.module, ir.FunctionType(double, [double, double]), name
         )
         return builder.call(function, args)
 
     return signature, codegen
+
+
+_fmin: Any = intrinsic(_minnum)
+_fmax: Any = intrinsic(_maxnum)
 
 
 @numba.njit(cache=True)
