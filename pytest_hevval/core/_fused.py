@@ -341,20 +341,32 @@ def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):
 
 
 @numba.njit(parallel=True, cache=True)
-def interpolate(values, index, right, offset, step, exact):  # type: ignore[no-untyped-def]
+def interpolate(values, index, offset, step, chunk):  # type: ignore[no-untyped-def]
     """values at the grid points of a plan (data/align.py), as np.interp rounds them.
 
-    Compiled without fast-math: the same operations in the same order as np.interp, so the
-    result is bit-identical to the numpy path.
+    A zero offset marks a grid point that takes its left sample as it is; at any other the
+    right-hand neighbour is index + 1. Compiled without fast-math: the same operations in the
+    same order as np.interp, so the result is bit-identical to the numpy path. Parallel over
+    chunks, so both threads also share the first writes to the fresh column.
     """
     n = index.shape[0]
     out = np.empty(n, dtype=np.float64)
-    for i in numba.prange(n):
-        left = values[index[i]]
-        if exact[i]:
-            out[i] = left
-        else:
-            out[i] = (values[right[i]] - left) / step[i] * offset[i] + left
+    chunks = (n + chunk - 1) // chunk
+    for c in numba.prange(chunks):
+        start = c * chunk
+        stop = min(start + chunk, n)
+        part = out[start:stop]
+        where = index[start:stop]
+        shift = offset[start:stop]
+        width = step[start:stop]
+        for i in range(stop - start):
+            j = where[i]
+            left = values[j]
+            o = shift[i]
+            if o == 0.0:
+                part[i] = left
+            else:
+                part[i] = (values[j + 1] - left) / width[i] * o + left
     return out
 
 

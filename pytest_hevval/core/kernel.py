@@ -59,6 +59,9 @@ KERNEL_CHUNK = 1 << 15
 #: scheduler time slice on a busy machine (measured 8 ms with the load at 5 on 2 cores), more
 #: than the whole loop over a million samples.
 KERNEL_PARALLEL_MIN = 1 << 21
+#: The same for applying an interpolation plan, which costs about 15 times more per sample
+#: than the main pass (most of it the first write to the new column's pages).
+INTERPOLATE_PARALLEL_MIN = 1 << 17
 
 #: Columns of one chunk's row of sums from the compiled main pass. The simulated extremes are
 #: left to the caller, as on the numpy path, which rarely needs them.
@@ -223,9 +226,9 @@ def _launch(function: Any, *arguments: Any) -> Any:
     return result
 
 
-def _threads(workers: int, samples: int) -> None:
+def _threads(workers: int, samples: int, minimum: int = KERNEL_PARALLEL_MIN) -> None:
     numba: Any = importlib.import_module("numba")
-    if samples < KERNEL_PARALLEL_MIN:
+    if samples < minimum:
         workers = 1
     numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
 
@@ -299,15 +302,15 @@ def interpolate(
     module: ModuleType,
     values: AnyFloatArray,
     index: npt.NDArray[np.intp],
-    right: npt.NDArray[np.intp],
     offset: FloatArray,
     step: FloatArray,
-    exact: npt.NDArray[np.bool_],
     workers: int = 2,
 ) -> FloatArray:
     """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
-    _threads(workers, index.shape[0])
-    out: FloatArray = _launch(module.interpolate, values, index, right, offset, step, exact)
+    # A column costs several nanoseconds a sample (the first write to its fresh pages most of
+    # it), so a second thread pays off on far shorter loops than the main pass.
+    _threads(workers, index.shape[0], INTERPOLATE_PARALLEL_MIN)
+    out: FloatArray = _launch(module.interpolate, values, index, offset, step, KERNEL_CHUNK)
     return out
 
 
