@@ -19,11 +19,14 @@ failure to import it (not installed, or built for an older numpy) leaves the num
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib
 import importlib.util
 import os
 import sys
 import threading
+import time
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
@@ -118,14 +121,23 @@ def _load() -> ModuleType | None:
         return _loaded["module"]
 
 
-def _cache_folders() -> list[Path]:
-    here = Path(__file__).resolve().parent
-    folders = [here / "__pycache__"]
-    custom = os.environ.get("NUMBA_CACHE_DIR")
+@functools.lru_cache(maxsize=4)
+def _cache_folders(custom: str | None = None) -> tuple[Path, ...]:
+    """Where numba keeps this module's cache: ``__pycache__`` beside it, or with
+    ``NUMBA_CACHE_DIR`` set, the folder ``<its name>_<SHA-1 of its absolute path>`` there
+    (numba's ``_CacheLocator.get_suitable_cache_subpath``)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    folders = [Path(here) / "__pycache__"]
     if custom:
-        # numba files a module's cache under the module's folder path inside NUMBA_CACHE_DIR.
-        folders.insert(0, Path(custom) / here.relative_to(here.anchor))
-    return folders
+        digest = hashlib.sha1(here.encode()).hexdigest()
+        folders.insert(0, Path(custom) / f"{os.path.basename(here)}_{digest}")
+    return tuple(folders)
+
+
+#: A cold cache is looked at again after this many seconds at the soonest: the look costs a
+#: directory listing, and the engine asks once per signal.
+_COLD_RECHECK_S = 1.0
+_cold_seen: dict[tuple[str, ...], float] = {}
 
 
 def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
@@ -136,11 +148,16 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     """
     if names in _warm_found:
         return True
+    seen = _cold_seen.get(names)
+    if seen is not None and time.monotonic() - seen < _COLD_RECHECK_S:
+        return False
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    for folder in _cache_folders():
+    for folder in _cache_folders(os.environ.get("NUMBA_CACHE_DIR") or None):
         if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
             _warm_found.add(names)
+            _cold_seen.pop(names, None)
             return True
+    _cold_seen[names] = time.monotonic()
     return False
 
 
