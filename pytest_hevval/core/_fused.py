@@ -1,7 +1,8 @@
 """The compiled loops behind :mod:`pytest_hevval.core.kernel` (imports numba; load it lazily).
 
-Each parallel loop writes one row of partial results per chunk; the caller combines the rows
-in chunk order, so a result depends on the chunk size but not on the thread count. Every
+Each loop covers a range of chunks and writes one row of partial results per chunk, without
+holding the GIL; the caller runs contiguous ranges on its threads and combines the rows in
+chunk order, so a result depends on the chunk size but not on the thread count. Every
 function is called with one set of argument types (C-contiguous float64 arrays, float64
 scalars, int64 counts), so each compiles once and its cache holds one entry.
 """
@@ -22,7 +23,6 @@ from .kernel import (
     CROSS,
     ERROR_M2,
     ERROR_SUM,
-    FIELDS,
     REF_MAX,
     REF_MIN,
     REF_SQ,
@@ -98,13 +98,13 @@ def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[n
         top[h] = ((out[4 * h] + out[4 * h + 1]) + (out[4 * h + 2] + out[4 * h + 3])) * 0.25
 
 
-@numba.njit(parallel=True, cache=True)
-def quarter_level(x, out, chunk):  # type: ignore[no-untyped-def]
-    """Block means by 4 of x into out (len(x) // 4), as lag._quarter_level sums them."""
+@numba.njit(cache=True, nogil=True)
+def quarter_level(x, out, chunk, first, last):  # type: ignore[no-untyped-def]
+    """Block means by 4 of x into out (len(x) // 4) for chunks [first, last) of ``chunk``
+    samples, as lag._quarter_level sums them."""
     quarters = out.shape[0]
     per = chunk // 4
-    chunks = (quarters + per - 1) // per
-    for c in numba.prange(chunks):
+    for c in range(first, last):
         q0 = c * per
         q1 = min(q0 + per, quarters)
         xs = x[4 * q0 : 4 * q1]
@@ -208,24 +208,21 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     row[SIGN_MATCHES] = matches
 
 
-@numba.njit(parallel=True, cache=True)
-def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore[no-untyped-def]
-    """One row of sums per chunk of ``chunk`` samples (a multiple of 16).
+@numba.njit(cache=True, nogil=True)
+def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, rows, first, last):  # type: ignore[no-untyped-def]
+    """Rows of sums for chunks [first, last) of ``chunk`` samples (a multiple of 16).
 
     The block means by 4 and 16 are written into ref4 … sim16 unless they are empty.
     """
     n = ref.shape[0]
-    chunks = (n + chunk - 1) // chunk
-    rows = np.empty((chunks, FIELDS), dtype=np.float64)
     levels = ref4.shape[0] > 0
-    for c in numba.prange(chunks):
+    for c in range(first, last):
         start = c * chunk
         stop = min(start + chunk, n)
         _chunk_row(ref, sim, start, stop, scale, rows[c])
         if levels:
             _quarter_means(ref, start, stop, scale, ref4, ref16)
             _quarter_means(sim, start, stop, scale, sim4, sim16)
-    return rows
 
 
 #: Samples per tile of the lag window: both centred tiles stay in a 32 KiB L1 cache, which
@@ -327,47 +324,37 @@ def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ign
         row[count] += energy
 
 
-@numba.njit(parallel=True, cache=True)
-def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):  # type: ignore[no-untyped-def]
-    """Per chunk of the window [core_lo, core_hi): C(lo + k) for k < count, then the energy
-    Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""
-    chunks = (core_hi - core_lo + chunk - 1) // chunk
-    rows = np.empty((chunks, count + 1), dtype=np.float64)
-    for c in numba.prange(chunks):
+@numba.njit(cache=True, nogil=True)
+def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk, rows, first, last):  # type: ignore[no-untyped-def]
+    """For chunks [first, last) of the window [core_lo, core_hi): C(lo + k) for k < count,
+    then the energy Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""
+    for c in range(first, last):
         a = core_lo + c * chunk
         b = min(a + chunk, core_hi)
         _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, rows[c])
-    return rows
 
 
-@numba.njit(parallel=True, cache=True)
-def interpolate(values, index, offset, step, chunk):  # type: ignore[no-untyped-def]
-    """values at the grid points of a plan (data/align.py), as np.interp rounds them.
+@numba.njit(cache=True, nogil=True)
+def interpolate(values, index, offset, step, out, start, stop):  # type: ignore[no-untyped-def]
+    """values at the grid points [start, stop) of a plan (data/align.py), as np.interp rounds
+    them, written into out.
 
     A zero offset marks a grid point that takes its left sample as it is; at any other the
     right-hand neighbour is index + 1. Compiled without fast-math: the same operations in the
-    same order as np.interp, so the result is bit-identical to the numpy path. Parallel over
-    chunks, so both threads also share the first writes to the fresh column.
+    same order as np.interp, so the result is bit-identical to the numpy path.
     """
-    n = index.shape[0]
-    out = np.empty(n, dtype=np.float64)
-    chunks = (n + chunk - 1) // chunk
-    for c in numba.prange(chunks):
-        start = c * chunk
-        stop = min(start + chunk, n)
-        part = out[start:stop]
-        where = index[start:stop]
-        shift = offset[start:stop]
-        width = step[start:stop]
-        for i in range(stop - start):
-            j = where[i]
-            left = values[j]
-            o = shift[i]
-            if o == 0.0:
-                part[i] = left
-            else:
-                part[i] = (values[j + 1] - left) / width[i] * o + left
-    return out
+    part = out[start:stop]
+    where = index[start:stop]
+    shift = offset[start:stop]
+    width = step[start:stop]
+    for i in range(stop - start):
+        j = where[i]
+        left = values[j]
+        o = shift[i]
+        if o == 0.0:
+            part[i] = left
+        else:
+            part[i] = (values[j + 1] - left) / width[i] * o + left
 
 
 # -- sums per group (windows, phases, conditions, region cells) ---------------------------

@@ -3,9 +3,11 @@
 The numpy code in :mod:`~pytest_hevval.core.characteristics` and :mod:`~pytest_hevval.core.lag`
 is the reference. With the ``fast`` extra (numba) installed, the main pass (the sums behind
 λ1–λ6, the reference's extremes, the λ2 sign count and the first pyramid levels), the exact lag
-window and the interpolation plans of alignment run as compiled loops instead, parallel over
-chunks and combined in chunk order, so a result is the same for any thread count and agrees
-with numpy to rounding.
+window and the interpolation plans of alignment run as compiled loops instead. They release
+the GIL and cover ranges of chunks, which long records spread over threads; the per-chunk
+results are combined in chunk order, so a result is the same for any thread count and agrees
+with numpy to rounding. Signals scored side by side on the engine's threads run side by side
+in the kernel too.
 
 Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
 kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
@@ -23,10 +25,12 @@ import functools
 import hashlib
 import importlib
 import importlib.util
+import itertools
 import os
 import sys
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
@@ -58,7 +62,7 @@ KERNEL_MIN_SAMPLES = 1 << 26
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
-#: Shorter loops run on the calling thread alone. Waking numba's second thread costs up to a
+#: Shorter loops run on the calling thread alone. Waking a second thread costs up to a
 #: scheduler time slice on a busy machine (measured 8 ms with the load at 5 on 2 cores), more
 #: than the whole loop over a million samples.
 KERNEL_PARALLEL_MIN = 1 << 21
@@ -225,29 +229,45 @@ def describe() -> str:
     )
 
 
-# numba's own "workqueue" threading layer (used where neither OpenMP nor TBB is found) must not
-# launch parallel loops from two threads at once, and the engine scores signals on two.
-_launch_lock = threading.Lock()
-_concurrent_launches = threading.Event()
+_pool_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
 
 
-def _launch(function: Any, *arguments: Any) -> Any:
-    """Call a parallel compiled loop, one at a time unless the threading layer allows more."""
-    if _concurrent_launches.is_set():
-        return function(*arguments)
-    with _launch_lock:
-        result = function(*arguments)
-        numba: Any = importlib.import_module("numba")
-        if numba.threading_layer() != "workqueue":
-            _concurrent_launches.set()
-    return result
+def _helpers() -> ThreadPoolExecutor:
+    global _pool
+    with _pool_lock:
+        if _pool is None:
+            _pool = ThreadPoolExecutor(
+                max_workers=max(1, (os.cpu_count() or 2) - 1), thread_name_prefix="hevval-kernel"
+            )
+        return _pool
 
 
-def _threads(workers: int, samples: int, minimum: int = KERNEL_PARALLEL_MIN) -> None:
-    numba: Any = importlib.import_module("numba")
-    if samples < minimum:
-        workers = 1
-    numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
+def _spread(
+    function: Any, chunks: int, workers: int, samples: int, minimum: int, *arguments: Any
+) -> None:
+    """Run ``function(*arguments, first, last)`` over the chunks [0, chunks).
+
+    The compiled loops release the GIL, so contiguous ranges of chunks run side by side: the
+    calling thread takes the first and helper threads the others. Shorter loops than
+    ``minimum`` samples stay on the calling thread, where waking a helper would cost more than
+    the loop. Each chunk's row is computed alike on any thread, so the result does not depend
+    on the thread count.
+    """
+    parts = max(1, min(workers, chunks)) if samples >= minimum else 1
+    bounds = [chunks * i // parts for i in range(parts + 1)]
+    if parts == 1:
+        function(*arguments, 0, chunks)
+        return
+    pool = _helpers()
+    spans = list(itertools.pairwise(bounds))
+    run = functools.partial(function, *arguments)
+    pending = [pool.submit(run, a, b) for a, b in spans[1:]]
+    try:
+        run(*spans[0])
+    finally:
+        for future in pending:
+            future.result()
 
 
 def accepts(*arrays: AnyFloatArray) -> bool:
@@ -264,11 +284,26 @@ def main_pass(
     levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
 ) -> FloatArray:
     """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
-    _threads(workers, ref.shape[0])
+    n = ref.shape[0]
+    chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     empty = np.empty(0, dtype=np.float64)
     ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
-    rows: FloatArray = _launch(
-        module.main_pass, ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
+    rows = np.empty((chunks, FIELDS), dtype=np.float64)
+    _spread(
+        module.main_pass,
+        chunks,
+        workers,
+        n,
+        KERNEL_PARALLEL_MIN,
+        ref,
+        sim,
+        float(scale),
+        KERNEL_CHUNK,
+        ref4,
+        sim4,
+        ref16,
+        sim16,
+        rows,
     )
     return rows
 
@@ -287,9 +322,15 @@ def lag_window(
 ) -> FloatArray:
     """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
     per-chunk rows summed in chunk order."""
-    _threads(workers, window[1] - window[0])
-    rows: FloatArray = _launch(
+    width = window[1] - window[0]
+    chunks = (width + KERNEL_CHUNK - 1) // KERNEL_CHUNK
+    rows = np.empty((chunks, count + 1), dtype=np.float64)
+    _spread(
         module.lag_window,
+        chunks,
+        workers,
+        width,
+        KERNEL_PARALLEL_MIN,
         r,
         s,
         int(lo),
@@ -300,6 +341,7 @@ def lag_window(
         int(window[0]),
         int(window[1]),
         KERNEL_CHUNK,
+        rows,
     )
     total = np.zeros(count + 1, dtype=np.float64)
     for row in rows:
@@ -308,10 +350,13 @@ def lag_window(
 
 
 def quarter_level(module: ModuleType, x: AnyFloatArray, workers: int) -> FloatArray:
-    """Block means by 4 of x (a trailing partial block dropped), in one parallel loop."""
-    _threads(workers, x.shape[0])
+    """Block means by 4 of x (a trailing partial block dropped), on ``workers`` threads."""
     out = np.empty(x.shape[0] // 4, dtype=np.float64)
-    _launch(module.quarter_level, x, out, KERNEL_CHUNK)
+    per = KERNEL_CHUNK // 4
+    chunks = (out.shape[0] + per - 1) // per
+    _spread(
+        module.quarter_level, chunks, workers, x.shape[0], KERNEL_PARALLEL_MIN, x, out, KERNEL_CHUNK
+    )
     return out
 
 
@@ -323,11 +368,18 @@ def interpolate(
     step: FloatArray,
     workers: int = 2,
 ) -> FloatArray:
-    """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
+    """One column through an interpolation plan: np.interp's arithmetic, compiled."""
+    n = index.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
+    bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
+
+    def run(first: int, last: int) -> None:
+        module.interpolate(values, index, offset, step, out, int(bounds[first]), int(bounds[last]))
+
     # A column costs several nanoseconds a sample (the first write to its fresh pages most of
     # it), so a second thread pays off on far shorter loops than the main pass.
-    _threads(workers, index.shape[0], INTERPOLATE_PARALLEL_MIN)
-    out: FloatArray = _launch(module.interpolate, values, index, offset, step, KERNEL_CHUNK)
+    _spread(run, chunks, workers, n, INTERPOLATE_PARALLEL_MIN)
     return out
 
 
