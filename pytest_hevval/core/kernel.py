@@ -165,7 +165,9 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     return False
 
 
+@functools.lru_cache(maxsize=1)
 def _numba_installed() -> bool:
+    # Asked once per process: the look-up stats the import path, and the engine asks per signal.
     return importlib.util.find_spec("numba") is not None
 
 
