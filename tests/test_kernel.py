@@ -128,8 +128,8 @@ def test_kernel_reports_non_finite_samples(
 @pytest.mark.parametrize("n", [1_000_003, 2_300_017])
 def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
     """The compiled pass's sums agree with the numpy pass to 1e-12, its extremes and sign
-    count exactly, and its pyramid levels (block means by 4 and 16, and the next levels of the
-    lag search) bit for bit, whatever the thread count."""
+    count exactly, and its pyramid levels (block means by 4, 16 and 64, and the next level of
+    the lag search) bit for bit, whatever the thread count."""
     from pytest_hevval.core import characteristics as core
     from pytest_hevval.core import lag
 
@@ -147,7 +147,9 @@ def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
         patch.setenv(kernel.KERNEL_ENV, "numpy")
         numpy_levels = levels()
         expected = core._all_sums(reference, simulated, 1.0, 2, numpy_levels)
-        numpy_next = lag._quarter_level(numpy_levels[1][0], 2)
+        # The main pass's third level is the lag search's next level of the second.
+        np.testing.assert_array_equal(numpy_levels[2][0], lag._quarter_level(numpy_levels[1][0], 1))
+        numpy_next = lag._quarter_level(numpy_levels[2][0], 2)
         for workers in (1, 2):
             patch.setenv(kernel.KERNEL_ENV, "numba")
             compiled_levels = levels()
@@ -156,7 +158,7 @@ def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
                 np.testing.assert_array_equal(a, c)
                 np.testing.assert_array_equal(b, d)
             np.testing.assert_array_equal(
-                lag._quarter_level(compiled_levels[1][0], workers), numpy_next
+                lag._quarter_level(compiled_levels[2][0], workers), numpy_next
             )
             assert (got.ref_min, got.ref_max) == (reference.min(), reference.max())
             assert (got.n, got.sign_matches) == (expected.n, expected.sign_matches)

@@ -70,8 +70,9 @@ _fmax: Any = intrinsic(_maxnum)
 
 
 @numba.njit(cache=True)
-def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[no-untyped-def]
-    """Block means by 4 and 16 of x[start:stop]·scale, summed in the numpy path's order.
+def _quarter_means(x, start, stop, scale, quarter, sixteenth, sixty_fourth):  # type: ignore[no-untyped-def]
+    """Block means by 4, 16 and 64 of x[start:stop]·scale, summed in the numpy path's order
+    (``start`` is a multiple of 64).
 
     Compiled without reassociation: ((a + b) + (c + d))·0.25 here is bit-identical to the
     strided pairwise additions of characteristics._quarter_means. Slice views indexed from zero
@@ -96,6 +97,11 @@ def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[n
     top = sixteenth[h0 : h0 + sixteenths]
     for h in range(sixteenths):
         top[h] = ((out[4 * h] + out[4 * h + 1]) + (out[4 * h + 2] + out[4 * h + 3])) * 0.25
+    g0 = start // 64
+    sixty_fourths = sixteenths // 4
+    coarse = sixty_fourth[g0 : g0 + sixty_fourths]
+    for g in range(sixty_fourths):
+        coarse[g] = ((top[4 * g] + top[4 * g + 1]) + (top[4 * g + 2] + top[4 * g + 3])) * 0.25
 
 
 @numba.njit(cache=True, nogil=True)
@@ -209,10 +215,10 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
 
 
 @numba.njit(cache=True, nogil=True)
-def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, rows, first, last):  # type: ignore[no-untyped-def]
-    """Rows of sums for chunks [first, last) of ``chunk`` samples (a multiple of 16).
+def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, ref64, sim64, rows, first, last):  # type: ignore[no-untyped-def]
+    """Rows of sums for chunks [first, last) of ``chunk`` samples (a multiple of 64).
 
-    The block means by 4 and 16 are written into ref4 … sim16 unless they are empty.
+    The block means by 4, 16 and 64 are written into ref4 … sim64 unless they are empty.
     """
     n = ref.shape[0]
     levels = ref4.shape[0] > 0
@@ -221,8 +227,8 @@ def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, rows, first, las
         stop = min(start + chunk, n)
         _chunk_row(ref, sim, start, stop, scale, rows[c])
         if levels:
-            _quarter_means(ref, start, stop, scale, ref4, ref16)
-            _quarter_means(sim, start, stop, scale, sim4, sim16)
+            _quarter_means(ref, start, stop, scale, ref4, ref16, ref64)
+            _quarter_means(sim, start, stop, scale, sim4, sim16, sim64)
 
 
 #: Samples per tile of the lag window. Short tiles let the next tile's loads from memory

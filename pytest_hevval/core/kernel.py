@@ -283,13 +283,14 @@ def main_pass(
     sim: AnyFloatArray,
     scale: float,
     workers: int,
-    levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+    levels: tuple[FloatArray, ...] | None,
 ) -> FloatArray:
-    """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
+    """Rows of per-chunk sums (columns named in ``_fused``), in record order; ``levels`` are
+    the pyramid's (ref, sim) block means by 4, 16 and 64 to fill, flattened."""
     n = ref.shape[0]
     chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     empty = np.empty(0, dtype=np.float64)
-    ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
+    ref4, sim4, ref16, sim16, ref64, sim64 = levels if levels is not None else (empty,) * 6
     rows = np.empty((chunks, FIELDS), dtype=np.float64)
     _spread(
         module.main_pass,
@@ -305,6 +306,8 @@ def main_pass(
         sim4,
         ref16,
         sim16,
+        ref64,
+        sim64,
         rows,
     )
     return rows
