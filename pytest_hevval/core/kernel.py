@@ -55,9 +55,9 @@ KernelPath = Literal["auto", "numpy", "numba"]
 #: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
 KERNEL_ENV = "HEVVAL_KERNEL"
 #: On the auto path with a cold cache, records shorter than this stay on numpy. The compile
-#: (5.4 s, once per environment: it is cached) is then at most a few times what numpy spends
-#: on one such record (1.1 s at 5·10^7 samples, docs/performance.md), never a surprise on
-#: short records.
+#: (2.4–2.6 s, once per environment: it is cached) is then a few times what numpy spends on one
+#: such record (0.5 s at 10^8 samples on two threads, docs/performance.md), never a surprise
+#: on short records.
 KERNEL_MIN_SAMPLES = 1 << 26
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
