@@ -169,6 +169,29 @@ def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
 
 
 @needs_kernel
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_a_forked_child_spreads_a_long_record_over_new_helper_threads() -> None:
+    """A fork copies the helper pool without its threads; the child must make its own."""
+    script = (
+        "import os, numpy as np\n"
+        "from pytest_hevval import signal_characteristics as sc\n"
+        "r = np.random.default_rng(0).normal(size=2_200_000); s = r + 0.1\n"
+        "before = sc(r, s, dt=1.0, workers=2).mae\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    os._exit(0 if sc(r, s, dt=1.0, workers=2).mae == before else 3)\n"
+        "print(os.waitpid(pid, 0)[1])\n"
+    )
+    python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env = {**os.environ, "PYTHONPATH": python_path, "HEVVAL_KERNEL": "numba"}
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "0"
+
+
+@needs_kernel
 def test_the_cache_is_looked_for_where_numba_files_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -233,15 +233,19 @@ def describe() -> str:
 
 _pool_lock = threading.Lock()
 _pool: ThreadPoolExecutor | None = None
+_pool_pid = 0
 
 
 def _helpers() -> ThreadPoolExecutor:
-    global _pool
+    """The kernel's helper threads, made on first use and again in a forked child (a fork
+    copies the pool but not its threads, so work handed to it would never run)."""
+    global _pool, _pool_pid
     with _pool_lock:
-        if _pool is None:
+        if _pool is None or _pool_pid != os.getpid():
             _pool = ThreadPoolExecutor(
                 max_workers=max(1, (os.cpu_count() or 2) - 1), thread_name_prefix="hevval-kernel"
             )
+            _pool_pid = os.getpid()
         return _pool
 
 
