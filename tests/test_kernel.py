@@ -125,6 +125,24 @@ def test_kernel_reports_non_finite_samples(
 
 
 @needs_kernel
+@pytest.mark.parametrize("n", [5_000, 300_001])  # exact FFT lag search; pyramid
+def test_float32_and_strided_input_score_as_their_float64_values_on_the_kernel(
+    n: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(n)
+    reference = (np.cumsum(rng.normal(size=n)) + 20.0).astype(np.float32)
+    simulated = (np.roll(reference, 3) + rng.normal(0.0, 0.2, size=n)).astype(np.float32)
+    double = _on(
+        "numba", monkeypatch, reference.astype(np.float64), simulated.astype(np.float64), dt=0.01
+    )
+    assert _on("numba", monkeypatch, reference, simulated, dt=0.01) == double
+    wide = np.repeat(reference.astype(np.float64), 2)[::2]  # a strided float64 view
+    assert not wide.flags.c_contiguous
+    strided = _on("numba", monkeypatch, wide, simulated.astype(np.float64), dt=0.01)
+    assert strided == double
+
+
+@needs_kernel
 @pytest.mark.parametrize("n", [1_000_003, 2_300_017])
 def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
     """The compiled pass's sums agree with the numpy pass to 1e-12, its extremes and sign

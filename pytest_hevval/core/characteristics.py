@@ -549,6 +549,12 @@ def signal_characteristics(
     """
     ref, sim = _check_inputs(reference, simulated, dt)
     n = int(ref.shape[0])
+    if not kernel.accepts(ref, sim) and kernel.kernel_for(n) is not None:
+        # The kernel takes contiguous float64 only. Promoting float32 (or a strided view) here
+        # keeps the result that of the same values in float64 on this path too, as the numpy
+        # path's per-chunk promotion does, for the price of a float64 copy of each signal.
+        ref = np.ascontiguousarray(ref, dtype=np.float64)
+        sim = np.ascontiguousarray(sim, dtype=np.float64)
     if workers is None:
         import os
 
