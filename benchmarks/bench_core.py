@@ -761,7 +761,7 @@ def _stage_times(
     means = {"ref_mean": sums.ref_sum / n, "sim_mean": sums.sim_sum / n}
     stages: dict[str, Callable[[], object]] = {
         "floor": lambda: floor(reference, simulated),
-        "main pass (λ1–λ6 sums, levels 1–2)": lambda: core._all_sums(
+        "main pass (λ1–λ6 sums, levels 1–3)": lambda: core._all_sums(
             reference, simulated, 1.0, workers, levels
         ),
         "lag search from those levels": lambda: lag_module._search(

@@ -194,11 +194,13 @@ def test_channels_sharing_a_time_base_share_one_interpolation_plan() -> None:
     assert len(aligned.interpolated) == 10
 
 
-def test_an_interpolation_plan_rounds_as_np_interp(kernel_path: str) -> None:
-    """On either path (numpy, or the compiled kernel) a plan gives np.interp's very bits."""
+@pytest.mark.parametrize("n", [20_000, 300_001])  # one chunk on one thread; chunks on two
+def test_an_interpolation_plan_rounds_as_np_interp(kernel_path: str, n: int) -> None:
+    """On either path (numpy, or the compiled kernel) a plan gives np.interp's very bits,
+    also where a time stamp falls on a grid point and beyond either end of the record."""
     rng = np.random.default_rng(5)
-    n = 20_000
     t = np.arange(n) * 0.01 + rng.uniform(-0.002, 0.002, n)  # jitter: off the grid
+    t[5::7] = np.arange(n)[5::7] * 0.01  # some exactly on it
     columns = {f"c{i}": np.cumsum(rng.normal(size=n)) for i in range(3)}
     ref = record("ref.csv", np.arange(n) * 0.01, x=np.zeros(n))
     sim = record("sim.csv", t, **columns)

@@ -99,9 +99,12 @@ def test_kernel_agrees_with_numpy_on_real_data(monkeypatch: pytest.MonkeyPatch) 
 
 
 @needs_kernel
-def test_kernel_is_bit_identical_across_thread_counts(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("n", [700_001, 2_300_007])  # one thread; above KERNEL_PARALLEL_MIN
+def test_kernel_is_bit_identical_across_thread_counts(
+    n: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    assert (n > kernel.KERNEL_PARALLEL_MIN) == (n > 2_000_000)
     rng = np.random.default_rng(3)
-    n = 700_001
     reference = np.cumsum(rng.normal(size=n))
     simulated = reference + rng.normal(size=n)
     one = _on("numba", monkeypatch, reference, simulated, dt=1.0, workers=1)
@@ -119,6 +122,115 @@ def test_kernel_reports_non_finite_samples(
     signals[where][1234] = bad
     with pytest.raises(DegenerateSignalError, match=rf"{where} signal contains NaN or inf.*1234"):
         _on("numba", monkeypatch, signals["reference"], signals["simulated"], dt=1.0)
+
+
+@needs_kernel
+@pytest.mark.parametrize("n", [5_000, 300_001])  # exact FFT lag search; pyramid
+def test_float32_and_strided_input_score_as_their_float64_values_on_the_kernel(
+    n: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(n)
+    reference = (np.cumsum(rng.normal(size=n)) + 20.0).astype(np.float32)
+    simulated = (np.roll(reference, 3) + rng.normal(0.0, 0.2, size=n)).astype(np.float32)
+    double = _on(
+        "numba", monkeypatch, reference.astype(np.float64), simulated.astype(np.float64), dt=0.01
+    )
+    assert _on("numba", monkeypatch, reference, simulated, dt=0.01) == double
+    wide = np.repeat(reference.astype(np.float64), 2)[::2]  # a strided float64 view
+    assert not wide.flags.c_contiguous
+    strided = _on("numba", monkeypatch, wide, simulated.astype(np.float64), dt=0.01)
+    assert strided == double
+
+
+@needs_kernel
+@pytest.mark.parametrize("n", [1_000_003, 2_300_017])
+def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
+    """The compiled pass's sums agree with the numpy pass to 1e-12, its extremes and sign
+    count exactly, and its pyramid levels (block means by 4, 16 and 64, and the next level of
+    the lag search) bit for bit, whatever the thread count."""
+    from pytest_hevval.core import characteristics as core
+    from pytest_hevval.core import lag
+
+    rng = np.random.default_rng(n)
+    reference = np.cumsum(rng.normal(size=n)) + 300.0
+    simulated = reference * 0.99 + rng.normal(0.2, 0.3, size=n)
+    simulated[::5] = np.roll(simulated, 1)[::5]  # flat steps: derivative 0 here and there
+
+    def levels() -> list[tuple[np.ndarray, np.ndarray]]:
+        buffers = core._level_buffers(n, 0.01, 1.0)
+        assert buffers is not None
+        return buffers
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(kernel.KERNEL_ENV, "numpy")
+        numpy_levels = levels()
+        expected = core._all_sums(reference, simulated, 1.0, 2, numpy_levels)
+        # The main pass's third level is the lag search's next level of the second.
+        np.testing.assert_array_equal(numpy_levels[2][0], lag._quarter_level(numpy_levels[1][0], 1))
+        numpy_next = lag._quarter_level(numpy_levels[2][0], 2)
+        for workers in (1, 2):
+            patch.setenv(kernel.KERNEL_ENV, "numba")
+            compiled_levels = levels()
+            got = core._all_sums(reference, simulated, 1.0, workers, compiled_levels)
+            for (a, b), (c, d) in zip(numpy_levels, compiled_levels, strict=True):
+                np.testing.assert_array_equal(a, c)
+                np.testing.assert_array_equal(b, d)
+            np.testing.assert_array_equal(
+                lag._quarter_level(compiled_levels[2][0], workers), numpy_next
+            )
+            assert (got.ref_min, got.ref_max) == (reference.min(), reference.max())
+            assert (got.n, got.sign_matches) == (expected.n, expected.sign_matches)
+            for name in ("abs_error", "sq_error", "ref_sum", "sim_sum", "ref_sq", "sim_sq"):
+                assert getattr(got, name) == pytest.approx(getattr(expected, name), rel=1e-12)
+            assert got.cross == pytest.approx(expected.cross, rel=1e-12)
+            assert got.error_m2 == pytest.approx(expected.error_m2, rel=1e-12)
+
+
+@needs_kernel
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_a_forked_child_spreads_a_long_record_over_new_helper_threads() -> None:
+    """A fork copies the helper pool without its threads; the child must make its own."""
+    script = (
+        "import os, numpy as np\n"
+        "from pytest_hevval import signal_characteristics as sc\n"
+        "r = np.random.default_rng(0).normal(size=2_200_000); s = r + 0.1\n"
+        "before = sc(r, s, dt=1.0, workers=2).mae\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    os._exit(0 if sc(r, s, dt=1.0, workers=2).mae == before else 3)\n"
+        "print(os.waitpid(pid, 0)[1])\n"
+    )
+    python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env = {**os.environ, "PYTHONPATH": python_path, "HEVVAL_KERNEL": "numba"}
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "0"
+
+
+@needs_kernel
+def test_the_cache_is_looked_for_where_numba_files_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from numba.core.caching import _CacheLocator
+
+    from pytest_hevval.core import _fused
+
+    folder = kernel._cache_folders(str(tmp_path))[0]
+    assert folder == tmp_path / _CacheLocator.get_suitable_cache_subpath(_fused.__file__)
+    names = ("main_pass", "lag_window")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(kernel, "_warm_found", set())
+    monkeypatch.setattr(kernel, "_cold_seen", {})
+    monkeypatch.setattr(kernel, "_cache_folders", lambda custom=None: (folder,))
+    assert not kernel.cache_warm(names)
+    folder.mkdir(parents=True)
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    for name in names:
+        (folder / f"_fused.{name}-100.{tag}.nbi").write_bytes(b"")
+    monkeypatch.setattr(kernel, "_COLD_RECHECK_S", 0.0)
+    assert kernel.cache_warm(names)
 
 
 def test_auto_path_keeps_short_records_on_numpy_while_the_cache_is_cold(
@@ -174,23 +286,24 @@ def test_version_names_the_active_path(path: str) -> None:
 
 
 @needs_kernel
-def test_kernel_is_safe_from_several_threads_on_any_threading_layer() -> None:
-    """numba's workqueue layer cannot launch from two threads at once; the engine does."""
+def test_kernel_is_safe_from_several_threads_at_once() -> None:
+    """The engine scores signals on several threads; each may spread a long record over the
+    kernel's helper threads too. Every call gives the same result."""
     script = (
         "import numpy as np\n"
         "from concurrent.futures import ThreadPoolExecutor\n"
         "from pytest_hevval import signal_characteristics as sc\n"
         "r = np.random.default_rng(0).normal(size=2_200_000); s = r + 0.1\n"
         "with ThreadPoolExecutor(4) as pool:\n"
-        "    got = set(pool.map(lambda _: sc(r, s, dt=1.0, workers=2).mae, range(8)))\n"
+        "    got = set(pool.map(lambda w: sc(r, s, dt=1.0, workers=w).as_dict().__repr__(),"
+        " [1, 2] * 4))\n"
         "assert len(got) == 1, got\n"
-        "import numba; print(numba.threading_layer())\n"
+        "print('same')\n"
     )
     python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
     env = {**os.environ, "PYTHONPATH": python_path, "HEVVAL_KERNEL": "numba"}
-    env["NUMBA_THREADING_LAYER"] = "workqueue"
     done = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300
     )
     assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "workqueue"
+    assert done.stdout.strip() == "same"

@@ -1,7 +1,8 @@
 """The compiled loops behind :mod:`pytest_hevval.core.kernel` (imports numba; load it lazily).
 
-Each parallel loop writes one row of partial results per chunk; the caller combines the rows
-in chunk order, so a result depends on the chunk size but not on the thread count. Every
+Each loop covers a range of chunks and writes one row of partial results per chunk, without
+holding the GIL; the caller runs contiguous ranges on its threads and combines the rows in
+chunk order, so a result depends on the chunk size but not on the thread count. Every
 function is called with one set of argument types (C-contiguous float64 arrays, float64
 scalars, int64 counts), so each compiles once and its cache holds one entry.
 """
@@ -9,16 +10,19 @@ scalars, int64 counts), so each compiles once and its cache holds one entry.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numba
 import numpy as np
+from llvmlite import ir  # type: ignore[import-untyped]
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 from .kernel import (
     ABS_ERROR,
     CROSS,
     ERROR_M2,
     ERROR_SUM,
-    FIELDS,
     REF_MAX,
     REF_MIN,
     REF_SQ,
@@ -36,41 +40,105 @@ from .kernel import (
 _FAST = {"reassoc", "contract", "nnan", "nsz"}
 
 
+def _minnum(typingctx, a, b):  # type: ignore[no-untyped-def]
+    """llvm.minnum: the smaller of two floats, which LLVM vectorises as a reduction (a loop of
+    ``min`` or of comparisons it does not)."""
+    return _binary_intrinsic("llvm.minnum.f64")
+
+
+def _maxnum(typingctx, a, b):  # type: ignore[no-untyped-def]
+    """llvm.maxnum: the larger of two floats (see :func:`_minnum`)."""
+    return _binary_intrinsic("llvm.maxnum.f64")
+
+
+def _binary_intrinsic(name: str) -> tuple[Any, Any]:
+    """The typing and code of a numba intrinsic calling LLVM's ``name`` on two float64."""
+    signature = types.float64(types.float64, types.float64)
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        double = ir.DoubleType()
+        function = cgutils.get_or_insert_function(  # type: ignore[no-untyped-call]
+            builder.module, ir.FunctionType(double, [double, double]), name
+        )
+        return builder.call(function, args)
+
+    return signature, codegen
+
+
+_fmin: Any = intrinsic(_minnum)
+_fmax: Any = intrinsic(_maxnum)
+
+
 @numba.njit(cache=True)
-def _quarter_means(x, start, stop, scale, quarter, sixteenth):  # type: ignore[no-untyped-def]
-    """Block means by 4 and 16 of x[start:stop]·scale, summed in the numpy path's order.
+def _quarter_means(x, start, stop, scale, quarter, sixteenth, sixty_fourth):  # type: ignore[no-untyped-def]
+    """Block means by 4, 16 and 64 of x[start:stop]·scale, summed in the numpy path's order
+    (``start`` is a multiple of 64).
 
     Compiled without reassociation: ((a + b) + (c + d))·0.25 here is bit-identical to the
-    strided pairwise additions of characteristics._quarter_means.
+    strided pairwise additions of characteristics._quarter_means. Slice views indexed from zero
+    let LLVM vectorise the loops; x·1.0 is x, so the common unscaled case skips the products.
     """
     q0 = start // 4
     quarters = (stop - start) // 4
-    for q in range(quarters):
-        i = start + 4 * q
-        a = x[i] * scale
-        b = x[i + 1] * scale
-        c = x[i + 2] * scale
-        d = x[i + 3] * scale
-        quarter[q0 + q] = ((a + b) + (c + d)) * 0.25
+    xs = x[start : start + 4 * quarters]
+    out = quarter[q0 : q0 + quarters]
+    if scale == 1.0:
+        for q in range(quarters):
+            out[q] = ((xs[4 * q] + xs[4 * q + 1]) + (xs[4 * q + 2] + xs[4 * q + 3])) * 0.25
+    else:
+        for q in range(quarters):
+            a = xs[4 * q] * scale
+            b = xs[4 * q + 1] * scale
+            c = xs[4 * q + 2] * scale
+            d = xs[4 * q + 3] * scale
+            out[q] = ((a + b) + (c + d)) * 0.25
     h0 = start // 16
-    for h in range(quarters // 4):
-        j = q0 + 4 * h
-        sixteenth[h0 + h] = (
-            (quarter[j] + quarter[j + 1]) + (quarter[j + 2] + quarter[j + 3])
-        ) * 0.25
+    sixteenths = quarters // 4
+    top = sixteenth[h0 : h0 + sixteenths]
+    for h in range(sixteenths):
+        top[h] = ((out[4 * h] + out[4 * h + 1]) + (out[4 * h + 2] + out[4 * h + 3])) * 0.25
+    g0 = start // 64
+    sixty_fourths = sixteenths // 4
+    coarse = sixty_fourth[g0 : g0 + sixty_fourths]
+    for g in range(sixty_fourths):
+        coarse[g] = ((top[4 * g] + top[4 * g + 1]) + (top[4 * g + 2] + top[4 * g + 3])) * 0.25
+
+
+@numba.njit(cache=True, nogil=True)
+def quarter_level(x, out, chunk, first, last):  # type: ignore[no-untyped-def]
+    """Block means by 4 of x into out (len(x) // 4) for chunks [first, last) of ``chunk``
+    samples, as lag._quarter_level sums them."""
+    quarters = out.shape[0]
+    per = chunk // 4
+    for c in range(first, last):
+        q0 = c * per
+        q1 = min(q0 + per, quarters)
+        xs = x[4 * q0 : 4 * q1]
+        part = out[q0:q1]
+        for q in range(q1 - q0):
+            part[q] = ((xs[4 * q] + xs[4 * q + 1]) + (xs[4 * q + 2] + xs[4 * q + 3])) * 0.25
 
 
 @numba.njit(cache=True, fastmath=_FAST)
 def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-def]
-    """The sums of one chunk, in three loops over it while it is in cache.
+    """The sums of one chunk, in one loop over it (two when the error's bias dominates).
 
     Loops index slice views from zero: an index that may be negative makes numba check for
-    wraparound, which stops LLVM from vectorising the loop.
+    wraparound, which stops LLVM from vectorising the loop. The samples with both neighbours
+    in the record carry the λ2 sign comparison in the same loop; the record's first and last
+    sample (derivative 0 on both sides, so they always agree) are added after it.
     """
     n_total = ref.shape[0]
     m = stop - start
-    ref_part = ref[start:stop]
-    sim_part = sim[start:stop]
+    first = max(start, 1)
+    last = max(min(stop, n_total - 1), first)
+    inner = last - first
+    r_part = ref[first:last]
+    s_part = sim[first:last]
+    r_before = ref[first - 1 : last - 1]
+    r_after = ref[first + 1 : last + 1]
+    s_before = sim[first - 1 : last - 1]
+    s_after = sim[first + 1 : last + 1]
     abs_error = 0.0
     sq_error = 0.0
     error_sum = 0.0
@@ -79,9 +147,12 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     ref_sq = 0.0
     sim_sq = 0.0
     cross = 0.0
-    for i in range(m):
-        r = ref_part[i] * scale
-        s = sim_part[i] * scale
+    ref_min = math.inf
+    ref_max = -math.inf
+    matches = 0
+    for i in range(inner):
+        r = r_part[i] * scale
+        s = s_part[i] * scale
         e = r - s
         error_sum += e
         sq_error += e * e
@@ -91,43 +162,43 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
         ref_sq += r * r
         sim_sq += s * s
         cross += r * s
-    # min and max do not vectorise here: a loop of their own costs as much as all the sums
-    # above, so only the reference's (for R) are taken.
-    ref_min = math.inf
-    ref_max = -math.inf
-    for i in range(m):
-        r = ref_part[i] * scale
-        ref_min = min(ref_min, r)
-        ref_max = max(ref_max, r)
+        # Only the reference's extremes (for R): the caller rarely needs the simulation's.
+        ref_min = _fmin(ref_min, r)
+        ref_max = _fmax(ref_max, r)
+        # The sign of a central difference, from comparing the neighbours.
+        a = r_after[i]
+        b = r_before[i]
+        c = s_after[i]
+        d = s_before[i]
+        matches += ((a > b) == (c > d)) & ((a < b) == (c < d))
+    # The record's ends: no sign comparison, they always agree.
+    for i in (0, n_total - 1):
+        if start <= i < stop and not first <= i < last:
+            r = ref[i] * scale
+            s = sim[i] * scale
+            e = r - s
+            error_sum += e
+            sq_error += e * e
+            abs_error += abs(e)
+            ref_sum += r
+            sim_sum += s
+            ref_sq += r * r
+            sim_sq += s * s
+            cross += r * s
+            ref_min = _fmin(ref_min, r)
+            ref_max = _fmax(ref_max, r)
+            matches += 1
     error_mean = error_sum / m
     if error_mean * error_sum <= 0.5 * sq_error:
         # As in the numpy path: Σe² − (Σe)²/m loses at most a bit when spread ≥ bias.
         error_m2 = sq_error - error_mean * error_sum
     else:
         error_m2 = 0.0
+        ref_chunk = ref[start:stop]
+        sim_chunk = sim[start:stop]
         for i in range(m):
-            d = (ref_part[i] * scale - sim_part[i] * scale) - error_mean
+            d = (ref_chunk[i] * scale - sim_chunk[i] * scale) - error_mean
             error_m2 += d * d
-    # Central differences: the first and last sample of the record have derivative 0, and
-    # those endpoints always agree. Comparing the neighbours gives the sign of the difference.
-    first = max(start, 1)
-    last = min(stop, n_total - 1)
-    matches = 0
-    if last > first:
-        r_before = ref[first - 1 : last - 1]
-        r_after = ref[first + 1 : last + 1]
-        s_before = sim[first - 1 : last - 1]
-        s_after = sim[first + 1 : last + 1]
-        for j in range(last - first):
-            a = r_after[j]
-            b = r_before[j]
-            c = s_after[j]
-            d = s_before[j]
-            matches += ((a > b) == (c > d)) & ((a < b) == (c < d))
-    if start == 0:
-        matches += 1
-    if stop == n_total and n_total > 1:
-        matches += 1
     row[N] = m
     row[ABS_ERROR] = abs_error
     row[SQ_ERROR] = sq_error
@@ -143,98 +214,154 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
     row[SIGN_MATCHES] = matches
 
 
-@numba.njit(parallel=True, cache=True)
-def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16):  # type: ignore[no-untyped-def]
-    """One row of sums per chunk of ``chunk`` samples (a multiple of 16).
+@numba.njit(cache=True, nogil=True)
+def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, ref64, sim64, rows, first, last):  # type: ignore[no-untyped-def]
+    """Rows of sums for chunks [first, last) of ``chunk`` samples (a multiple of 64).
 
-    The block means by 4 and 16 are written into ref4 … sim16 unless they are empty.
+    The block means by 4, 16 and 64 are written into ref4 … sim64 unless they are empty.
     """
     n = ref.shape[0]
-    chunks = (n + chunk - 1) // chunk
-    rows = np.empty((chunks, FIELDS), dtype=np.float64)
     levels = ref4.shape[0] > 0
-    for c in numba.prange(chunks):
+    for c in range(first, last):
         start = c * chunk
         stop = min(start + chunk, n)
         _chunk_row(ref, sim, start, stop, scale, rows[c])
         if levels:
-            _quarter_means(ref, start, stop, scale, ref4, ref16)
-            _quarter_means(sim, start, stop, scale, sim4, sim16)
-    return rows
+            _quarter_means(ref, start, stop, scale, ref4, ref16, ref64)
+            _quarter_means(sim, start, stop, scale, sim4, sim16, sim64)
+
+
+#: Samples per tile of the lag window. Short tiles let the next tile's loads from memory
+#: overlap the sweeps over this one: on 10^8 samples the whole window took 120 ms on one
+#: thread with tiles of 128, against 126–138 ms with 256–512 and 173 ms with 1,024
+#: (13 lags; 2^15 samples at once measured 1.3 ns a sample in cache, 1,024 1.0 ns).
+_TILE = 128
 
 
 @numba.njit(cache=True, fastmath=_FAST)
 def _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, row):  # type: ignore[no-untyped-def]
     width = b - a
-    s_part = s[a:b]
-    r_part = r[a + lo : b + lo + count - 1]
-    centred_s = np.empty(width, dtype=np.float64)
-    centred_r = np.empty(width + count - 1, dtype=np.float64)
-    for j in range(width):
-        centred_s[j] = (s_part[j] - s_mean) * scale
-    for j in range(width + count - 1):
-        centred_r[j] = (r_part[j] - r_mean) * scale
-    # Four lags per sweep: each centred simulated sample is loaded once for all four.
-    k = 0
-    while k + 4 <= count:
-        t0 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        t3 = 0.0
-        shifted = centred_r[k:]
-        for j in range(width):
-            x = centred_s[j]
-            t0 += shifted[j] * x
-            t1 += shifted[j + 1] * x
-            t2 += shifted[j + 2] * x
-            t3 += shifted[j + 3] * x
-        row[k] = t0
-        row[k + 1] = t1
-        row[k + 2] = t2
-        row[k + 3] = t3
-        k += 4
-    while k < count:
-        total = 0.0
-        shifted = centred_r[k:]
-        for j in range(width):
-            total += shifted[j] * centred_s[j]
-        row[k] = total
-        k += 1
-    energy = 0.0
-    for j in range(width):
-        energy += centred_r[j] * centred_r[j]
-    row[count] = energy
+    centred_s = np.empty(_TILE, dtype=np.float64)
+    centred_r = np.empty(_TILE + count - 1, dtype=np.float64)
+    for k in range(count + 1):
+        row[k] = 0.0
+    for t in range(0, width, _TILE):
+        w = min(_TILE, width - t)
+        s_part = s[a + t : a + t + w]
+        r_part = r[a + t + lo : a + t + w + lo + count - 1]
+        for j in range(w):
+            centred_s[j] = (s_part[j] - s_mean) * scale
+        for j in range(w + count - 1):
+            centred_r[j] = (r_part[j] - r_mean) * scale
+        # Eight, then four lags per sweep: each centred simulated sample is loaded once for
+        # all of them, and the lagged loads hit L1.
+        k = 0
+        energy = 0.0
+        if count >= 8:
+            # The first sweep also takes the reference energy of lag lo (its samples are
+            # the ones it loads for t0).
+            t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = 0.0
+            for j in range(w):
+                x = centred_s[j]
+                y = centred_r[j]
+                energy += y * y
+                t0 += y * x
+                t1 += centred_r[j + 1] * x
+                t2 += centred_r[j + 2] * x
+                t3 += centred_r[j + 3] * x
+                t4 += centred_r[j + 4] * x
+                t5 += centred_r[j + 5] * x
+                t6 += centred_r[j + 6] * x
+                t7 += centred_r[j + 7] * x
+            row[0] += t0
+            row[1] += t1
+            row[2] += t2
+            row[3] += t3
+            row[4] += t4
+            row[5] += t5
+            row[6] += t6
+            row[7] += t7
+            k = 8
+        else:
+            for j in range(w):
+                energy += centred_r[j] * centred_r[j]
+        while k + 8 <= count:
+            t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = 0.0
+            shifted = centred_r[k:]
+            for j in range(w):
+                x = centred_s[j]
+                t0 += shifted[j] * x
+                t1 += shifted[j + 1] * x
+                t2 += shifted[j + 2] * x
+                t3 += shifted[j + 3] * x
+                t4 += shifted[j + 4] * x
+                t5 += shifted[j + 5] * x
+                t6 += shifted[j + 6] * x
+                t7 += shifted[j + 7] * x
+            row[k] += t0
+            row[k + 1] += t1
+            row[k + 2] += t2
+            row[k + 3] += t3
+            row[k + 4] += t4
+            row[k + 5] += t5
+            row[k + 6] += t6
+            row[k + 7] += t7
+            k += 8
+        while k + 4 <= count:
+            t0 = t1 = t2 = t3 = 0.0
+            shifted = centred_r[k:]
+            for j in range(w):
+                x = centred_s[j]
+                t0 += shifted[j] * x
+                t1 += shifted[j + 1] * x
+                t2 += shifted[j + 2] * x
+                t3 += shifted[j + 3] * x
+            row[k] += t0
+            row[k + 1] += t1
+            row[k + 2] += t2
+            row[k + 3] += t3
+            k += 4
+        while k < count:
+            total = 0.0
+            shifted = centred_r[k:]
+            for j in range(w):
+                total += shifted[j] * centred_s[j]
+            row[k] += total
+            k += 1
+        row[count] += energy
 
 
-@numba.njit(parallel=True, cache=True)
-def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk):  # type: ignore[no-untyped-def]
-    """Per chunk of the window [core_lo, core_hi): C(lo + k) for k < count, then the energy
-    Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""
-    chunks = (core_hi - core_lo + chunk - 1) // chunk
-    rows = np.empty((chunks, count + 1), dtype=np.float64)
-    for c in numba.prange(chunks):
+@numba.njit(cache=True, nogil=True)
+def lag_window(r, s, lo, count, r_mean, s_mean, scale, core_lo, core_hi, chunk, rows, first, last):  # type: ignore[no-untyped-def]
+    """For chunks [first, last) of the window [core_lo, core_hi): C(lo + k) for k < count,
+    then the energy Σ ((r[j] − μ)·scale)² over the chunk shifted by ``lo``."""
+    for c in range(first, last):
         a = core_lo + c * chunk
         b = min(a + chunk, core_hi)
         _window_row(r, s, a, b, lo, count, r_mean, s_mean, scale, rows[c])
-    return rows
 
 
-@numba.njit(parallel=True, cache=True)
-def interpolate(values, index, right, offset, step, exact):  # type: ignore[no-untyped-def]
-    """values at the grid points of a plan (data/align.py), as np.interp rounds them.
+@numba.njit(cache=True, nogil=True)
+def interpolate(values, index, offset, step, out, start, stop):  # type: ignore[no-untyped-def]
+    """values at the grid points [start, stop) of a plan (data/align.py), as np.interp rounds
+    them, written into out.
 
-    Compiled without fast-math: the same operations in the same order as np.interp, so the
-    result is bit-identical to the numpy path.
+    A zero offset marks a grid point that takes its left sample as it is; at any other the
+    right-hand neighbour is index + 1. Compiled without fast-math: the same operations in the
+    same order as np.interp, so the result is bit-identical to the numpy path.
     """
-    n = index.shape[0]
-    out = np.empty(n, dtype=np.float64)
-    for i in numba.prange(n):
-        left = values[index[i]]
-        if exact[i]:
-            out[i] = left
+    part = out[start:stop]
+    where = index[start:stop]
+    shift = offset[start:stop]
+    width = step[start:stop]
+    for i in range(stop - start):
+        j = where[i]
+        left = values[j]
+        o = shift[i]
+        if o == 0.0:
+            part[i] = left
         else:
-            out[i] = (values[right[i]] - left) / step[i] * offset[i] + left
-    return out
+            part[i] = (values[j + 1] - left) / width[i] * o + left
 
 
 # -- sums per group (windows, phases, conditions, region cells) ---------------------------

@@ -274,7 +274,7 @@ def _derivative_key(
     return np.subtract(up.view(np.int8), down.view(np.int8), out=out)
 
 
-# Pyramid levels made by the main pass: [(ref, sim) block means by 4, (ref, sim) by 16].
+# Pyramid levels made by the main pass: [(ref, sim) block means by 4, by 16, by 64].
 _Levels = list[tuple[FloatArray, FloatArray]]
 
 _add = np.add.reduce
@@ -333,10 +333,10 @@ def _chunk_sums(
     out.ref_min = float(_min(r))
     out.ref_max = float(_max(r))
     if levels is not None:
-        # The block means by 4 and 16 of the lag pyramid come from the chunk while it is in
-        # cache; the sum of the first (×4, exact) is the chunk's sum. Chunks start on multiples
-        # of 16.
-        (r4, s4), (r16, s16) = levels
+        # The block means by 4, 16 and 64 of the lag pyramid come from the chunk while it is
+        # in cache; the sum of the first (×4, exact) is the chunk's sum. Chunks start on
+        # multiples of 64.
+        (r4, s4), (r16, s16), (r64, s64) = levels
         q0 = start // 4
         q1 = q0 + m // 4
         whole = (m // 4) * 4
@@ -348,6 +348,10 @@ def _chunk_sums(
         h1 = h0 + (q1 - q0) // 4
         _quarter_means(rq[: (h1 - h0) * 4], r16[h0:h1], scratch.error)
         _quarter_means(sq[: (h1 - h0) * 4], s16[h0:h1], scratch.error)
+        g0 = start // 64
+        g1 = g0 + (h1 - h0) // 4
+        _quarter_means(r16[h0 : h0 + (g1 - g0) * 4], r64[g0:g1], scratch.error)
+        _quarter_means(s16[h0 : h0 + (g1 - g0) * 4], s64[g0:g1], scratch.error)
     else:
         out.ref_sum = float(_add(r))
         out.sim_sum = float(_add(s))
@@ -375,7 +379,7 @@ def _all_sums(
     n = ref.shape[0]
     compiled = kernel.kernel_for(n) if kernel.accepts(ref, sim) else None
     if compiled is not None:
-        flat = None if levels is None else (levels[0][0], levels[0][1], levels[1][0], levels[1][1])
+        flat = None if levels is None else tuple(x for pair in levels for x in pair)
         return _sums_from_rows(kernel.main_pass(compiled, ref, sim, scale, workers, flat))
     convert = scale != 1.0 or ref.dtype != np.float64 or sim.dtype != np.float64
     if n <= _SMALL:
@@ -445,7 +449,7 @@ def _check_inputs(
 
 
 def _level_buffers(n: int, dt: float, max_lag_s: float | None) -> _Levels | None:
-    """Storage for the block means by 4 and 16 when the lag search will build a pyramid."""
+    """Storage for the block means by 4, 16 and 64 when the lag search will build a pyramid."""
     if n <= _EXACT_LIMIT:
         return None
     if max_lag_s is not None:
@@ -456,7 +460,8 @@ def _level_buffers(n: int, dt: float, max_lag_s: float | None) -> _Levels | None
             return None
     quarter = (np.empty(n // 4, dtype=np.float64), np.empty(n // 4, dtype=np.float64))
     sixteenth = (np.empty(n // 16, dtype=np.float64), np.empty(n // 16, dtype=np.float64))
-    return [quarter, sixteenth]
+    sixty_fourth = (np.empty(n // 64, dtype=np.float64), np.empty(n // 64, dtype=np.float64))
+    return [quarter, sixteenth, sixty_fourth]
 
 
 def _sim_extremes_needed(sums: _Sums) -> bool:
@@ -544,6 +549,12 @@ def signal_characteristics(
     """
     ref, sim = _check_inputs(reference, simulated, dt)
     n = int(ref.shape[0])
+    if not kernel.accepts(ref, sim) and kernel.kernel_for(n) is not None:
+        # The kernel takes contiguous float64 only. Promoting float32 (or a strided view) here
+        # keeps the result that of the same values in float64 on this path too, as the numpy
+        # path's per-chunk promotion does, for the price of a float64 copy of each signal.
+        ref = np.ascontiguousarray(ref, dtype=np.float64)
+        sim = np.ascontiguousarray(sim, dtype=np.float64)
     if workers is None:
         import os
 

@@ -3,9 +3,11 @@
 The numpy code in :mod:`~pytest_hevval.core.characteristics` and :mod:`~pytest_hevval.core.lag`
 is the reference. With the ``fast`` extra (numba) installed, the main pass (the sums behind
 λ1–λ6, the reference's extremes, the λ2 sign count and the first pyramid levels), the exact lag
-window and the interpolation plans of alignment run as compiled loops instead, parallel over
-chunks and combined in chunk order, so a result is the same for any thread count and agrees
-with numpy to rounding.
+window and the interpolation plans of alignment run as compiled loops instead. They release
+the GIL and cover ranges of chunks, which long records spread over threads; the per-chunk
+results are combined in chunk order, so a result is the same for any thread count and agrees
+with numpy to rounding. Signals scored side by side on the engine's threads run side by side
+in the kernel too.
 
 Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
 kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
@@ -19,11 +21,16 @@ failure to import it (not installed, or built for an older numpy) leaves the num
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib
 import importlib.util
+import itertools
 import os
 import sys
 import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
 from typing import Any, Literal
@@ -48,17 +55,20 @@ KernelPath = Literal["auto", "numpy", "numba"]
 #: Environment variable that forces a path (tests and benchmarks): auto, numpy or numba.
 KERNEL_ENV = "HEVVAL_KERNEL"
 #: On the auto path with a cold cache, records shorter than this stay on numpy. The compile
-#: (5.4 s, once per environment: it is cached) is then at most a few times what numpy spends
-#: on one such record (1.1 s at 5·10^7 samples, docs/performance.md), never a surprise on
-#: short records.
+#: (2.4–2.6 s, once per environment: it is cached) is then a few times what numpy spends on one
+#: such record (0.5 s at 10^8 samples on two threads, docs/performance.md), never a surprise
+#: on short records.
 KERNEL_MIN_SAMPLES = 1 << 26
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
-#: Shorter loops run on the calling thread alone. Waking numba's second thread costs up to a
+#: Shorter loops run on the calling thread alone. Waking a second thread costs up to a
 #: scheduler time slice on a busy machine (measured 8 ms with the load at 5 on 2 cores), more
 #: than the whole loop over a million samples.
 KERNEL_PARALLEL_MIN = 1 << 21
+#: The same for applying an interpolation plan, which costs about 15 times more per sample
+#: than the main pass (most of it the first write to the new column's pages).
+INTERPOLATE_PARALLEL_MIN = 1 << 17
 
 #: Columns of one chunk's row of sums from the compiled main pass. The simulated extremes are
 #: left to the caller, as on the numpy path, which rarely needs them.
@@ -115,14 +125,23 @@ def _load() -> ModuleType | None:
         return _loaded["module"]
 
 
-def _cache_folders() -> list[Path]:
-    here = Path(__file__).resolve().parent
-    folders = [here / "__pycache__"]
-    custom = os.environ.get("NUMBA_CACHE_DIR")
+@functools.lru_cache(maxsize=4)
+def _cache_folders(custom: str | None = None) -> tuple[Path, ...]:
+    """Where numba keeps this module's cache: ``__pycache__`` beside it, or with
+    ``NUMBA_CACHE_DIR`` set, the folder ``<its name>_<SHA-1 of its absolute path>`` there
+    (numba's ``_CacheLocator.get_suitable_cache_subpath``)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    folders = [Path(here) / "__pycache__"]
     if custom:
-        # numba files a module's cache under the module's folder path inside NUMBA_CACHE_DIR.
-        folders.insert(0, Path(custom) / here.relative_to(here.anchor))
-    return folders
+        digest = hashlib.sha1(here.encode()).hexdigest()
+        folders.insert(0, Path(custom) / f"{os.path.basename(here)}_{digest}")
+    return tuple(folders)
+
+
+#: A cold cache is looked at again after this many seconds at the soonest: the look costs a
+#: directory listing, and the engine asks once per signal.
+_COLD_RECHECK_S = 1.0
+_cold_seen: dict[tuple[str, ...], float] = {}
 
 
 def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
@@ -133,15 +152,22 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     """
     if names in _warm_found:
         return True
+    seen = _cold_seen.get(names)
+    if seen is not None and time.monotonic() - seen < _COLD_RECHECK_S:
+        return False
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    for folder in _cache_folders():
+    for folder in _cache_folders(os.environ.get("NUMBA_CACHE_DIR") or None):
         if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
             _warm_found.add(names)
+            _cold_seen.pop(names, None)
             return True
+    _cold_seen[names] = time.monotonic()
     return False
 
 
+@functools.lru_cache(maxsize=1)
 def _numba_installed() -> bool:
+    # Asked once per process: the look-up stats the import path, and the engine asks per signal.
     return importlib.util.find_spec("numba") is not None
 
 
@@ -205,29 +231,49 @@ def describe() -> str:
     )
 
 
-# numba's own "workqueue" threading layer (used where neither OpenMP nor TBB is found) must not
-# launch parallel loops from two threads at once, and the engine scores signals on two.
-_launch_lock = threading.Lock()
-_concurrent_launches = threading.Event()
+_pool_lock = threading.Lock()
+_pool: ThreadPoolExecutor | None = None
+_pool_pid = 0
 
 
-def _launch(function: Any, *arguments: Any) -> Any:
-    """Call a parallel compiled loop, one at a time unless the threading layer allows more."""
-    if _concurrent_launches.is_set():
-        return function(*arguments)
-    with _launch_lock:
-        result = function(*arguments)
-        numba: Any = importlib.import_module("numba")
-        if numba.threading_layer() != "workqueue":
-            _concurrent_launches.set()
-    return result
+def _helpers() -> ThreadPoolExecutor:
+    """The kernel's helper threads, made on first use and again in a forked child (a fork
+    copies the pool but not its threads, so work handed to it would never run)."""
+    global _pool, _pool_pid
+    with _pool_lock:
+        if _pool is None or _pool_pid != os.getpid():
+            _pool = ThreadPoolExecutor(
+                max_workers=max(1, (os.cpu_count() or 2) - 1), thread_name_prefix="hevval-kernel"
+            )
+            _pool_pid = os.getpid()
+        return _pool
 
 
-def _threads(workers: int, samples: int) -> None:
-    numba: Any = importlib.import_module("numba")
-    if samples < KERNEL_PARALLEL_MIN:
-        workers = 1
-    numba.set_num_threads(max(1, min(workers, numba.config.NUMBA_NUM_THREADS)))
+def _spread(
+    function: Any, chunks: int, workers: int, samples: int, minimum: int, *arguments: Any
+) -> None:
+    """Run ``function(*arguments, first, last)`` over the chunks [0, chunks).
+
+    The compiled loops release the GIL, so contiguous ranges of chunks run side by side: the
+    calling thread takes the first and helper threads the others. Shorter loops than
+    ``minimum`` samples stay on the calling thread, where waking a helper would cost more than
+    the loop. Each chunk's row is computed alike on any thread, so the result does not depend
+    on the thread count.
+    """
+    parts = max(1, min(workers, chunks)) if samples >= minimum else 1
+    bounds = [chunks * i // parts for i in range(parts + 1)]
+    if parts == 1:
+        function(*arguments, 0, chunks)
+        return
+    pool = _helpers()
+    spans = list(itertools.pairwise(bounds))
+    run = functools.partial(function, *arguments)
+    pending = [pool.submit(run, a, b) for a, b in spans[1:]]
+    try:
+        run(*spans[0])
+    finally:
+        for future in pending:
+            future.result()
 
 
 def accepts(*arrays: AnyFloatArray) -> bool:
@@ -241,14 +287,32 @@ def main_pass(
     sim: AnyFloatArray,
     scale: float,
     workers: int,
-    levels: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None,
+    levels: tuple[FloatArray, ...] | None,
 ) -> FloatArray:
-    """Rows of per-chunk sums (columns named in ``_fused``), in record order."""
-    _threads(workers, ref.shape[0])
+    """Rows of per-chunk sums (columns named in ``_fused``), in record order; ``levels`` are
+    the pyramid's (ref, sim) block means by 4, 16 and 64 to fill, flattened."""
+    n = ref.shape[0]
+    chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     empty = np.empty(0, dtype=np.float64)
-    ref4, sim4, ref16, sim16 = levels if levels is not None else (empty,) * 4
-    rows: FloatArray = _launch(
-        module.main_pass, ref, sim, float(scale), KERNEL_CHUNK, ref4, sim4, ref16, sim16
+    ref4, sim4, ref16, sim16, ref64, sim64 = levels if levels is not None else (empty,) * 6
+    rows = np.empty((chunks, FIELDS), dtype=np.float64)
+    _spread(
+        module.main_pass,
+        chunks,
+        workers,
+        n,
+        KERNEL_PARALLEL_MIN,
+        ref,
+        sim,
+        float(scale),
+        KERNEL_CHUNK,
+        ref4,
+        sim4,
+        ref16,
+        sim16,
+        ref64,
+        sim64,
+        rows,
     )
     return rows
 
@@ -267,9 +331,15 @@ def lag_window(
 ) -> FloatArray:
     """C(lo + k) for k < count over ``window``, then the shifted reference energy: the
     per-chunk rows summed in chunk order."""
-    _threads(workers, window[1] - window[0])
-    rows: FloatArray = _launch(
+    width = window[1] - window[0]
+    chunks = (width + KERNEL_CHUNK - 1) // KERNEL_CHUNK
+    rows = np.empty((chunks, count + 1), dtype=np.float64)
+    _spread(
         module.lag_window,
+        chunks,
+        workers,
+        width,
+        KERNEL_PARALLEL_MIN,
         r,
         s,
         int(lo),
@@ -280,6 +350,7 @@ def lag_window(
         int(window[0]),
         int(window[1]),
         KERNEL_CHUNK,
+        rows,
     )
     total = np.zeros(count + 1, dtype=np.float64)
     for row in rows:
@@ -287,19 +358,37 @@ def lag_window(
     return total
 
 
+def quarter_level(module: ModuleType, x: AnyFloatArray, workers: int) -> FloatArray:
+    """Block means by 4 of x (a trailing partial block dropped), on ``workers`` threads."""
+    out = np.empty(x.shape[0] // 4, dtype=np.float64)
+    per = KERNEL_CHUNK // 4
+    chunks = (out.shape[0] + per - 1) // per
+    _spread(
+        module.quarter_level, chunks, workers, x.shape[0], KERNEL_PARALLEL_MIN, x, out, KERNEL_CHUNK
+    )
+    return out
+
+
 def interpolate(
     module: ModuleType,
     values: AnyFloatArray,
     index: npt.NDArray[np.intp],
-    right: npt.NDArray[np.intp],
     offset: FloatArray,
     step: FloatArray,
-    exact: npt.NDArray[np.bool_],
     workers: int = 2,
 ) -> FloatArray:
-    """One column through an interpolation plan: np.interp's arithmetic, in one parallel loop."""
-    _threads(workers, index.shape[0])
-    out: FloatArray = _launch(module.interpolate, values, index, right, offset, step, exact)
+    """One column through an interpolation plan: np.interp's arithmetic, compiled."""
+    n = index.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
+    bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
+
+    def run(first: int, last: int) -> None:
+        module.interpolate(values, index, offset, step, out, int(bounds[first]), int(bounds[last]))
+
+    # A column costs several nanoseconds a sample (the first write to its fresh pages most of
+    # it), so a second thread pays off on far shorter loops than the main pass.
+    _spread(run, chunks, workers, n, INTERPOLATE_PARALLEL_MIN)
     return out
 
 

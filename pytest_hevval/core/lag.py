@@ -336,6 +336,28 @@ def _block_means(x: FloatArray, factor: int) -> npt.NDArray[np.float64]:
     return out
 
 
+def _quarter_level(x: FloatArray, workers: int) -> npt.NDArray[np.float64]:
+    """Block means by 4 (a trailing partial block dropped): the next level of the pyramid.
+
+    ((a + b) + (c + d))·0.25 per block, the arithmetic of the main pass's first two levels, on
+    both paths alike, so the compiled and numpy pyramids are bit-identical.
+    """
+    blocks = x.shape[0] // _FACTOR
+    compiled = kernel.kernel_for(x.shape[0], ("quarter_level",)) if kernel.accepts(x) else None
+    if compiled is not None:
+        return kernel.quarter_level(compiled, x, workers)
+    out = np.empty(blocks, dtype=np.float64)
+    step = _CHUNK * _FACTOR
+    for first in range(0, blocks * _FACTOR, step):
+        last = min(first + step, blocks * _FACTOR)
+        chunk = np.asarray(x[first:last], dtype=np.float64)
+        pairs = np.add(chunk[0::2], chunk[1::2])
+        part = out[first // _FACTOR : last // _FACTOR]
+        np.add(pairs[0::2], pairs[1::2], out=part)
+        np.multiply(part, 0.25, out=part)
+    return out
+
+
 def _centred_energy(x: FloatArray, mean: float, scale: float, lo: int, hi: int) -> float:
     """Σ ((x[j] − mean)·scale)² over j in [lo, hi), in cache-sized chunks."""
     total = 0.0
@@ -494,8 +516,8 @@ def _search(
             refs.append(r_level)
             sims.append(s_level)
     while refs[-1].shape[0] > _COARSEST and refs[-1].shape[0] // _FACTOR >= 16:
-        refs.append(_block_means(refs[-1], _FACTOR))
-        sims.append(_block_means(sims[-1], _FACTOR))
+        refs.append(_quarter_level(refs[-1], workers))
+        sims.append(_quarter_level(sims[-1], workers))
     top = len(refs) - 1
     factor = _FACTOR**top
     coarse_max = min(math.ceil(max_lag / factor) + 1, refs[top].shape[0] // 4)

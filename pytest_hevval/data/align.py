@@ -458,9 +458,7 @@ class _Plan:
             else None
         )
         if compiled is not None:
-            return kernel.interpolate(
-                compiled, values, self.index, self.right, self.offset, self.step, self.exact
-            )
+            return kernel.interpolate(compiled, values, self.index, self.offset, self.step)
         # np.interp's arithmetic, (right − left) / step · offset + left, in place in one
         # buffer: two gathers and four passes, no temporaries.
         left = np.take(values, self.index)
