@@ -41,9 +41,8 @@ class SpecConfidence:
     #: Per node path: λ1–λ6 from the signal's own blocks, λ7 from the spec's common blocks.
     signals: dict[NodePath, dict[str, Interval]]
     phi: Interval
-    #: Bootstrap block length per node path, in samples, and the spec's common one.
+    #: Bootstrap block length per node path, in samples.
     block_samples: dict[NodePath, int]
-    common_block_samples: int
 
 
 def spec_confidence(
@@ -103,10 +102,8 @@ def spec_confidence(
         }
         for node in nodes
     }
-    fine = {signature_of(node.path): blocks[signature_of(node.path)].fine for node in nodes}
     return SpecConfidence(
         signals=signals,
         phi=percentile_interval(phi, phi_replicates),
         block_samples={node.path: blocks[signature_of(node.path)].block_samples for node in nodes},
-        common_block_samples=common * max(fine.values()),
     )

@@ -478,6 +478,18 @@ def _sim_extremes_needed(sums: _Sums) -> bool:
     return max(abs(sums.ref_min), abs(sums.ref_max)) < _TOO_SMALL
 
 
+def power_of_two_scale(peak: float) -> float:
+    """The factor that brings values of magnitude ``peak`` to about 1 when their squares would
+    overflow or underflow (beyond 2^±400), else 1.
+
+    An exact power of two keeps every ratio bit-identical while the squares stay finite.
+    Subnormal peaks need more than 2**1023; 2**1000 already makes them normal.
+    """
+    if peak > _TOO_BIG or (0.0 < peak < _TOO_SMALL):
+        return math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+    return 1.0
+
+
 def _first_non_finite(arr: FloatArray) -> int:
     bad = np.flatnonzero(~np.isfinite(arr))
     return int(bad[0]) if bad.size else -1
@@ -582,11 +594,8 @@ def signal_characteristics(
     peak = max(abs(sums.ref_min), abs(sums.ref_max))
     if sim_extremes:
         peak = max(peak, abs(sums.sim_min), abs(sums.sim_max))
-    scale = 1.0
-    if peak > _TOO_BIG or (0.0 < peak < _TOO_SMALL):
-        # An exact power of two keeps every ratio bit-identical while the squares stay finite.
-        # Subnormal peaks need more than 2**1023; 2**1000 already makes them normal.
-        scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+    scale = power_of_two_scale(peak)
+    if scale != 1.0:
         sums = _all_sums(ref, sim, scale, workers)
         # The first pass's block means are unscaled and may have overflowed; the lag search
         # builds its own from the records instead (this case is rare enough to pay a read).

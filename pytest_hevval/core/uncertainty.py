@@ -35,6 +35,7 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
+from .characteristics import power_of_two_scale
 from .local import CorrelationKind, SumTable, group_lambdas, labelled_table
 
 __all__ = [
@@ -189,17 +190,9 @@ def block_sums(
     return BlockSums(table, fine, n, lag1_autocorrelation(residual), scale)
 
 
-#: Values beyond these magnitudes are summed at a power-of-two scale: their squares would
-#: overflow (or lose all precision) otherwise.
-_TOO_BIG = 2.0**400
-_TOO_SMALL = 2.0**-400
-
-
 def _power_of_two_scale(ref: FloatArray, sim: FloatArray) -> float:
     peak = max(float(np.max(np.abs(ref), initial=0.0)), float(np.max(np.abs(sim), initial=0.0)))
-    if not math.isfinite(peak) or (_TOO_SMALL <= peak <= _TOO_BIG) or peak == 0.0:
-        return 1.0
-    return math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+    return power_of_two_scale(peak) if math.isfinite(peak) else 1.0
 
 
 def coarsen(table: SumTable, per_block: int) -> SumTable:
