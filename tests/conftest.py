@@ -55,3 +55,16 @@ def kernel_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch)
             pytest.skip(reason)
     monkeypatch.setenv(KERNEL_ENV, path)
     return path
+
+
+@pytest.fixture
+def one_kernel_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Pins every process of a test to the numpy path.
+
+    On the auto path a short record takes the compiled kernel once numba's on-disk cache is
+    warm, and the two paths agree only to rounding. A test comparing results from two
+    processes bit for bit would flake whenever another test warmed the cache in between.
+    """
+    from pytest_hevval.core.kernel import KERNEL_ENV
+
+    monkeypatch.setenv(KERNEL_ENV, "numpy")

@@ -29,6 +29,9 @@ from pytest_hevval.spec.load import load_spec
 distributed = pytest.importorskip("distributed")
 fsspec = pytest.importorskip("fsspec")
 
+# Results from dask workers are compared with local results bit for bit.
+pytestmark = pytest.mark.usefixtures("one_kernel_path")
+
 TREE = """\
 sets:
   - signal: P

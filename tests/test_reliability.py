@@ -694,6 +694,7 @@ def _junit_cases(path: Path) -> dict[str, tuple[str, dict[str, str | None], str]
     return cases
 
 
+@pytest.mark.usefixtures("one_kernel_path")
 def test_same_outcomes_messages_and_properties_with_and_without_xdist(
     pytester: pytest.Pytester,
 ) -> None:
