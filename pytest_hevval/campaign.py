@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .core.registry import describe
+from .core.uncertainty import Interval
 from .core.upooling import area_to_uniform, pool
 from .digest import identity
 from .result import SpecResult
@@ -89,6 +90,25 @@ class RecordingOutcome:
     hash: str
     digest: str
     failed_signals: tuple[str, ...]
+    #: Φ's 95 % bootstrap interval (None when the run had intervals off).
+    phi_interval: Interval | None = None
+    #: The recording's ``min_phi`` (None when its spec has none).
+    min_phi: float | None = None
+
+    @property
+    def phi_text(self) -> str:
+        """``0.9257 [0.9190, 0.9311]``, or the bare value where no interval is known."""
+        if self.phi_interval is None:
+            return f"{self.phi:.4f}"
+        return f"{self.phi:.4f} {self.phi_interval.bounds}"
+
+    @property
+    def within_noise(self) -> bool:
+        """Whether ``min_phi`` lies inside Φ's interval: noise alone could flip the Φ gate."""
+        interval, minimum = self.phi_interval, self.min_phi
+        return (
+            interval is not None and minimum is not None and interval.low < minimum <= interval.high
+        )
 
 
 @dataclass
@@ -128,6 +148,11 @@ class CampaignVerdict:
         return sorted(self.counted, key=lambda r: (r.passed, r.phi))[:WORST_SHOWN]
 
     @property
+    def within_noise(self) -> list[RecordingOutcome]:
+        """Validation recordings whose Φ interval holds ``min_phi``: their Φ verdict is noise."""
+        return [r for r in self.counted if r.within_noise]
+
+    @property
     def passed(self) -> bool:
         return not self.failures
 
@@ -143,6 +168,7 @@ class CampaignVerdict:
             "excluded": self.excluded,
             "missing": list(self.missing),
             "worst": [r.id for r in self.worst],
+            "within_noise": [r.id for r in self.within_noise],
             "phi": self.phi.to_dict(),
             "lambdas": {name: d.to_dict() for name, d in self.lambdas.items()},
             "signal_pass_rates": dict(self.signal_pass_rates),
@@ -152,6 +178,12 @@ class CampaignVerdict:
                     "id": r.id,
                     "role": r.role,
                     "phi": _clean(r.phi),
+                    **(
+                        {"phi_interval": {"low": r.phi_interval.low, "high": r.phi_interval.high}}
+                        if r.phi_interval is not None
+                        else {}
+                    ),
+                    "within_noise": r.within_noise,
                     "passed": r.passed,
                     "hash": r.hash,
                     "digest": r.digest,
@@ -195,6 +227,8 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
             hash=_identity(result)[0],
             digest=_identity(result)[1],
             failed_signals=tuple(s.path for s in result.signals if not s.passed),
+            phi_interval=result.phi_interval,
+            min_phi=result.min_phi,
         )
         for recording in declared
         if (result := by_id.get(recording)) is not None
@@ -313,8 +347,13 @@ def verdict_lines(found: CampaignVerdict) -> list[str]:
         lines.append(
             "  worst recordings: "
             + ", ".join(
-                f"{r.id} Φ {r.phi:.4f}" + ("" if r.passed else " FAIL") for r in found.worst
+                f"{r.id} Φ {r.phi_text}" + ("" if r.passed else " FAIL") for r in found.worst
             )
+        )
+    if found.within_noise:
+        lines.append(
+            "  Φ within noise of min_phi (the 95 % interval holds it): "
+            + ", ".join(f"{r.id} Φ {r.phi_text}" for r in found.within_noise)
         )
     lines.append("  signal pass rate (u-pooling area, 0 best, 0.5 worst):")
     width = max(len(p) for p in found.signal_pass_rates) if found.signal_pass_rates else 0

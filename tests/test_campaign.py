@@ -13,6 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from pytest_hevval.campaign import CampaignVerdict, Distribution, RecordingOutcome, verdict_lines
+from pytest_hevval.core.uncertainty import Interval
 from pytest_hevval.core.upooling import (
     U_GRID,
     area_to_uniform,
@@ -377,6 +379,59 @@ def test_reports_have_a_campaign_section(project: pytest.Pytester) -> None:
     assert "**❌ campaign fleet** (`fleet.hevval.yaml`)" in markdown
     assert "Excluded from the gate (calibration): `Trip01`" in markdown
     assert '<section class="card" id="campaign-1">' in (folder / "report.html").read_text()
+    # Every recording's Φ carries its 95 % interval, in JSON and in the Markdown table.
+    for recording in campaign["recordings"]:
+        interval = recording["phi_interval"]
+        assert interval["low"] <= recording["phi"] <= interval["high"]
+        assert f"{recording['phi']:.4f} [{interval['low']:.4f}, {interval['high']:.4f}]" in markdown
+
+
+def _outcome(name: str, phi: float, low: float, high: float, **kwargs: object) -> RecordingOutcome:
+    defaults: dict[str, object] = {"role": "validation", "passed": phi >= 0.9, "min_phi": 0.9}
+    defaults.update(kwargs)
+    return RecordingOutcome(
+        id=name,
+        phi=phi,
+        hash="",
+        digest="",
+        failed_signals=(),
+        phi_interval=Interval(phi, low, high),
+        **defaults,  # type: ignore[arg-type]
+    )
+
+
+def test_recordings_whose_interval_holds_min_phi_are_within_noise() -> None:
+    clear_fail = _outcome("A", 0.80, 0.78, 0.82)
+    noisy_fail = _outcome("B", 0.89, 0.87, 0.91)
+    noisy_pass = _outcome("C", 0.91, 0.89, 0.93)
+    clear_pass = _outcome("D", 0.95, 0.93, 0.97)
+    at_bound = _outcome("E", 0.92, 0.90, 0.94)  # low == min_phi: noise cannot take it below
+    calibration = _outcome("F", 0.89, 0.87, 0.91, role="calibration")
+    no_gate = _outcome("G", 0.89, 0.87, 0.91, min_phi=None)
+    no_interval = RecordingOutcome("H", "validation", 0.89, False, "", "", (), None, 0.9)
+    outcomes = [clear_fail, noisy_fail, noisy_pass, clear_pass, at_bound, calibration]
+    outcomes += [no_gate, no_interval]
+    assert [o.id for o in outcomes if o.within_noise] == ["B", "C", "F"]
+    found = CampaignVerdict(
+        spec="fleet.hevval.yaml",
+        name="fleet",
+        recordings=outcomes,
+        missing=[],
+        min_pass_rate=None,
+        phi_quantile=None,
+        phi=Distribution.of([o.phi for o in outcomes]),
+        lambdas={},
+        signal_pass_rates={},
+        pooled_area={},
+    )
+    # A calibration recording never counts, so it is not named either.
+    assert [o.id for o in found.within_noise] == ["B", "C"]
+    assert found.to_dict()["within_noise"] == ["B", "C"]
+    assert (
+        "  Φ within noise of min_phi (the 95 % interval holds it): "
+        "B Φ 0.8900 [0.8700, 0.9100], C Φ 0.9100 [0.8900, 0.9300]"
+    ) in verdict_lines(found)
+    assert "worst recordings: A Φ 0.8000 [0.7800, 0.8200] FAIL" in "\n".join(verdict_lines(found))
 
 
 def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> None:

@@ -133,7 +133,7 @@ def _campaign_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
             failing = ", ".join(_code(s) for s in recording["failed_signals"]) or "—"
             lines.append(
                 f"| {'✅' if recording['passed'] else '❌'} {_md(recording['id'])} "
-                f"| {recording['role']} | {_num(recording['phi'])} | {failing} |"
+                f"| {recording['role']} | {_phi_cell(recording)} | {failing} |"
             )
         lines += [
             "",
@@ -162,6 +162,15 @@ def _json_default(value: Any) -> Any:
 
 def _num(value: object, digits: int = 4) -> str:
     return f"{float(value):.{digits}f}" if model.is_finite_number(value) else "—"
+
+
+def _phi_cell(recording: Mapping[str, Any]) -> str:
+    """A campaign recording's Φ with its interval, marked where the interval holds min_phi."""
+    interval = recording.get("phi_interval")
+    text = _num(recording["phi"])
+    if interval:
+        text += f" [{_num(interval['low'])}, {_num(interval['high'])}]"
+    return text + (" (within noise of min_phi)" if recording.get("within_noise") else "")
 
 
 def _md(text: object) -> str:
