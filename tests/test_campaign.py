@@ -458,3 +458,43 @@ def test_a_recording_is_scored_alone_as_file_and_id(project: pytest.Pytester) ->
     assert (payload["recording"], payload["role"]) == ("Trip02", "validation")
     assert payload["campaign"]["recordings"] == list(TRIPS)
     assert len(payload["signals"][0]["u_distribution"]) == U_GRID.size
+
+
+def _recording(trip: str, phi: float, low: float | None = None, high: float | None = None) -> dict:
+    spec: dict = {"spec": f"fleet.hevval.yaml::{trip}", "name": "fleet", "phi": phi, "signals": []}
+    if low is not None:
+        spec["phi_interval"] = {"low": low, "high": high}
+    return spec
+
+
+def test_campaign_compare_separates_real_changes_from_noise() -> None:
+    from pytest_hevval.history.compare import campaign_change_lines, campaign_changes, compare
+
+    before = [
+        _recording("Trip01", 0.90, 0.89, 0.91),
+        _recording("Trip02", 0.90, 0.89, 0.91),
+        _recording("Trip03", 0.90, 0.89, 0.91),
+        _recording("Trip04", 0.90),  # recorded without intervals
+        _recording("Trip05", 0.90, 0.89, 0.91),
+    ]
+    after = [
+        _recording("Trip01", 0.95, 0.94, 0.96),  # disjoint: better
+        _recording("Trip02", 0.905, 0.895, 0.915),  # overlapping: noise
+        _recording("Trip03", 0.85, 0.84, 0.86),  # disjoint: worse
+        _recording("Trip04", 0.901, 0.89, 0.91),  # no interval before: the point value decides
+        _recording("Trip05", 0.90, 0.89, 0.91),
+    ]
+    comparison = compare(after, before, before_label="v1", after_label="v2")
+    (change,) = campaign_changes(comparison)
+    assert [r for r, _ in change.better] == ["Trip01", "Trip04"]
+    assert [r for r, _ in change.worse] == ["Trip03"]
+    assert [r for r, _ in change.within_noise] == ["Trip02"]
+    assert change.unchanged == ("Trip05",)
+    assert change.to_dict()["within_noise"] == [
+        {"recording": "Trip02", "phi_delta": pytest.approx(0.005)}
+    ]
+    (line,) = campaign_change_lines(comparison)
+    assert line == (
+        "campaign fleet.hevval.yaml (v1 → v2): Φ better on Trip01 (+0.0500), Trip04 (+0.0010);"
+        " worse on Trip03 (-0.0500); within noise on Trip02 (+0.0050); unchanged on Trip05"
+    )

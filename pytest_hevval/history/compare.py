@@ -426,42 +426,58 @@ class Comparison:
 
 @dataclass(frozen=True)
 class CampaignChange:
-    """Which recordings of one campaign got better and which got worse, by their Φ."""
+    """Which recordings of one campaign got better and which got worse, by their Φ.
+
+    Where both runs recorded Φ's interval, a change counts as better or worse only when the
+    intervals are disjoint; a smaller change is listed as within noise.
+    """
 
     spec: str
     #: (recording, change of Φ), largest change first.
     better: tuple[tuple[str, float], ...]
     worse: tuple[tuple[str, float], ...]
     unchanged: tuple[str, ...]
+    #: (recording, change of Φ) where the two runs' Φ intervals overlap, largest change first.
+    within_noise: tuple[tuple[str, float], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "spec": self.spec,
             "better": [{"recording": r, "phi_delta": d} for r, d in self.better],
             "worse": [{"recording": r, "phi_delta": d} for r, d in self.worse],
+            "within_noise": [{"recording": r, "phi_delta": d} for r, d in self.within_noise],
             "unchanged": list(self.unchanged),
         }
 
 
 def campaign_changes(comparison: Comparison) -> list[CampaignChange]:
     """Per campaign, the recordings whose Φ rose and those whose Φ fell between the runs."""
-    deltas: dict[str, list[tuple[str, float | None]]] = {}
+    deltas: dict[str, list[tuple[str, FieldDelta]]] = {}
     for spec in comparison.specs:
         path, recording = split_key(spec.key)
         if recording is not None:
-            deltas.setdefault(path, []).append((recording, spec.phi.delta))
+            deltas.setdefault(path, []).append((recording, spec.phi))
     changes = []
     for path, found in deltas.items():
-        known = [(r, d) for r, d in found if d is not None]
+        changed = [(r, d, phi.beyond_noise) for r, phi in found if (d := _moved(phi)) is not None]
+        real = [(r, d) for r, d, beyond in changed if beyond is not False]
+        noise = [(r, d) for r, d, beyond in changed if beyond is False]
         changes.append(
             CampaignChange(
                 spec=path,
-                better=tuple(sorted(((r, d) for r, d in known if d > 0), key=lambda x: -x[1])),
-                worse=tuple(sorted(((r, d) for r, d in known if d < 0), key=lambda x: x[1])),
-                unchanged=tuple(r for r, d in found if d is None or d == 0),
+                better=tuple(sorted(((r, d) for r, d in real if d > 0), key=lambda x: -x[1])),
+                worse=tuple(sorted(((r, d) for r, d in real if d < 0), key=lambda x: x[1])),
+                unchanged=tuple(r for r, phi in found if _moved(phi) is None),
+                within_noise=tuple(sorted(noise, key=lambda x: -abs(x[1]))),
             )
         )
     return changes
+
+
+def _moved(phi: FieldDelta) -> float | None:
+    """Φ's change where it is known and not zero, else None."""
+    delta = phi.delta
+    return delta if delta is not None and math.isfinite(delta) and delta != 0 else None
 
 
 def campaign_change_lines(comparison: Comparison) -> list[str]:
@@ -473,6 +489,7 @@ def campaign_change_lines(comparison: Comparison) -> list[str]:
     return [
         f"campaign {c.spec} ({comparison.before_label} → {comparison.after_label}): "
         f"Φ better on {listed(c.better)}; worse on {listed(c.worse)}"
+        + (f"; within noise on {listed(c.within_noise)}" if c.within_noise else "")
         + (f"; unchanged on {', '.join(c.unchanged)}" if c.unchanged else "")
         for c in campaign_changes(comparison)
     ]
