@@ -24,7 +24,6 @@ from .core.local import (
     PHASES,
     CorrelationKind,
     GroupSums,
-    SumTable,
     concentration,
     driving_phases,
     group_lambdas,
@@ -87,15 +86,18 @@ class GroupTable:
         reference_range: float,
         correlation: str,
         total_sq: float,
+        scale: float = 1.0,
     ) -> GroupTable:
+        """``sums`` of samples times ``scale`` (see :class:`~pytest_hevval.core.local.SumTable`);
+        ``reference_range`` and the errors kept are in the signal's unit."""
         kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
-        lambdas = group_lambdas(sums, reference_range, kind)
+        lambdas = group_lambdas(sums, reference_range * scale, kind)
         n = sums.n.astype(np.float64)
         judged = sums.n >= MIN_GROUP_SAMPLES
         safe = np.maximum(n, 1.0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            rms = np.where(judged, np.sqrt(sums.sq_error / safe), np.nan)
-            mean = np.where(judged, sums.error_sum / safe, np.nan)
+            rms = np.where(judged, np.sqrt(sums.sq_error / safe) / scale, np.nan)
+            mean = np.where(judged, sums.error_sum / safe / scale, np.nan)
         share = sums.sq_error / total_sq if total_sq > 0 else np.zeros_like(n)
         return cls(
             labels=tuple(labels),
@@ -419,13 +421,14 @@ def score_local(
     total_sq = float(fine.sums().sq_error.sum())
 
     def table(axis: int, names: Sequence[str], rows: slice = slice(None)) -> GroupTable:
-        merged = fine.merged(labels.shape, axis)
-        merged = SumTable(merged.values[rows], merged.shift)
-        return GroupTable.from_sums(names, merged.sums(), reference_range, correlation, total_sq)
+        merged = fine.merged(labels.shape, axis).rows(rows)
+        return GroupTable.from_sums(
+            names, merged.sums(), reference_range, correlation, total_sq, fine.scale
+        )
 
     window_sums = fine.merged(labels.shape, 0).sums()
     windows = GroupTable.from_sums(
-        labels.window_labels, window_sums, reference_range, correlation, total_sq
+        labels.window_labels, window_sums, reference_range, correlation, total_sq, fine.scale
     )
     hot = concentration(
         window_sums, labels.window_starts, labels.window_stops, labels.dt, labels.start_s

@@ -156,6 +156,29 @@ def test_the_json_result_round_trips(tmp_path: Path) -> None:
     assert not again.signals[0].passed
 
 
+@pytest.mark.parametrize("exponent", [600, -600])
+def test_windows_and_cells_of_huge_or_tiny_signals_match_ordinary_ones(
+    tmp_path: Path, exponent: int
+) -> None:
+    # Squares of 2^±600 overflow or underflow float64; the sums are taken rescaled.
+    write_trip(tmp_path, stretch=True, fast=True)
+    factor = 2.0**exponent
+    scaled_spec = SPEC.replace(
+        "unit: kW}", f"unit: kW, ref_scale: {factor!r}, sim_scale: {factor!r}}}"
+    )
+    plain = _evaluate(tmp_path).result.signals[0]  # type: ignore[attr-defined]
+    scaled = _evaluate(tmp_path, scaled_spec).result.signals[0]  # type: ignore[attr-defined]
+    for scope in ("windows", "phases", "regions"):
+        before, after = getattr(plain.local, scope), getattr(scaled.local, scope)
+        assert after.n == before.n
+        for name, values in before.lambdas.items():
+            np.testing.assert_allclose(after.lambdas[name], values, rtol=1e-9, err_msg=name)
+        np.testing.assert_allclose(np.array(after.rms) / factor, before.rms, rtol=1e-9)
+        np.testing.assert_allclose(after.error_share, before.error_share, rtol=1e-9)
+    assert scaled.local.concentration == plain.local.concentration
+    assert [f.where for f in scaled.local_failures] == [f.where for f in plain.local_failures]
+
+
 @pytest.mark.parametrize(
     ("fragment", "key", "problem"),
     [

@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
 from . import kernel
+from .characteristics import power_of_two_scale
 from .registry import FUSED_CHARACTERISTICS
 
 __all__ = [
@@ -396,16 +397,26 @@ SUM_COLUMNS = (
 
 @dataclass(frozen=True)
 class SumTable:
-    """Additive sums per group: a union of groups is the sum of their rows."""
+    """Additive sums per group: a union of groups is the sum of their rows.
+
+    The sums are of the samples times ``scale``, a power of two that keeps squares of very large
+    or very small signals finite (1 for ordinary magnitudes). λ are ratios and do not change;
+    an error in the signal's unit is a scaled error divided by ``scale``.
+    """
 
     values: FloatArray  # (groups, len(SUM_COLUMNS))
     shift: float
+    scale: float = 1.0
+
+    def rows(self, selection: slice | npt.NDArray[np.intp]) -> SumTable:
+        """The table of some of the groups only."""
+        return SumTable(self.values[selection], self.shift, self.scale)
 
     def merged(self, shape: Sequence[int], keep: int) -> SumTable:
         """Rows laid out as a mixed-radix grid of ``shape``, summed over all axes but ``keep``."""
         grid = self.values.reshape((*shape, len(SUM_COLUMNS)))
         axes = tuple(a for a in range(len(shape)) if a != keep)
-        return SumTable(np.ascontiguousarray(grid.sum(axis=axes)), self.shift)
+        return SumTable(np.ascontiguousarray(grid.sum(axis=axes)), self.shift, self.scale)
 
     def sums(self) -> GroupSums:
         table = self.values
@@ -448,6 +459,9 @@ def labelled_table(
     """
     r, s = _check_pair(ref, sim)
     labels = np.asarray(labels, dtype=np.int64)
+    scale = _rescale(r, s)
+    if scale != 1.0:
+        r, s = r * scale, s * scale
     # Any value near the mean error keeps the shifted sums exact enough; the first samples'
     # mean costs nothing and is the same on both paths.
     shift = float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
@@ -457,7 +471,7 @@ def labelled_table(
     elif compiled:
         module = kernel.load_or_raise()
     if module is not None:
-        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift), shift)
+        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift), shift, scale)
     signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
     if (labels < 0).any():  # samples in no group, as the compiled pass skips them
         keep = labels >= 0
@@ -480,4 +494,13 @@ def labelled_table(
         total(r * s),
         total(signs_match),
     )
-    return SumTable(np.column_stack(columns), shift)
+    return SumTable(np.column_stack(columns), shift, scale)
+
+
+def _rescale(ref: FloatArray, sim: FloatArray) -> float:
+    """The power of two that keeps the squares of ``ref`` and ``sim`` finite (1 when they are)."""
+    if ref.shape[0] == 0:
+        return 1.0
+    with np.errstate(invalid="ignore"):
+        peak = max(abs(float(a)) for a in (ref.max(), ref.min(), sim.max(), sim.min()))
+    return power_of_two_scale(peak) if math.isfinite(peak) else 1.0
