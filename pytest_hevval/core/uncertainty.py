@@ -249,7 +249,7 @@ def _one_block_sums(
 def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) -> list[BlockSums]:
     """:func:`labelled_table` over fine blocks for a stack of signals: the same sums (in the
     order of ``SUM_COLUMNS``, each block's samples added in order as ``np.bincount`` adds them)
-    with one array operation per column for all signals."""
+    with a few array operations per column for all signals."""
     fine = fine_block_size(n)
     rows = math.ceil(n / fine)
     r = np.stack([np.asarray(ref, dtype=np.float64) for ref, _ in pairs])
@@ -266,36 +266,51 @@ def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) 
         s = s * scales[:, None]
     e = r - s
     shift = np.mean(e[:, :SHIFT_SAMPLES], axis=1) if n else np.zeros(k)
-    # One plane per column but n, padded with zeros to whole fine blocks.
-    planes = np.empty((len(SUM_COLUMNS), k, rows * fine), dtype=np.float64)
-    planes[:, :, n:] = 0.0
-    body = planes[:, :, :n]
-    d = np.subtract(e, shift[:, None], out=body[1])
-    np.multiply(d, d, out=body[2])
-    np.abs(e, out=body[3])
-    np.copyto(body[4], r)
-    np.copyto(body[5], s)
-    np.multiply(r, r, out=body[6])
-    np.multiply(r, s, out=body[8])
-    np.multiply(s, s, out=body[7])
+    tables = np.empty((k, rows, len(SUM_COLUMNS)), dtype=np.float64)
+    tables[:, :, 0] = fine
+    if rows:
+        tables[:, -1, 0] = n - (rows - 1) * fine
+    d = e - shift[:, None]
+    _fine_sums(d, fine, tables[:, :, 1])
+    _fine_sums(d * d, fine, tables[:, :, 2])
+    _fine_sums(np.abs(e), fine, tables[:, :, 3])
+    _fine_sums(r, fine, tables[:, :, 4])
+    _fine_sums(s, fine, tables[:, :, 5])
+    _fine_sums(r * r, fine, tables[:, :, 6])
+    _fine_sums(s * s, fine, tables[:, :, 7])
+    _fine_sums(r * s, fine, tables[:, :, 8])
     # λ2: the central-difference signs of reference and model agree (both ends are 0 on both
     # sides, so they agree); y[i+1] − y[i−1] > 0 exactly when y[i+1] > y[i−1].
-    body[9] = 1.0
+    matches = np.ones((k, n), dtype=np.float64)
     if n > 2:
-        a, b, c, d = r[:, 2:], r[:, :-2], s[:, 2:], s[:, :-2]
-        body[9, :, 1:-1] = ((a > b) == (c > d)) & ((a < b) == (c < d))
-    sums = planes[1:, :, 0::fine].copy()
-    for offset in range(1, fine):
-        sums += planes[1:, :, offset::fine]
-    tables = np.empty((k, rows, len(SUM_COLUMNS)), dtype=np.float64)
-    tables[:, :, 1:] = sums.transpose(1, 2, 0)
-    tables[:, :, 0] = fine
-    tables[:, -1, 0] = n - (rows - 1) * fine
+        r2, r0, s2, s0 = r[:, 2:], r[:, :-2], s[:, 2:], s[:, :-2]
+        matches[:, 1:-1] = ((r2 > r0) == (s2 > s0)) & ((r2 < r0) == (s2 < s0))
+    _fine_sums(matches, fine, tables[:, :, 9])
     rho = [lag1_autocorrelation(row) for row in e]
     return [
         BlockSums(SumTable(tables[i], float(shift[i])), fine, n, float(rho[i]), float(scales[i]))
         for i in range(k)
     ]
+
+
+def _fine_sums(x: FloatArray, fine: int, out: FloatArray) -> None:
+    """Sums of runs of ``fine`` consecutive samples of every row of ``x`` into ``out`` (the
+    last run may be short), each run added left to right as ``np.bincount`` adds it."""
+    n = x.shape[1]
+    whole = (n // fine) * fine
+    runs = whole // fine
+    if runs:
+        if fine == 1:
+            out[:, :runs] = x
+        else:
+            np.add(x[:, 0:whole:fine], x[:, 1:whole:fine], out=out[:, :runs])
+            for offset in range(2, fine):
+                out[:, :runs] += x[:, offset:whole:fine]
+    if whole < n:
+        tail = x[:, whole].copy()
+        for j in range(whole + 1, n):
+            tail += x[:, j]
+        out[:, runs] = tail
 
 
 def _power_of_two_scale(ref: FloatArray, sim: FloatArray) -> float:
@@ -317,7 +332,10 @@ def resample_counts(blocks: int, replicates: int = REPLICATES, seed: int = SEED)
 
     Every replicate draws ``blocks`` blocks with replacement. One seed, one matrix: signals of
     one record drawn with the same matrix share their blocks, so quantities combining them
-    (λ7, Φ) keep the dependence between signals. Read-only, as it is shared.
+    (λ7, Φ) keep the dependence between signals. Read-only, as it is shared. A spec's signals
+    need a matrix per distinct block count (between :data:`MIN_BLOCKS` and about
+    :data:`MAX_BLOCKS`), so the cache holds 64 of them: at most 64 × 1,000 × 130 × 8 bytes
+    (67 MB), typically a few MB.
     """
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, blocks, size=(replicates, blocks), dtype=np.int64)
