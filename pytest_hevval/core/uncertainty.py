@@ -466,15 +466,17 @@ def stacked_replicates(
     planes = np.empty((len(columns), REPLICATES, len(tables)), dtype=np.float64)
     for (rows, per_block), members in groups.items():
         starts = np.arange(0, rows, per_block)
-        stack = np.stack(
-            [np.add.reduceat(tables[i].values, starts, axis=0)[:, columns] for i in members],
-            axis=1,
-        )  # blocks, signals, columns
-        blocks = stack.shape[0]
-        product = replicate_sums(resample_counts(blocks), stack.reshape(blocks, -1))
-        product = product.reshape(REPLICATES, len(members), len(columns))
-        if len(members) == len(tables):
-            planes[...] = product.transpose(2, 0, 1)
+        coarse = [np.add.reduceat(tables[i].values, starts, axis=0) for i in members]
+        blocks = coarse[0].shape[0]
+        # blocks × (signals · columns), each signal's needed columns side by side
+        stack = np.stack(coarse, axis=1)[:, :, columns] if len(coarse) > 1 else coarse[0]
+        product = replicate_sums(
+            resample_counts(blocks),
+            stack.reshape(blocks, -1) if len(coarse) > 1 else stack[:, columns],
+        ).reshape(REPLICATES, len(members), len(columns))
+        first, last = members[0], members[-1]
+        if last - first + 1 == len(members):  # consecutive: a view, no index arrays
+            planes[:, :, first : last + 1] = product.transpose(2, 0, 1)
         else:
             planes[:, :, members] = product.transpose(2, 0, 1)
     named = {SUM_COLUMNS[c]: planes[i] for i, c in enumerate(columns)}
