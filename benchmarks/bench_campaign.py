@@ -189,9 +189,12 @@ def main() -> None:
     args = parser.parse_args()
     singles, campaign = prepare(args.recordings)
     sys.path.insert(0, str(ROOT))
+    from pytest_hevval.core.kernel import KERNEL_ENV, describe
+
     print(
         f"{args.recordings} recordings of {SECONDS / 60:g} min at {RATE_HZ:g} Hz, "
-        f"{CHANNELS} signals; load average {os.getloadavg()[0]:.2f}"
+        f"{CHANNELS} signals; load average {os.getloadavg()[0]:.2f}; "
+        f"{KERNEL_ENV}={os.environ.get(KERNEL_ENV, '(unset)')}; {describe()}"
     )
     if args.part in ("all", "intervals"):
         interval_cost(campaign, args.repeat)

@@ -7,6 +7,10 @@ spec (the longest any of its signals needs) and one matrix of draws. Their inter
 the dependence between signals, which averaging per-signal intervals would lose.
 Characteristics that are not ratios of the block sums (registered ones, the standard metrics)
 enter each replicate at their point value.
+
+The work is batched across the spec's signals: one product with the draws for all signals
+that share a block length, λ for all of them at once, and one quantile call for every λ
+interval of the spec and one for every λ7 and Φ.
 """
 
 from __future__ import annotations
@@ -18,16 +22,7 @@ from typing import Any
 import numpy as np
 
 from .core.tree import ScoredNode, global_metric_arrays, iter_nodes, replicate_tree
-from .core.uncertainty import (
-    BlockSums,
-    Interval,
-    coarsen,
-    percentile_interval,
-    percentile_intervals,
-    replicate_lambdas,
-    resample_counts,
-    signal_intervals,
-)
+from .core.uncertainty import BlockSums, Interval, stacked_intervals, stacked_replicates
 
 __all__ = ["SpecConfidence", "spec_confidence"]
 
@@ -62,29 +57,43 @@ def spec_confidence(
     share its sums); ``blocks`` and ``reference_range`` are keyed by that name.
     """
     nodes = list(iter_nodes(roots))
-    common = max(blocks[signature_of(node.path)].per_block for node in nodes)
-    own: dict[Hashable, dict[str, Interval]] = {}
-    replicated: dict[Hashable, dict[str, Any]] = {}
+    first: dict[Hashable, ScoredNode] = {}
     for node in nodes:
-        key = signature_of(node.path)
-        if key in own:
-            continue
-        table = coarsen(blocks[key].table, common)
-        counts = resample_counts(table.values.shape[0])
-        replicated[key] = replicate_lambdas(
-            table, counts, reference_range[key] * blocks[key].scale, correlation
-        )
-        if blocks[key].per_block == common:  # its own blocks are the common ones
-            own[key] = percentile_intervals(node.lambdas, replicated[key])
-        else:
-            own[key] = signal_intervals(
-                blocks[key], node.lambdas, reference_range[key], correlation
-            )
+        first.setdefault(signature_of(node.path), node)
+    keys = list(first)
+    common = max(blocks[key].per_block for key in keys)
+    # Replicate λ at the common block length for every signal (λ7, Φ, and the own intervals
+    # of the signals whose blocks are the common ones), and at its own length for every other
+    # signal: one product per distinct length, λ for all in one pass.
+    others = [key for key in keys if blocks[key].per_block != common]
+    requests = [(key, common) for key in keys] + [(key, blocks[key].per_block) for key in others]
+    lambdas = stacked_replicates(
+        [blocks[key].table for key, _ in requests],
+        [per_block for _, per_block in requests],
+        [reference_range[key] * blocks[key].scale for key, _ in requests],
+        correlation,
+    )
+    common_column = {key: i for i, key in enumerate(keys)}
+    own_column = {**common_column, **{key: len(keys) + i for i, key in enumerate(others)}}
+    names = list(lambdas)
+    # (characteristic, column, replicate): each column's replicates contiguous for the tree.
+    replicated = np.ascontiguousarray(np.stack([lambdas[name].T for name in names]))
+
+    own_columns = [own_column[key] for key in keys]
+    own_table = replicated[:, own_columns, :].reshape(len(names) * len(keys), -1)
+    own_found = stacked_intervals(
+        [first[key].lambdas[name] for name in names for key in keys], own_table
+    )
+    own = {
+        key: {name: own_found[a * len(keys) + i] for a, name in enumerate(names)}
+        for i, key in enumerate(keys)
+    }
 
     def base(path: NodePath) -> dict[str, Any]:
         node = by_path[path]
+        column = common_column[signature_of(path)]
         fixed = {name: value for name, value in node.lambdas.items() if name != "emergent"}
-        return {**fixed, **replicated[signature_of(path)]}
+        return {**fixed, **{name: replicated[a, column] for a, name in enumerate(names)}}
 
     by_path = {node.path: node for node in nodes}
     per_node: dict[NodePath, dict[str, Any]] = {}
@@ -93,17 +102,27 @@ def spec_confidence(
     phi_replicates = global_metric_arrays(
         ((node.alpha, per_node[node.path]) for node in nodes), beta
     )
+    # λ7 of a leaf is the constant 1 (no replicates): its interval is the point.
+    varying = [node for node in nodes if np.ndim(per_node[node.path]["emergent"]) > 0]
+    found = stacked_intervals(
+        [node.lambdas["emergent"] for node in varying] + [phi],
+        np.stack([per_node[node.path]["emergent"] for node in varying] + [phi_replicates]),
+    )
+    emergent = {node.path: found[i] for i, node in enumerate(varying)}
     signals = {
         node.path: {
             **own[signature_of(node.path)],
-            "emergent": percentile_interval(
-                node.lambdas["emergent"], np.atleast_1d(per_node[node.path]["emergent"])
-            ),
+            "emergent": emergent.get(node.path) or _fixed(node.lambdas["emergent"], 1.0),
         }
         for node in nodes
     }
     return SpecConfidence(
         signals=signals,
-        phi=percentile_interval(phi, phi_replicates),
+        phi=found[-1],
         block_samples={node.path: blocks[signature_of(node.path)].block_samples for node in nodes},
     )
+
+
+def _fixed(value: float, replicate: float) -> Interval:
+    """The interval of a value whose every replicate is ``replicate``."""
+    return Interval(value, min(value, replicate), max(value, replicate))

@@ -22,7 +22,7 @@ from .confidence import spec_confidence
 from .core.characteristics import SignalCharacteristics, signal_characteristics
 from .core.registry import compute_characteristic
 from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
-from .core.uncertainty import BlockSums, block_sums, fine_block_size, fine_labels
+from .core.uncertainty import BlockSums, block_sums_many
 from .core.upooling import u_distribution_of
 from .data.align import AlignedData, align_records
 from .data.quality import assess, fail_on, mask_on_grid
@@ -513,17 +513,22 @@ def _local_results(
 def _block_sums(
     values: Mapping[Signature, tuple[FloatArray, FloatArray]], workers: int | None
 ) -> dict[Signature, BlockSums]:
-    """Each distinct signal's sums over consecutive fine blocks, for its bootstrap intervals."""
+    """Each distinct signal's sums over consecutive fine blocks, for its bootstrap intervals.
+
+    The signals are summed as stacks, one stack per scoring thread.
+    """
     if not values:
         return {}
-    n = next(iter(values.values()))[0].shape[0]
-    labels = fine_labels(n, fine_block_size(n))
+    signatures = list(values)
+    threads = max(1, min(_scoring_threads(workers), len(signatures)))
+    size = -(-len(signatures) // threads)
+    shares = [signatures[i : i + size] for i in range(0, len(signatures), size)]
 
-    def sums(signature: Signature) -> tuple[Signature, BlockSums]:
-        ref, sim = values[signature]
-        return signature, block_sums(ref, sim, labels)
+    def sums(share: list[Signature]) -> list[tuple[Signature, BlockSums]]:
+        found = block_sums_many([values[signature] for signature in share])
+        return list(zip(share, found, strict=True))
 
-    return dict(_per_signal(sums, list(values), _scoring_threads(workers)))
+    return dict(pair for share in _per_signal(sums, shares, threads) for pair in share)
 
 
 def _add_intervals(

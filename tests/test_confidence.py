@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from pytest_hevval import cli
+from pytest_hevval.core.uncertainty import block_sums, signal_intervals
 from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import SpecError
 from pytest_hevval.history.compare import compare, parse_compare_fail, regressions
@@ -45,6 +46,24 @@ def test_every_lambda_and_phi_carry_an_interval_around_their_value(tmp_path: Pat
     # A node with children has a real λ7, and so a real interval.
     emergent = result.signal("E/P").intervals["emergent"]
     assert emergent.low < emergent.high
+
+
+def test_batched_intervals_equal_each_signal_scored_alone(tmp_path: Path) -> None:
+    """The spec's signals are resampled together; each λ1–λ6 interval is still the one its
+    signal gets alone from its own blocks (signal_intervals), to rounding."""
+    write_data(tmp_path, fault="leaf")
+    spec = parse_spec_text(TREE_SPEC, tmp_path / "pack.hevval.yaml")
+    evaluation = evaluate_spec(spec, keep_arrays=True)
+    for signal in evaluation.result.signals:
+        ref, sim = evaluation.arrays[signal.path]
+        span = evaluation.characteristics[signal.path].reference_range
+        alone = signal_intervals(block_sums(ref, sim), signal.lambdas, span)
+        assert block_sums(ref, sim).block_samples == signal.block_samples
+        for name, interval in alone.items():
+            batched = signal.intervals[name]
+            assert batched.value == interval.value
+            assert batched.low == pytest.approx(interval.low, abs=1e-12)
+            assert batched.high == pytest.approx(interval.high, abs=1e-12)
 
 
 def test_intervals_survive_json_and_are_the_same_on_every_run(tmp_path: Path) -> None:

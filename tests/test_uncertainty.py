@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 from pytest_hevval.core.characteristics import signal_characteristics
-from pytest_hevval.core.local import group_lambdas, labelled_table
+from pytest_hevval.core.local import SUM_COLUMNS, group_lambdas, labelled_table
 from pytest_hevval.core.uncertainty import (
     FINE_BLOCKS,
     MAX_BLOCKS,
@@ -18,12 +19,20 @@ from pytest_hevval.core.uncertainty import (
     BlockSums,
     block_length,
     block_sums,
+    block_sums_many,
     coarsen,
     fine_block_size,
+    fine_labels,
+    lag1_autocorrelation,
     percentile_interval,
+    replicate_lambdas,
+    replicate_sums,
     replicate_table,
     resample_counts,
     signal_intervals,
+    stacked_intervals,
+    stacked_replicates,
+    sums_lambdas,
 )
 from tests.strategies import signal_pairs
 
@@ -150,3 +159,123 @@ def test_interval_holds_its_value_and_prints_as_documented() -> None:
         "low": 0.5,
         "high": 0.5,
     }
+
+
+# -- the batched path the engine takes -----------------------------------------------------
+
+
+@given(st.lists(signal_pairs(min_size=3, max_size=40), min_size=1, max_size=4))
+@settings(max_examples=60, deadline=None)
+def test_stacked_block_sums_are_the_per_signal_pass_bit_for_bit(
+    pairs: list[tuple[np.ndarray, np.ndarray]],
+) -> None:
+    n = min(ref.shape[0] for ref, _ in pairs)
+    pairs = [(ref[:n], sim[:n]) for ref, sim in pairs]
+    for (ref, sim), blocks in zip(pairs, block_sums_many(pairs, compiled=False), strict=True):
+        fine = fine_block_size(n)
+        table = labelled_table(ref, sim, fine_labels(n, fine), math.ceil(n / fine), compiled=False)
+        assert blocks.fine == fine
+        assert blocks.table.shift == table.shift
+        np.testing.assert_array_equal(blocks.table.values, table.values)
+        assert blocks.rho == lag1_autocorrelation(ref - sim)
+
+
+def test_stacked_block_sums_cover_whole_and_partial_fine_blocks() -> None:
+    rng = np.random.default_rng(3)
+    for n in (4_096, 4_097, 10_001, 12_288):
+        pairs = [(rng.normal(size=n), rng.normal(size=n)) for _ in range(3)]
+        for (ref, sim), blocks in zip(pairs, block_sums_many(pairs, compiled=False), strict=True):
+            fine = fine_block_size(n)
+            table = labelled_table(ref, sim, fine_labels(n, fine), math.ceil(n / fine))
+            np.testing.assert_array_equal(blocks.table.values, table.values)
+            assert blocks.table.values[:, 0].sum() == n
+
+
+def test_huge_values_are_summed_at_a_power_of_two_scale_signal_by_signal() -> None:
+    rng = np.random.default_rng(4)
+    small = (rng.normal(size=500), rng.normal(size=500))
+    huge = (1e300 * rng.normal(size=500), 1e300 * rng.normal(size=500))
+    one, other = block_sums_many([small, huge], compiled=False)
+    assert one.scale == 1.0
+    assert other.scale != 1.0
+    assert math.log2(other.scale).is_integer()
+    assert np.all(np.isfinite(other.table.values))
+    assert np.array_equal(one.table.values, block_sums(*small).table.values)
+
+
+@given(signal_pairs(min_size=30), st.sampled_from(["xcorr", "pearson"]))
+@settings(max_examples=60, deadline=None)
+def test_sums_lambdas_are_group_lambdas(pair: tuple[np.ndarray, np.ndarray], kind: str) -> None:
+    ref, sim = pair
+    table = coarsen(block_sums(ref, sim).table, 3)
+    span = float(np.ptp(ref))
+    columns = {name: table.values[:, c] for c, name in enumerate(SUM_COLUMNS)}
+    found = sums_lambdas(columns, table.shift, span, kind)
+    expected = group_lambdas(table.sums(), span, kind)  # type: ignore[arg-type]
+    assert list(found) == list(expected)
+    for name in expected:
+        np.testing.assert_allclose(found[name], expected[name], rtol=0, atol=1e-12)
+
+
+@given(
+    st.lists(signal_pairs(min_size=40, max_size=120), min_size=1, max_size=5),
+    st.lists(st.integers(1, 6), min_size=5, max_size=5),
+    st.sampled_from(["xcorr", "pearson"]),
+)
+@settings(max_examples=40, deadline=None)
+def test_batched_lambdas_equal_per_signal_lambdas(
+    pairs: list[tuple[np.ndarray, np.ndarray]], per_blocks: list[int], kind: str
+) -> None:
+    n = min(ref.shape[0] for ref, _ in pairs)
+    pairs = [(ref[:n], sim[:n]) for ref, sim in pairs]
+    blocks = block_sums_many(pairs, compiled=False)
+    spans = [float(np.ptp(ref)) or 1.0 for ref, _ in pairs]
+    # Every signal twice: at a length shared by all, and at its own.
+    tables = [b.table for b in blocks] * 2
+    lengths = [per_blocks[0]] * len(blocks) + per_blocks[: len(blocks)]
+    ranges = [s * b.scale for s, b in zip(spans, blocks, strict=True)] * 2
+    found = stacked_replicates(tables, lengths, ranges, kind)
+    for column, (table, length, span) in enumerate(zip(tables, lengths, ranges, strict=True)):
+        coarse = coarsen(table, length)
+        counts = resample_counts(coarse.values.shape[0])
+        one = replicate_lambdas(coarse, counts, span, kind)
+        # Pearson's variance of a replicate drawn from constant blocks is rounding noise, whose
+        # sign another summation order may flip (λ1 then jumps between 0 and 1): λ1 is
+        # compared where both variances are well above rounding.
+        sums = replicate_table(coarse, counts).sums()
+        n = np.maximum(sums.n, 1)
+        sure = np.ones(counts.shape[0], dtype=bool)
+        if kind == "pearson":
+            for total, square in ((sums.ref_sum, sums.ref_sq), (sums.sim_sum, sums.sim_sq)):
+                sure &= square - total**2 / n > 1e-9 * square
+        for name, values in one.items():
+            keep = sure if name == "lag_correlation" else slice(None)
+            np.testing.assert_allclose(
+                found[name][:, column][keep], values[keep], rtol=0, atol=1e-12
+            )
+
+
+@pytest.mark.parametrize(
+    ("replicates", "blocks", "width"),
+    [(1000, 125, 10), (1000, 40, 160), (7, 3, 2), (1000, 128, 2100)],
+)
+def test_replicate_sums_cut_into_small_products_equal_one_product(
+    replicates: int, blocks: int, width: int
+) -> None:
+    rng = np.random.default_rng(5)
+    counts = rng.integers(0, 4, (replicates, blocks)).astype(np.float64)
+    rows = rng.normal(size=(blocks, width))
+    np.testing.assert_allclose(replicate_sums(counts, rows), counts @ rows, rtol=1e-13, atol=1e-12)
+
+
+def test_stacked_intervals_are_percentile_intervals() -> None:
+    rng = np.random.default_rng(6)
+    table = rng.normal(size=(5, 1000))
+    table[2, 10] = np.nan  # a row with a non-finite replicate is handled on its own
+    values = [0.1, 5.0, 0.0, float("nan"), -0.2]
+    found = stacked_intervals(values, table)
+    for value, row, interval in zip(values, table, found, strict=True):
+        expected = percentile_interval(value, row)
+        assert interval.value == expected.value or math.isnan(value)
+        assert interval.low == pytest.approx(expected.low, abs=1e-15, nan_ok=True)
+        assert interval.high == pytest.approx(expected.high, abs=1e-15, nan_ok=True)

@@ -28,15 +28,24 @@ Choices, each documented in ``docs/uncertainty.md``:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
 
+from ..errors import DegenerateSignalError
+from . import kernel
 from .characteristics import power_of_two_scale
-from .local import CorrelationKind, SumTable, group_lambdas, labelled_table
+from .local import (
+    MIN_GROUP_SAMPLES,
+    SHIFT_SAMPLES,
+    SUM_COLUMNS,
+    SumTable,
+    _coefficient,
+    labelled_table,
+)
 
 __all__ = [
     "CONFIDENCE",
@@ -48,6 +57,7 @@ __all__ = [
     "Interval",
     "block_length",
     "block_sums",
+    "block_sums_many",
     "coarsen",
     "fine_block_size",
     "fine_labels",
@@ -55,9 +65,13 @@ __all__ = [
     "percentile_interval",
     "percentile_intervals",
     "replicate_lambdas",
+    "replicate_sums",
     "replicate_table",
     "resample_counts",
     "signal_intervals",
+    "stacked_intervals",
+    "stacked_replicates",
+    "sums_lambdas",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -78,6 +92,17 @@ MAX_BLOCKS = 128
 FINE_BLOCKS = 4096
 #: The seed of the draws: one record, one interval.
 SEED = 20_140_601
+#: Multiply-adds per matrix product at most. OpenBLAS runs a dgemm on its own threads above
+#: 65,536 × 4 of them (measured here: from about 600,000); those threads spin while they wait,
+#: and next to the engine's two threads on two cores one replicate product of a signal
+#: (1,000 × 125 × 10) cost many times its single-thread CPU time. Larger products are cut into
+#: pieces of at most this size, batched into one ``matmul`` call.
+GEMM_LIMIT = 1 << 18
+#: The fine-block pass of records up to this many samples runs on all signals of a record at
+#: once (one set of array operations on a stack of signals, in chunks of about
+#: :data:`STACK_ELEMENTS` samples); a longer record is read signal by signal.
+STACK_SAMPLES = 1 << 16
+STACK_ELEMENTS = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -168,26 +193,124 @@ class BlockSums:
 def block_sums(
     ref: FloatArray,
     sim: FloatArray,
-    labels: IntArray | None = None,
     *,
     compiled: bool | None = None,
 ) -> BlockSums:
-    """A signal's rows of sums over fine blocks (one pass), with its residual's ρ.
+    """A signal's rows of sums over fine blocks (one pass), with its residual's ρ."""
+    return block_sums_many([(ref, sim)], compiled=compiled)[0]
 
-    ``labels`` are :func:`fine_labels` of the record, passed in when many signals share it.
+
+def block_sums_many(
+    pairs: Sequence[tuple[FloatArray, FloatArray]],
+    *,
+    compiled: bool | None = None,
+) -> list[BlockSums]:
+    """:func:`block_sums` of several signals of one record (all of one length), in order.
+
+    Records up to :data:`STACK_SAMPLES` samples are summed for all signals at once, as a stack;
+    longer ones signal by signal, on the compiled pass where
+    :func:`pytest_hevval.core.kernel.kernel_for` (decided once for all) or ``compiled`` says.
     """
-    n = int(np.asarray(ref).shape[0])
-    fine = fine_block_size(n)
-    if labels is None:
+    if not pairs:
+        return []
+    n = int(np.asarray(pairs[0][0]).shape[0])
+    for ref, sim in pairs:
+        if np.asarray(ref).shape != (n,) or np.asarray(sim).shape != (n,):
+            raise DegenerateSignalError(
+                f"every signal of a record must be 1-D and {n} samples long "
+                f"(got {np.asarray(ref).shape}, {np.asarray(sim).shape})"
+            )
+    if compiled is None:
+        compiled = kernel.kernel_for(n, ("grouped_sums",)) is not None
+    if compiled or n > STACK_SAMPLES:
+        fine = fine_block_size(n)
         labels = fine_labels(n, fine)
-    rows = math.ceil(n / fine)
+        return [_one_block_sums(ref, sim, labels, fine, compiled) for ref, sim in pairs]
+    step = max(1, STACK_ELEMENTS // max(n, 1))
+    out: list[BlockSums] = []
+    for first in range(0, len(pairs), step):
+        out.extend(_stacked_block_sums(pairs[first : first + step], n))
+    return out
+
+
+def _one_block_sums(
+    ref: FloatArray, sim: FloatArray, labels: IntArray, fine: int, compiled: bool
+) -> BlockSums:
+    n = int(np.asarray(ref).shape[0])
     scale = _power_of_two_scale(ref, sim)
     if scale != 1.0:
         ref = np.multiply(ref, scale, dtype=np.float64)
         sim = np.multiply(sim, scale, dtype=np.float64)
-    table = labelled_table(ref, sim, labels, rows, compiled=compiled)
+    table = labelled_table(ref, sim, labels, math.ceil(n / fine), compiled=compiled)
     residual = np.subtract(ref, sim, dtype=np.float64)
     return BlockSums(table, fine, n, lag1_autocorrelation(residual), scale)
+
+
+def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) -> list[BlockSums]:
+    """:func:`labelled_table` over fine blocks for a stack of signals: the same sums (in the
+    order of ``SUM_COLUMNS``, each block's samples added in order as ``np.bincount`` adds them)
+    with a few array operations per column for all signals."""
+    fine = fine_block_size(n)
+    rows = math.ceil(n / fine)
+    r = np.stack([np.asarray(ref, dtype=np.float64) for ref, _ in pairs])
+    s = np.stack([np.asarray(sim, dtype=np.float64) for _, sim in pairs])
+    k = r.shape[0]
+    if n:
+        with np.errstate(invalid="ignore"):
+            peaks = np.maximum(np.max(np.abs(r), axis=1), np.max(np.abs(s), axis=1))
+    else:
+        peaks = np.zeros(k)
+    scales = np.array([power_of_two_scale(p) if math.isfinite(p) else 1.0 for p in peaks.tolist()])
+    if np.any(scales != 1.0):  # exact powers of two
+        r = r * scales[:, None]
+        s = s * scales[:, None]
+    e = r - s
+    shift = np.mean(e[:, :SHIFT_SAMPLES], axis=1) if n else np.zeros(k)
+    tables = np.empty((k, rows, len(SUM_COLUMNS)), dtype=np.float64)
+    tables[:, :, 0] = fine
+    if rows:
+        tables[:, -1, 0] = n - (rows - 1) * fine
+    d = e - shift[:, None]
+    _fine_sums(d, fine, tables[:, :, 1])
+    _fine_sums(d * d, fine, tables[:, :, 2])
+    _fine_sums(np.abs(e), fine, tables[:, :, 3])
+    _fine_sums(r, fine, tables[:, :, 4])
+    _fine_sums(s, fine, tables[:, :, 5])
+    _fine_sums(r * r, fine, tables[:, :, 6])
+    _fine_sums(s * s, fine, tables[:, :, 7])
+    _fine_sums(r * s, fine, tables[:, :, 8])
+    # λ2: the central-difference signs of reference and model agree (both ends are 0 on both
+    # sides, so they agree); y[i+1] − y[i−1] > 0 exactly when y[i+1] > y[i−1].
+    matches = np.ones((k, n), dtype=np.float64)
+    if n > 2:
+        r2, r0, s2, s0 = r[:, 2:], r[:, :-2], s[:, 2:], s[:, :-2]
+        matches[:, 1:-1] = ((r2 > r0) == (s2 > s0)) & ((r2 < r0) == (s2 < s0))
+    _fine_sums(matches, fine, tables[:, :, 9])
+    rho = [lag1_autocorrelation(row) for row in e]
+    return [
+        BlockSums(SumTable(tables[i], float(shift[i])), fine, n, float(rho[i]), float(scales[i]))
+        for i in range(k)
+    ]
+
+
+def _fine_sums(x: FloatArray, fine: int, out: FloatArray) -> None:
+    """Sums of runs of ``fine`` consecutive samples of every row of ``x`` into ``out`` (the
+    last run may be short), each run added left to right as ``np.bincount`` adds it."""
+    n = x.shape[1]
+    whole = (n // fine) * fine
+    runs = whole // fine
+    if runs:
+        if fine == 1:
+            out[:, :runs] = x
+        else:
+            np.add(x[:, 0:whole:fine], x[:, 1:whole:fine], out=out[:, :runs])
+            for offset in range(2, fine):
+                out[:, :runs] += x[:, offset:whole:fine]
+    if whole < n:
+        tail = x[:, whole].copy()
+        for j in range(whole + 1, n):
+            tail += x[:, j]
+        out[:, runs] = tail
 
 
 def _power_of_two_scale(ref: FloatArray, sim: FloatArray) -> float:
@@ -203,13 +326,16 @@ def coarsen(table: SumTable, per_block: int) -> SumTable:
     return SumTable(np.add.reduceat(table.values, starts, axis=0), table.shift)
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=64)
 def resample_counts(blocks: int, replicates: int = REPLICATES, seed: int = SEED) -> FloatArray:
     """How often each block is drawn into each replicate, shape (replicates, blocks).
 
     Every replicate draws ``blocks`` blocks with replacement. One seed, one matrix: signals of
     one record drawn with the same matrix share their blocks, so quantities combining them
-    (λ7, Φ) keep the dependence between signals. Read-only, as it is shared.
+    (λ7, Φ) keep the dependence between signals. Read-only, as it is shared. A spec's signals
+    need a matrix per distinct block count (between :data:`MIN_BLOCKS` and about
+    :data:`MAX_BLOCKS`), so the cache holds 64 of them: at most 64 × 1,000 × 130 × 8 bytes
+    (67 MB), typically a few MB.
     """
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, blocks, size=(replicates, blocks), dtype=np.int64)
@@ -220,17 +346,143 @@ def resample_counts(blocks: int, replicates: int = REPLICATES, seed: int = SEED)
     return counts
 
 
+def replicate_sums(counts: FloatArray, rows: FloatArray) -> FloatArray:
+    """``counts @ rows`` in matrix products of at most :data:`GEMM_LIMIT` multiply-adds each,
+    so BLAS stays on the calling thread."""
+    replicates, blocks = counts.shape
+    width = rows.shape[1]
+    if replicates * blocks * width <= GEMM_LIMIT:
+        return np.asarray(counts @ rows, dtype=np.float64)
+    if blocks * width > GEMM_LIMIT // 8:  # too wide for 8 replicates a product: split columns
+        step = max(1, GEMM_LIMIT // (8 * blocks))
+        return np.concatenate(
+            [replicate_sums(counts, rows[:, a : a + step]) for a in range(0, width, step)], axis=1
+        )
+    per = GEMM_LIMIT // (blocks * width)
+    pieces, rest = divmod(replicates, per)
+    whole = pieces * per
+    head: FloatArray = np.matmul(counts[:whole].reshape(pieces, per, blocks), rows)
+    head = head.reshape(whole, width)
+    if not rest:
+        return head
+    return np.concatenate((head, counts[whole:] @ rows))
+
+
 def replicate_table(blocks: SumTable, counts: FloatArray) -> SumTable:
     """The sums of every replicate record: one row per row of ``counts``."""
-    return SumTable(counts @ blocks.values, blocks.shift)
+    return SumTable(replicate_sums(counts, blocks.values), blocks.shift)
 
 
 def replicate_lambdas(
     blocks: SumTable, counts: FloatArray, reference_range: float, correlation: str = "xcorr"
 ) -> dict[str, FloatArray]:
     """λ1–λ6 of every replicate, keyed by characteristic name."""
-    kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
-    return group_lambdas(replicate_table(blocks, counts).sums(), reference_range, kind)
+    table = replicate_sums(counts, blocks.values)
+    columns = {name: table[:, c] for c, name in enumerate(SUM_COLUMNS)}
+    return sums_lambdas(columns, blocks.shift, reference_range, correlation)
+
+
+def sums_lambdas(
+    columns: Mapping[str, FloatArray],
+    shift: float | FloatArray,
+    reference_range: float | FloatArray,
+    correlation: str = "xcorr",
+) -> dict[str, FloatArray]:
+    """λ1–λ6 from columns of additive sums, elementwise: :meth:`SumTable.sums` and
+    :func:`~pytest_hevval.core.local.group_lambdas` in one, for many signals at once.
+
+    ``columns`` maps the names of ``SUM_COLUMNS`` to arrays of one shape (``ref_sum`` and
+    ``sim_sum`` only for ``pearson``), e.g. (replicates, signals); ``shift`` and
+    ``reference_range`` broadcast against them (one per signal). The same operations in the
+    same order as those two, so the values are theirs.
+    """
+    ranges = np.asarray(reference_range, dtype=np.float64)
+    if not bool(np.all(np.isfinite(ranges) & (ranges > 0))):
+        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
+    k = shift
+    n = np.rint(columns["n"]).astype(np.int64)
+    nf = n.astype(np.float64)
+    shifted_sum, shifted_sq = columns["shifted_sum"], columns["shifted_sq"]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)
+    error_m2 = np.maximum(error_m2, 0.0)
+    sq_error = np.maximum(shifted_sq + 2.0 * k * shifted_sum + nf * k * k, 0.0)
+    small = n < MIN_GROUP_SAMPLES
+    safe_n = np.where(small, 1.0, nf)
+    mae = columns["abs_error"] / safe_n
+    rms = np.maximum(np.sqrt(sq_error / safe_n), mae)
+    error_std = np.sqrt(error_m2 / np.where(small, 1.0, nf - 1.0))
+    if correlation == "pearson":
+        ref_sum, sim_sum = columns["ref_sum"], columns["sim_sum"]
+        cov = columns["cross"] - ref_sum * sim_sum / safe_n
+        var_r = columns["ref_sq"] - ref_sum**2 / safe_n
+        var_s = columns["sim_sq"] - sim_sum**2 / safe_n
+        lag_correlation = _coefficient(cov, var_r, var_s)
+    else:
+        lag_correlation = _coefficient(columns["cross"], columns["ref_sq"], columns["sim_sq"])
+
+    def normalised(error: FloatArray) -> FloatArray:
+        return np.clip(1.0 - error / ranges, 0.0, 1.0)
+
+    values = {
+        "lag_correlation": lag_correlation,
+        "derivative_match": np.rint(columns["sign_matches"]).astype(np.int64) / safe_n,
+        "mae": normalised(mae),
+        "rms": normalised(rms),
+        "anomaly": normalised(rms - mae),
+        "error_std": normalised(error_std),
+    }
+    if not small.any():
+        return values
+    return {name: np.where(small, np.nan, value) for name, value in values.items()}
+
+
+def _needed_columns(correlation: str) -> tuple[int, ...]:
+    """The columns of the sums a replicate needs, as indices into ``SUM_COLUMNS``
+    (``ref_sum`` and ``sim_sum`` only for Pearson's coefficient)."""
+    skip = () if correlation == "pearson" else ("ref_sum", "sim_sum")
+    return tuple(c for c, name in enumerate(SUM_COLUMNS) if name not in skip)
+
+
+def stacked_replicates(
+    tables: Sequence[SumTable],
+    per_blocks: Sequence[int],
+    reference_ranges: Sequence[float],
+    correlation: str = "xcorr",
+) -> dict[str, FloatArray]:
+    """λ1–λ6 of every replicate of several signals of one record: each name maps to an array
+    (replicates, signals), the same values as :func:`replicate_lambdas` of each table coarsened
+    to its ``per_blocks`` entry with the draws of that many blocks.
+
+    Tables of one length merged into blocks of one length share their draws and one product
+    (a table may appear twice, at two block lengths); λ then come in one pass for all.
+    ``reference_ranges`` are the signals' ranges at the scale of their sums.
+    """
+    columns = _needed_columns(correlation)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for i, (table, per_block) in enumerate(zip(tables, per_blocks, strict=True)):
+        groups.setdefault((table.values.shape[0], max(1, int(per_block))), []).append(i)
+    # One plane per column of sums, (replicates, signals): λ then run on contiguous arrays.
+    planes = np.empty((len(columns), REPLICATES, len(tables)), dtype=np.float64)
+    for (rows, per_block), members in groups.items():
+        starts = np.arange(0, rows, per_block)
+        coarse = [np.add.reduceat(tables[i].values, starts, axis=0) for i in members]
+        blocks = coarse[0].shape[0]
+        # blocks × (signals · columns), each signal's needed columns side by side
+        stack = np.stack(coarse, axis=1)[:, :, columns] if len(coarse) > 1 else coarse[0]
+        product = replicate_sums(
+            resample_counts(blocks),
+            stack.reshape(blocks, -1) if len(coarse) > 1 else stack[:, columns],
+        ).reshape(REPLICATES, len(members), len(columns))
+        first, last = members[0], members[-1]
+        if last - first + 1 == len(members):  # consecutive: a view, no index arrays
+            planes[:, :, first : last + 1] = product.transpose(2, 0, 1)
+        else:
+            planes[:, :, members] = product.transpose(2, 0, 1)
+    named = {SUM_COLUMNS[c]: planes[i] for i, c in enumerate(columns)}
+    shifts = np.array([table.shift for table in tables], dtype=np.float64)
+    ranges = np.asarray(reference_ranges, dtype=np.float64)
+    return sums_lambdas(named, shifts, ranges, correlation)
 
 
 def signal_intervals(
@@ -242,14 +494,17 @@ def signal_intervals(
     per_block: int | None = None,
 ) -> dict[str, Interval]:
     """λ1–λ6 of one signal with their intervals, from its own block length by default."""
-    table = coarsen(blocks.table, blocks.per_block if per_block is None else per_block)
-    replicates = replicate_lambdas(
-        table,
-        resample_counts(table.values.shape[0]),
-        reference_range * blocks.scale,
+    replicates = stacked_replicates(
+        [blocks.table],
+        [blocks.per_block if per_block is None else per_block],
+        [reference_range * blocks.scale],
         correlation,
     )
-    return percentile_intervals(point, replicates)
+    names = list(replicates)
+    found = stacked_intervals(
+        [point[name] for name in names], np.stack([replicates[name][:, 0] for name in names])
+    )
+    return dict(zip(names, found, strict=True))
 
 
 def percentile_intervals(
@@ -257,19 +512,29 @@ def percentile_intervals(
 ) -> dict[str, Interval]:
     """:func:`percentile_interval` of every named value, with one quantile call for all."""
     names = list(replicates)
-    table = np.column_stack([np.asarray(replicates[name], dtype=np.float64) for name in names])
+    table = np.stack([np.asarray(replicates[name], dtype=np.float64) for name in names])
+    found = stacked_intervals([point[name] for name in names], table)
+    return dict(zip(names, found, strict=True))
+
+
+def stacked_intervals(values: Sequence[float], replicates: FloatArray) -> list[Interval]:
+    """:func:`percentile_interval` of every value, with the replicates of ``values[i]`` in row
+    ``i`` of ``replicates``; one quantile call for all rows whose replicates are all finite."""
+    table = np.asarray(replicates, dtype=np.float64)
     tail = (1.0 - CONFIDENCE) / 2.0
-    finite_columns = np.asarray(np.isfinite(table).all(axis=0), dtype=bool)
-    with np.errstate(invalid="ignore"):
-        bounds = np.quantile(table, [tail, 1.0 - tail], axis=0)
-    out = {}
-    for k, name in enumerate(names):
-        value = point[name]
-        if finite_columns[k] and math.isfinite(value):
-            low, high = float(bounds[0, k]), float(bounds[1, k])
-            out[name] = Interval(value, min(low, value), max(high, value))
+    finite_rows = np.flatnonzero(np.isfinite(table).all(axis=1))
+    if finite_rows.shape[0] == table.shape[0]:
+        bounds = np.quantile(table, [tail, 1.0 - tail], axis=1)
+    else:
+        bounds = np.full((2, table.shape[0]), np.nan)
+        bounds[:, finite_rows] = np.quantile(table[finite_rows], [tail, 1.0 - tail], axis=1)
+    out = []
+    for row, value in enumerate(values):
+        low, high = float(bounds[0, row]), float(bounds[1, row])
+        if math.isfinite(value) and math.isfinite(low):
+            out.append(Interval(value, min(low, value), max(high, value)))
         else:
-            out[name] = percentile_interval(value, table[:, k])
+            out.append(percentile_interval(value, table[row]))
     return out
 
 
