@@ -6,7 +6,7 @@ Run from the project root::
     python benchmarks/bench_scale.py --full           # the targets (needs ~8 GB disk, ~10 GB RAM)
     python benchmarks/bench_scale.py --full --only e2e,compare
 
-Three parts, each printed with the sizes it ran at:
+Four parts, each printed with the sizes it ran at:
 
 ``e2e``
     One spec of 600 signals over 1 h at 100 Hz (360,000 samples × 600 channels × 2 sides),
@@ -18,6 +18,9 @@ Three parts, each printed with the sizes it ran at:
     threads. Targets: end to end ≤ 1.1 × that read + core and ≤ 8 s for Parquet on two cores,
     peak RSS ≤ 1.3 × the loaded column values. The files are read once before the runs so
     that they start from a warm page cache; that read is timed and printed.
+``quality``
+    The data-quality checks (:func:`pytest_hevval.data.quality.assess`) of the e2e reference's
+    channels alone, read from Parquet, on one and on two threads.
 ``dask``
     100 specs of 10 min at 10 Hz with 20 signals each: serial in one process against
     :func:`pytest_hevval.distributed.evaluate_on_dask` on a ``LocalCluster`` of 2 worker
@@ -180,8 +183,10 @@ def _rss_kib(field: str) -> int:
     return 0
 
 
-def child_e2e(spec_path: str) -> None:
-    """Evaluate one spec as ``hevval run`` does; print measurements as JSON."""
+def child_e2e(spec_path: str, intervals: bool = True) -> None:
+    """Evaluate one spec as ``hevval run`` does; print measurements as JSON.
+
+    ``intervals``: False as ``--hevval-no-intervals`` (no bootstrap intervals)."""
     from pytest_hevval.engine import DataCache, evaluate_spec
     from pytest_hevval.spec.load import load_spec
 
@@ -196,7 +201,9 @@ def child_e2e(spec_path: str) -> None:
     reference = cache.read(spec.reference, spec.reference_columns())
     model = cache.read(spec.model, spec.model_columns())
     read_done = time.perf_counter()
-    evaluation = evaluate_spec(spec, cache=cache, rootdir=Path(spec_path).parent)
+    evaluation = evaluate_spec(
+        spec, cache=cache, rootdir=Path(spec_path).parent, intervals=intervals
+    )
     finished = time.perf_counter()
     arrays: dict[int, int] = {}
     for record in (reference, model):
@@ -300,11 +307,18 @@ def _read_through(path: Path) -> None:
 
 
 def part_e2e(
-    signals: int, duration_s: float, rate_hz: float, formats: tuple[str, ...] = ("parquet", "mf4")
+    signals: int,
+    duration_s: float,
+    rate_hz: float,
+    formats: tuple[str, ...] = ("parquet", "mf4"),
+    intervals: bool = True,
 ) -> None:
     folder = e2e_data(signals, duration_s, rate_hz)
     n = int(duration_s * rate_hz)
-    print(f"\n== e2e: one spec, {signals} signals × {n:,} samples × 2 sides ==")
+    print(
+        f"\n== e2e: one spec, {signals} signals × {n:,} samples × 2 sides"
+        f"{'' if intervals else ', without bootstrap intervals'} =="
+    )
     for fmt in formats:
         spec = folder / f"{fmt}.hevval.yaml"
         paths = [folder / f"{side}.{fmt}" for side in ("ref", "sim")]
@@ -318,7 +332,9 @@ def part_e2e(
         runs = []
         floors = []
         for _ in range(2):
-            runs.append(_timed_child("--child-e2e", str(spec)))
+            runs.append(
+                _timed_child("--child-e2e", str(spec), *([] if intervals else ["--no-intervals"]))
+            )
             floors.append(_timed_child("--child-floor", str(spec)))
         process_s, m = min(runs, key=lambda r: r[0])
         floor_process_s, f = min(floors, key=lambda r: r[0])
@@ -344,6 +360,30 @@ def part_e2e(
             f"yardstick peak RSS {f['hwm_mib'] / 1024:.2f} GiB\n"
             f"  against this run's own read + the yardstick's core "
             f"{m['read_s'] + f['core_s']:.1f} s: {m['wall_s'] / (m['read_s'] + f['core_s']):.2f}×"
+        )
+
+
+def part_quality(signals: int, duration_s: float, rate_hz: float, repeat: int = 3) -> None:
+    """The data-quality checks of the e2e reference alone, on one and on two threads."""
+    from pytest_hevval.data.quality import QualityLimits, assess
+    from pytest_hevval.data.readers import read_record
+    from pytest_hevval.data.record import SourceOptions
+    from pytest_hevval.engine import _tune_allocator
+
+    folder = e2e_data(signals, duration_s, rate_hz)
+    n = int(duration_s * rate_hz)
+    _tune_allocator()  # as evaluate_spec does: column-sized temporaries stay in the heap
+    columns = [f"c{i:03d}" for i in range(signals)]
+    record = read_record(str(folder / "ref.parquet"), columns, SourceOptions(time="time"))
+    print(f"\n== quality: data-quality checks of {signals} reference channels × {n:,} samples ==")
+    for threads in (1, 2) * repeat:
+        cpu = time.process_time()
+        started = time.perf_counter()
+        found = assess(record, columns, QualityLimits(), threads=threads)
+        wall = time.perf_counter() - started
+        print(
+            f"  {threads} thread(s): wall {wall:.3f} s, CPU {time.process_time() - cpu:.3f} s, "
+            f"{len(found)} findings; load average {os.getloadavg()[0]:.1f}"
         )
 
 
@@ -488,11 +528,13 @@ def part_compare(n_large: int, n_iso: int) -> None:
 SIZES = {
     "quick": {
         "e2e": (60, 600.0, 100.0),
+        "quality": (60, 600.0, 100.0),
         "dask": (20, 20, 600.0, 10.0),
         "compare": (60_000, 2_000),
     },
     "full": {
         "e2e": (600, 3600.0, 100.0),
+        "quality": (600, 3600.0, 100.0),
         "dask": (100, 20, 600.0, 10.0),
         "compare": (360_000, 4_000),
     },
@@ -504,15 +546,22 @@ def main() -> None:
     size = parser.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_true", help="small sizes (default)")
     size.add_argument("--full", action="store_true", help="the target sizes")
-    parser.add_argument("--only", default="e2e,dask,compare", help="comma-separated parts")
+    parser.add_argument(
+        "--only", default="e2e,dask,compare", help="comma-separated parts (also: quality)"
+    )
     parser.add_argument(
         "--formats", default="parquet,mf4", help="e2e: comma-separated formats (parquet, mf4)"
+    )
+    parser.add_argument(
+        "--no-intervals",
+        action="store_true",
+        help="e2e: score without the bootstrap intervals (as --hevval-no-intervals)",
     )
     parser.add_argument("--child-e2e", help=argparse.SUPPRESS)
     parser.add_argument("--child-floor", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child_e2e:
-        child_e2e(args.child_e2e)
+        child_e2e(args.child_e2e, intervals=not args.no_intervals)
         return
     if args.child_floor:
         child_floor(args.child_floor)
@@ -525,7 +574,9 @@ def main() -> None:
     print(f"python {sys.version.split()[0]}, {os.cpu_count()} cores, numpy {np.__version__}")
     if "e2e" in parts:
         formats = tuple(f.strip() for f in args.formats.split(",") if f.strip())
-        part_e2e(*sizes["e2e"], formats=formats)
+        part_e2e(*sizes["e2e"], formats=formats, intervals=not args.no_intervals)
+    if "quality" in parts:
+        part_quality(*sizes["quality"])
     if "dask" in parts:
         part_dask(*sizes["dask"])
     if "compare" in parts:

@@ -352,7 +352,7 @@ def _evaluate(
     reference = cache.read(spec.reference, spec.reference_columns())
     model_record, model_info = _load_model(spec, reference, cache, folders)
     nodes = list(spec.walk())
-    aligned = _align(spec, nodes, reference, model_record)
+    aligned = _align(spec, nodes, reference, model_record, workers)
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
     fused = _fused_characteristics(spec, unique, values, dt, workers)
@@ -415,6 +415,7 @@ def _align(
     nodes: list[tuple[int, NodePath, SignalSpec]],
     reference: Record,
     model_record: Record,
+    workers: int | None = None,
 ) -> AlignedData:
     """Both records on one time grid, with the columns every signal reads."""
     ref_columns: set[str] = set()
@@ -425,7 +426,10 @@ def _align(
     for expression in _local_expressions(spec):
         ref_columns.update(_columns_of(expression, reference))
     alignment = spec.alignment
-    findings = assess(reference, sorted(ref_columns), spec.data_quality)
+    # On the scoring threads: the channels' values are examined side by side.
+    findings = assess(
+        reference, sorted(ref_columns), spec.data_quality, threads=_scoring_threads(workers)
+    )
     if spec.data_quality.action == "error":
         fail_on(findings, reference.source)
     aligned = align_records(

@@ -156,3 +156,47 @@ def test_reports_show_the_findings(tmp_path: Path) -> None:
     markdown = render_markdown(payload)
     assert "**Data quality of" in markdown
     assert "straight-line fill at 39.3–199.1 s" in markdown
+
+
+def test_a_shared_time_array_is_examined_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    from pytest_hevval.data import quality
+
+    examined: list[int] = []
+    real = quality._time_spans
+
+    def counted(time: np.ndarray, limits: QualityLimits) -> object:
+        examined.append(time.shape[0])
+        return real(time, limits)
+
+    monkeypatch.setattr(quality, "_time_spans", counted)
+    shared = np.concatenate([np.arange(0.0, 100.0, 0.1), np.arange(110.0, 200.0, 0.1)])
+    own = np.arange(0.0, 50.0, 0.1)
+    rng = np.random.default_rng(1)
+    record = _record(
+        **{f"s{i}": (shared, rng.normal(0.0, 1.0, shared.shape[0])) for i in range(6)},
+        own=(own, rng.normal(0.0, 1.0, own.shape[0])),
+    )
+    for threads in (1, 2):
+        examined.clear()
+        found = assess(record, record.channels, QualityLimits(), threads=threads)
+        assert sorted(examined) == [own.shape[0], shared.shape[0]]
+        # ... yet every channel on the shared time array reports its gap, in channel order.
+        assert [(f.channel, f.kind) for f in found] == [(f"s{i}", "time gap") for i in range(6)]
+        assert {(f.start_s, f.stop_s) for f in found} == {(float(shared[999]), 110.0)}
+
+
+def test_findings_do_not_depend_on_the_thread_count() -> None:
+    t = np.arange(0.0, 1000.0, 0.1)
+    rng = np.random.default_rng(2)
+    channels = {}
+    for i in range(8):
+        values = 50.0 + rng.normal(0.0, 1.0, t.shape[0])
+        values[1000 * i : 1000 * i + 300] = np.nan
+        values[5000 : 5000 + 500 * i] = 42.0
+        channels[f"c{i}"] = (t, values)
+    record = _record(**channels)
+    limits = QualityLimits(flat_run_s=20.0)
+    one = assess(record, record.channels, limits, threads=1)
+    assert {f.kind for f in one} == {"NaN run", "flat line"}
+    assert assess(record, record.channels, limits, threads=2) == one
+    assert assess(record, record.channels, limits, threads=3) == one

@@ -11,6 +11,7 @@ the bad stretches) or ``error`` (the spec errors, saying the measurement is at f
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -87,12 +88,19 @@ class Finding:
         )
 
 
+def _run_bounds(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """Starts and stops ([start, stop)) of the runs of True, as index arrays."""
+    if not mask.any():
+        empty = np.empty(0, dtype=np.intp)
+        return empty, empty
+    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
+    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+
+
 def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     """[start, stop) of each run of True."""
-    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    return list(
-        zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True)
-    )
+    starts, stops = _run_bounds(mask)
+    return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
 def _long_runs(
@@ -100,40 +108,78 @@ def _long_runs(
 ) -> list[tuple[int, int]]:
     """Runs of ``mask`` (over samples, or over steps when ``widen`` is 1 or 2) lasting at least
     ``seconds``, as sample index ranges [start, stop] inclusive."""
-    found = []
-    last = time.shape[0] - 1
-    for a, b in _runs(mask):
-        first, final = a, min(b - 1 + widen, last)
-        if time[final] - time[first] >= seconds:
-            found.append((first, final))
-    return found
+    first, stops = _run_bounds(mask)
+    if first.shape[0] == 0:
+        return []
+    final = np.minimum(stops - 1 + widen, time.shape[0] - 1)
+    keep = time[final] - time[first] >= seconds
+    return list(zip(first[keep].tolist(), final[keep].tolist(), strict=True))
 
 
-def assess(record: Record, channels: Iterable[str], limits: QualityLimits) -> list[Finding]:
-    """Every finding on the named channels of ``record``, channel by channel, in time order."""
-    findings: list[Finding] = []
-    for name in channels:
-        if name not in record.channels:
-            continue  # an expression's helper column may live on the model side
+def assess(
+    record: Record, channels: Iterable[str], limits: QualityLimits, *, threads: int = 1
+) -> list[Finding]:
+    """Every finding on the named channels of ``record``, channel by channel, in time order.
+
+    The time stamps are examined once per distinct time array (channels of one table or MDF
+    group share theirs); the values of each channel are examined on up to ``threads`` threads
+    (numpy's loops release the GIL). The findings do not depend on ``threads``.
+    """
+    names = [name for name in channels if name in record.channels]
+    # (an expression's helper column may live on the model side)
+    times: dict[int, tuple[object, FloatArray, _TimeSpans | None]] = {}
+    work: list[tuple[str, FloatArray, _TimeSpans | None]] = []
+    for name in names:
+        original = record.channels[name].time
+        known = times.get(id(original))
+        if known is None:
+            time = np.asarray(original, dtype=np.float64)
+            # The original is kept so that its id is not reused while this call runs.
+            known = (original, time, _time_spans(time, limits) if time.shape[0] >= 3 else None)
+            times[id(original)] = known
+        work.append((name, known[1], known[2]))
+
+    def one(item: tuple[str, FloatArray, _TimeSpans | None]) -> list[Finding]:
+        name, time, spans = item
+        if spans is None:
+            return []
         channel = record.channels[name]
-        findings.extend(
-            _channel_findings(
-                name,
-                np.asarray(channel.time, dtype=np.float64),
-                np.asarray(channel.values, dtype=np.float64),
-                limits,
-                channel.unit,
-            )
-        )
-    return findings
+        values = np.asarray(channel.values, dtype=np.float64)
+        return _channel_findings(name, time, values, limits, channel.unit, spans)
+
+    if threads > 1 and len(work) > 1:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            per_channel = list(pool.map(one, work))
+    else:
+        per_channel = [one(item) for item in work]
+    return [finding for found in per_channel for finding in found]
+
+
+@dataclass(frozen=True)
+class _TimeSpans:
+    """What a time array alone shows: its gaps and clock resets, as step index ranges."""
+
+    gaps: list[tuple[int, int]]
+    resets: list[tuple[int, int]]
+
+
+def _time_spans(time: FloatArray, limits: QualityLimits) -> _TimeSpans:
+    steps = np.diff(time)
+    return _TimeSpans(
+        gaps=[(i, i + 1) for i in np.flatnonzero(steps > limits.max_gap_s).tolist()],
+        resets=[(i, i + 1) for i in np.flatnonzero(steps <= 0).tolist()],
+    )
 
 
 def _channel_findings(
-    name: str, time: FloatArray, values: FloatArray, limits: QualityLimits, unit: str | None
+    name: str,
+    time: FloatArray,
+    values: FloatArray,
+    limits: QualityLimits,
+    unit: str | None,
+    spans: _TimeSpans,
 ) -> list[Finding]:
     found: list[Finding] = []
-    if time.shape[0] < 3:
-        return found
     unit_text = f" {unit}" if unit else ""
 
     def add(kind: str, spans: list[tuple[int, int]], detail: str) -> None:
@@ -151,61 +197,82 @@ def _channel_findings(
                 return
             found.append(Finding(name, kind, float(time[a]), float(time[b]), detail))
 
-    steps = np.diff(time)
-    gaps = [(int(i), int(i) + 1) for i in np.flatnonzero(steps > limits.max_gap_s)]
-    add("time gap", gaps, f"no samples for more than {limits.max_gap_s:g} s")
-    resets = [(int(i), int(i) + 1) for i in np.flatnonzero(steps <= 0)]
-    add("clock reset", resets, "time stamps go back or repeat")
+    add("time gap", spans.gaps, f"no samples for more than {limits.max_gap_s:g} s")
+    add("clock reset", spans.resets, "time stamps go back or repeat")
 
-    bad = ~np.isfinite(values)
-    nan_runs = [(a, b - 1) for a, b in _runs(bad)]
-    if nan_runs:
-        add("NaN run", nan_runs, f"{int(bad.sum())} values missing in the channel")
-    finite = np.where(bad, np.nan, values)
+    # A finite sum means every value is finite (a NaN or an infinity would carry into it);
+    # an overflowing sum only sends the channel down the exact path.
+    with np.errstate(over="ignore", invalid="ignore"):
+        clean = bool(np.isfinite(np.sum(values)))
+    if clean:
+        finite = values
+    else:
+        bad = ~np.isfinite(values)
+        nan_runs = [(a, b - 1) for a, b in _runs(bad)]
+        if nan_runs:
+            add("NaN run", nan_runs, f"{int(bad.sum())} values missing in the channel")
+        finite = np.where(bad, np.nan, values)
+        clean = not nan_runs
 
     d1 = np.diff(finite)
-    moving = np.abs(d1) > 0
-    if moving.any():
-        resolution = float(np.min(np.abs(d1[moving])))
-        d2 = np.diff(finite, 2)
-        straight = (np.abs(d2) <= 2.0 * resolution) & moving[1:] & moving[:-1]
+    change = np.abs(d1)
+    moving = change > 0
+    every_step_moves = bool(moving.all())
+    if every_step_moves or moving.any():
+        # the smallest step that moves
+        resolution = float(
+            np.min(change) if every_step_moves else np.min(change, where=moving, initial=np.inf)
+        )
+        # diff(finite, 2), without taking the first difference again
+        d2 = np.subtract(d1[1:], d1[:-1])
+        np.abs(d2, out=d2)
+        straight = d2 <= 2.0 * resolution
+        straight &= moving[1:]
+        straight &= moving[:-1]
+        del d2
         add(
             "straight-line fill",
             _long_runs(straight, time, limits.straight_run_s, widen=2),
             f"changes at a constant rate for over {limits.straight_run_s:g} s, as a logger "
             "filling a dropout writes",
         )
-    # Zero held for long is a vehicle at rest (a soak, a stop), not a stuck sensor.
-    flat = (d1 == 0) & (finite[1:] != 0)
-    add(
-        "flat line",
-        _long_runs(flat, time, limits.flat_run_s, widen=1),
-        f"the same non-zero value for over {limits.flat_run_s:g} s: a stuck sensor?",
-    )
-    if np.isfinite(finite).any():
-        top = float(np.nanmax(finite))
-        bottom = float(np.nanmin(finite))
+    # Without NaN, a channel whose every step moves holds no value for two samples in a row:
+    # it has no flat line and no run at an extreme longer than one sample, which lasts 0 s.
+    steady = clean and every_step_moves
+    if not steady:
+        # Zero held for long is a vehicle at rest (a soak, a stop), not a stuck sensor.
+        flat = (d1 == 0) & (finite[1:] != 0)
+        add(
+            "flat line",
+            _long_runs(flat, time, limits.flat_run_s, widen=1),
+            f"the same non-zero value for over {limits.flat_run_s:g} s: a stuck sensor?",
+        )
+    # (unless a run of one sample, 0 s long, is long enough)
+    if (not steady or limits.saturation_run_s <= 0.0) and (clean or np.isfinite(finite).any()):
+        top = float(np.max(finite) if clean else np.nanmax(finite))
+        bottom = float(np.min(finite) if clean else np.nanmin(finite))
         if top > bottom:
             for extreme, where in ((top, "maximum"), (bottom, "minimum")):
                 if extreme == 0.0:
                     continue  # resting at zero is a standstill, not saturation
-                spans = _long_runs(finite == extreme, time, limits.saturation_run_s)
+                runs = _long_runs(finite == extreme, time, limits.saturation_run_s)
                 # A clipped sensor hits its limit again and again; a slow signal such as the
                 # state of charge sits at its extreme once, at the start or the end.
-                if len(spans) >= SATURATION_EPISODES:
+                if len(runs) >= SATURATION_EPISODES:
                     add(
                         "saturation",
-                        spans,
+                        runs,
                         f"held at its {where} {extreme:g}{unit_text} for over "
-                        f"{limits.saturation_run_s:g} s, {len(spans)} times",
+                        f"{limits.saturation_run_s:g} s, {len(runs)} times",
                     )
     rate = limits.rate_limits.get(name)
     if rate is not None:
+        steps = np.diff(time)
         with np.errstate(invalid="ignore", divide="ignore"):
-            too_fast = np.abs(d1) / np.where(steps > 0, steps, np.inf) > rate
+            too_fast = change / np.where(steps > 0, steps, np.inf) > rate
         add(
             "spike",
-            [(a, b) for a, b in _runs(too_fast)],
+            _runs(too_fast),
             f"changes faster than the declared {rate:g}{unit_text}/s",
         )
     return found
