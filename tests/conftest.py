@@ -21,6 +21,9 @@ from pytest_hevval import engine, session
 _KEPT_LOADED = [engine, session, importlib.import_module("pandas")]
 with contextlib.suppress(ImportError):  # the parquet extra
     _KEPT_LOADED.append(importlib.import_module("pyarrow"))
+    # pandas registers its Arrow extension types (pandas.period, pandas.interval) with pyarrow
+    # on this module's first import; a second import after an inline run fails.
+    _KEPT_LOADED.append(importlib.import_module("pandas.core.arrays.arrow.extension_types"))
 # The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
 # and the next would pay its import again.
 with contextlib.suppress(Exception):
