@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from .core.registry import describe
-from .core.uncertainty import Interval
+from .core.uncertainty import Interval, value_text
 from .core.upooling import area_to_uniform, pool
 from .digest import identity
 from .result import SpecResult
@@ -98,9 +98,7 @@ class RecordingOutcome:
     @property
     def phi_text(self) -> str:
         """``0.9257 [0.9190, 0.9311]``, or the bare value where no interval is known."""
-        if self.phi_interval is None:
-            return f"{self.phi:.4f}"
-        return f"{self.phi:.4f} {self.phi_interval.bounds}"
+        return value_text(self.phi, self.phi_interval)
 
     @property
     def within_noise(self) -> bool:

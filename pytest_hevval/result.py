@@ -14,7 +14,7 @@ from typing import Any
 
 from .core.characteristics import SignalCharacteristics
 from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
-from .core.uncertainty import Interval
+from .core.uncertainty import Interval, value_text
 from .localise import LocalFailure, LocalResult
 from .measurement import ErrorCheck, failure_sentence
 
@@ -278,10 +278,9 @@ class SignalResult:
             parts = self.components.get(failure.characteristic)
             if not meaning and parts:
                 meaning = ", ".join(f"{k} {v:.4g}" for k, v in parts.items())
-            interval = self.intervals.get(failure.characteristic)
-            bounds = f" {interval.bounds}" if interval is not None else ""
+            value = value_text(failure.value, self.intervals.get(failure.characteristic))
             lines.append(
-                f"{characteristic.title} = {failure.value:.4f}{bounds} < {failure.threshold:.4g}"
+                f"{characteristic.title} = {value} < {failure.threshold:.4g}"
                 + (f" ({meaning})" if meaning else "")
             )
         for local in self.local_failures:
@@ -351,9 +350,7 @@ class SpecResult:
     @property
     def phi_text(self) -> str:
         """``0.9257 [0.9190, 0.9311]``, or the bare value where no interval is known."""
-        if self.phi_interval is None:
-            return f"{self.phi:.4f}"
-        return f"{self.phi:.4f} {self.phi_interval.bounds}"
+        return value_text(self.phi, self.phi_interval)
 
     @property
     def passed(self) -> bool:

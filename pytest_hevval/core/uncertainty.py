@@ -72,6 +72,7 @@ __all__ = [
     "stacked_intervals",
     "stacked_replicates",
     "sums_lambdas",
+    "value_text",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -114,7 +115,7 @@ class Interval:
     high: float
 
     def __str__(self) -> str:
-        return f"{self.value:.4f} [{self.low:.4f}, {self.high:.4f}]"
+        return value_text(self.value, self)
 
     @property
     def bounds(self) -> str:
@@ -127,6 +128,11 @@ class Interval:
     @classmethod
     def from_dict(cls, data: dict[str, float]) -> Interval:
         return cls(float(data["value"]), float(data["low"]), float(data["high"]))
+
+
+def value_text(value: float, interval: Interval | None) -> str:
+    """``0.9257 [0.9190, 0.9311]``, or the bare value where no interval is known."""
+    return f"{value:.4f}" if interval is None else f"{value:.4f} {interval.bounds}"
 
 
 def lag1_autocorrelation(x: FloatArray) -> float:
