@@ -63,7 +63,6 @@ __all__ = [
     "fine_labels",
     "lag1_autocorrelation",
     "percentile_interval",
-    "percentile_intervals",
     "replicate_lambdas",
     "replicate_sums",
     "replicate_table",
@@ -510,16 +509,6 @@ def signal_intervals(
     found = stacked_intervals(
         [point[name] for name in names], np.stack([replicates[name][:, 0] for name in names])
     )
-    return dict(zip(names, found, strict=True))
-
-
-def percentile_intervals(
-    point: Mapping[str, float], replicates: Mapping[str, FloatArray]
-) -> dict[str, Interval]:
-    """:func:`percentile_interval` of every named value, with one quantile call for all."""
-    names = list(replicates)
-    table = np.stack([np.asarray(replicates[name], dtype=np.float64) for name in names])
-    found = stacked_intervals([point[name] for name in names], table)
     return dict(zip(names, found, strict=True))
 
 
