@@ -13,10 +13,18 @@ from __future__ import annotations
 import contextlib
 import importlib
 import importlib.util
+import os
 
 import pytest
+from hypothesis import settings
 
 from pytest_hevval import engine, session
+
+# In CI every run draws the same examples, so a pass or a failure can be reproduced; locally
+# hypothesis keeps drawing new ones (and replays the failures it saved in .hypothesis/).
+settings.register_profile("ci", derandomize=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 _KEPT_LOADED = [engine, session, importlib.import_module("pandas")]
 with contextlib.suppress(ImportError):  # the parquet extra

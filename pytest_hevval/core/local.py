@@ -215,6 +215,9 @@ def fixed_windows(n: int, dt: float, window_s: float) -> tuple[IntArray, IntArra
 def runs(mask: npt.NDArray[np.bool_], min_samples: int = 1) -> tuple[IntArray, IntArray]:
     """Start and stop indices of the runs of True in ``mask`` at least ``min_samples`` long."""
     m = np.asarray(mask, dtype=bool)
+    if not m.any():  # one cheap pass where most masks (data-quality scans) find nothing
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty
     edges = np.diff(np.concatenate(([0], m.view(np.int8), [0])))
     starts = np.flatnonzero(edges == 1).astype(np.int64)
     stops = np.flatnonzero(edges == -1).astype(np.int64)

@@ -18,6 +18,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from ..core.local import runs
 from ..errors import DataError
 from .record import Record
 
@@ -88,18 +89,9 @@ class Finding:
         )
 
 
-def _run_bounds(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
-    """Starts and stops ([start, stop)) of the runs of True, as index arrays."""
-    if not mask.any():
-        empty = np.empty(0, dtype=np.intp)
-        return empty, empty
-    edges = np.diff(np.concatenate(([0], mask.astype(np.int8), [0])))
-    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-
-
 def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     """[start, stop) of each run of True."""
-    starts, stops = _run_bounds(mask)
+    starts, stops = runs(mask)
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
 
 
@@ -108,7 +100,7 @@ def _long_runs(
 ) -> list[tuple[int, int]]:
     """Runs of ``mask`` (over samples, or over steps when ``widen`` is 1 or 2) lasting at least
     ``seconds``, as sample index ranges [start, stop] inclusive."""
-    first, stops = _run_bounds(mask)
+    first, stops = runs(mask)
     if first.shape[0] == 0:
         return []
     final = np.minimum(stops - 1 + widen, time.shape[0] - 1)
@@ -255,15 +247,15 @@ def _channel_findings(
             for extreme, where in ((top, "maximum"), (bottom, "minimum")):
                 if extreme == 0.0:
                     continue  # resting at zero is a standstill, not saturation
-                runs = _long_runs(finite == extreme, time, limits.saturation_run_s)
+                episodes = _long_runs(finite == extreme, time, limits.saturation_run_s)
                 # A clipped sensor hits its limit again and again; a slow signal such as the
                 # state of charge sits at its extreme once, at the start or the end.
-                if len(runs) >= SATURATION_EPISODES:
+                if len(episodes) >= SATURATION_EPISODES:
                     add(
                         "saturation",
-                        runs,
+                        episodes,
                         f"held at its {where} {extreme:g}{unit_text} for over "
-                        f"{limits.saturation_run_s:g} s, {len(runs)} times",
+                        f"{limits.saturation_run_s:g} s, {len(episodes)} times",
                     )
     rate = limits.rate_limits.get(name)
     if rate is not None:
