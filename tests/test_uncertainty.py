@@ -11,11 +11,13 @@ from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 from pytest_hevval.core.characteristics import signal_characteristics
-from pytest_hevval.core.local import SUM_COLUMNS, group_lambdas, labelled_table
+from pytest_hevval.core.local import SUM_COLUMNS, SumTable, group_lambdas, labelled_table
 from pytest_hevval.core.uncertainty import (
     FINE_BLOCKS,
     MAX_BLOCKS,
     MIN_BLOCKS,
+    NORMAL_QUANTILE,
+    REPLICATES,
     BlockSums,
     block_length,
     block_sums,
@@ -24,7 +26,6 @@ from pytest_hevval.core.uncertainty import (
     fine_block_size,
     fine_labels,
     lag1_autocorrelation,
-    percentile_interval,
     replicate_lambdas,
     replicate_sums,
     replicate_table,
@@ -32,6 +33,7 @@ from pytest_hevval.core.uncertainty import (
     signal_intervals,
     stacked_intervals,
     stacked_replicates,
+    standard_interval,
     sums_lambdas,
 )
 from tests.strategies import signal_pairs
@@ -149,16 +151,45 @@ def test_draws_are_reproducible_and_draw_every_replicate_full() -> None:
     assert not np.array_equal(counts, resample_counts(50, 10, seed=1))
 
 
-def test_interval_holds_its_value_and_prints_as_documented() -> None:
-    interval = percentile_interval(0.9257, np.linspace(0.919, 0.9311, 1001))
-    assert interval.low <= interval.value <= interval.high
-    assert str(interval) == "0.9257 [0.9193, 0.9308]"
-    assert interval.bounds == "[0.9193, 0.9308]"
-    assert percentile_interval(0.5, np.array([np.nan])).to_dict() == {
-        "value": 0.5,
-        "low": 0.5,
-        "high": 0.5,
+def test_interval_is_the_value_plus_minus_z_standard_errors() -> None:
+    assert pytest.approx(1.959963984540054, rel=1e-15) == NORMAL_QUANTILE
+    # 48 replicates at the value and one 0.01 either side: s = √(2·0.01² / 49) = 0.0020203,
+    # z·s = 0.0039597, well inside the replicates' span, so nothing is cut.
+    replicates = np.r_[np.full(48, 0.93), 0.92, 0.94]
+    interval = standard_interval(0.93, replicates)
+    spread = 1.959963984540054 * math.sqrt(2 * 0.01**2 / 49)
+    assert interval.low == pytest.approx(0.93 - spread, rel=1e-12)
+    assert interval.high == pytest.approx(0.93 + spread, rel=1e-12)
+    # Four replicates 0.90–0.95: 0.93 ± z·0.0208 = [0.889, 0.971], cut to their span.
+    assert standard_interval(0.93, np.array([0.90, 0.92, 0.93, 0.95])).to_dict() == {
+        "value": 0.93,
+        "low": 0.90,
+        "high": 0.95,
     }
+
+
+def test_interval_keeps_the_bounds_of_its_characteristic_and_holds_its_value() -> None:
+    # λ near 1: the replicates pile up at 1 and the interval stops there.
+    near_one = standard_interval(0.999, np.clip(np.linspace(0.98, 1.02, 401), 0.0, 1.0))
+    assert near_one.low < 0.999
+    assert near_one.high == 1.0
+    # A value outside its replicates' span (λ7 clipped at 1) is still inside its interval.
+    outside = standard_interval(1.0, np.linspace(0.90, 0.95, 11))
+    assert outside.low <= outside.value == outside.high == 1.0
+
+
+def test_interval_prints_as_documented_and_is_the_point_without_replicates() -> None:
+    replicates = 0.9257 + np.r_[-0.01, np.zeros(8), 0.01]  # s = 0.0047140, z·s = 0.0092393
+    interval = standard_interval(0.9257, replicates)
+    assert str(interval) == "0.9257 [0.9165, 0.9349]"
+    assert interval.bounds == "[0.9165, 0.9349]"
+    for replicates in (np.array([np.nan, 0.4]), np.array([]), np.array([0.3])):
+        assert standard_interval(0.5, replicates).to_dict() == {
+            "value": 0.5,
+            "low": 0.5,
+            "high": 0.5,
+        }
+    assert math.isnan(standard_interval(float("nan"), np.array([0.1, 0.2])).low)
 
 
 # -- the batched path the engine takes -----------------------------------------------------
@@ -240,20 +271,59 @@ def test_batched_lambdas_equal_per_signal_lambdas(
         coarse = coarsen(table, length)
         counts = resample_counts(coarse.values.shape[0])
         one = replicate_lambdas(coarse, counts, span, kind)
-        # Pearson's variance of a replicate drawn from constant blocks is rounding noise, whose
-        # sign another summation order may flip (λ1 then jumps between 0 and 1): λ1 is
-        # compared where both variances are well above rounding.
-        sums = replicate_table(coarse, counts).sums()
-        n = np.maximum(sums.n, 1)
-        sure = np.ones(counts.shape[0], dtype=bool)
-        if kind == "pearson":
-            for total, square in ((sums.ref_sum, sums.ref_sq), (sums.sim_sum, sums.sim_sq)):
-                sure &= square - total**2 / n > 1e-9 * square
+        # λ are computed from differences of sums (Σe² − (Σe)²/n, Σxy − ΣxΣy/n, RMS − MAE), so
+        # two summation orders agree only to ε times the condition number of that difference:
+        # huge for a replicate drawn from nearly constant blocks (Pearson's λ1 may even jump
+        # between 0 and 1 there). Every λ must agree to 1e-12 plus its rounding bound.
+        allowed = _rounding_bounds(replicate_table(coarse, counts), span, kind)
         for name, values in one.items():
-            keep = sure if name == "lag_correlation" else slice(None)
-            np.testing.assert_allclose(
-                found[name][:, column][keep], values[keep], rtol=0, atol=1e-12
-            )
+            batched = found[name][:, column]
+            same = np.abs(batched - values) <= 1e-12 + allowed[name]
+            same |= np.isnan(values) & np.isnan(batched)
+            assert same.all(), (name, batched[~same], values[~same])
+
+
+#: A rounding error bound's multiple of ε: generous for sums of a few hundred terms.
+ROUNDING = 2.0**-40
+
+
+def _rounding_bounds(table: SumTable, span: float, kind: str) -> dict[str, np.ndarray]:
+    """How far each replicate's λ may move when its sums are added in another order."""
+    sums = table.sums()
+    n = np.maximum(sums.n, 1).astype(float)
+    shifted_sq = table.values[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # λ6: σ² = (Σd² − (Σd)²/n) / (n − 1) moves by ε·Σd²/(n − 1); σ by that over 2σ, and
+        # never by more than its square root.
+        variance_error = ROUNDING * shifted_sq / np.maximum(n - 1.0, 1.0)
+        sigma = np.sqrt(sums.error_m2 / np.maximum(n - 1.0, 1.0))
+        sigma_error = np.minimum(np.sqrt(variance_error), variance_error / (2.0 * sigma))
+        # λ4: Σe² = Σd² + 2kΣd + nk² (d = e − k) moves by ε times its terms; RMS by that over
+        # 2·RMS·n, never by more than its square root. λ5 adds MAE's ε·MAE.
+        shifted_sum, shift = table.values[:, 1], table.shift
+        square_error = (
+            ROUNDING * (shifted_sq + np.abs(2.0 * shift * shifted_sum) + n * shift**2) / n
+        )
+        rms = np.sqrt(sums.sq_error / n)
+        rms_error = np.minimum(np.sqrt(square_error), square_error / (2.0 * rms))
+        mae_error = ROUNDING * sums.abs_error / n
+        lag = np.zeros_like(n)
+        if kind == "pearson":
+            for a, b, product in (
+                (sums.ref_sum, sums.sim_sum, sums.cross),
+                (sums.ref_sum, sums.ref_sum, sums.ref_sq),
+                (sums.sim_sum, sums.sim_sum, sums.sim_sq),
+            ):
+                lag += (np.abs(product) + np.abs(a * b / n)) / np.abs(product - a * b / n)
+            lag = ROUNDING * np.nan_to_num(lag, nan=np.inf)
+    return {
+        "lag_correlation": lag,
+        "derivative_match": np.zeros_like(n),
+        "mae": mae_error / span,
+        "rms": np.nan_to_num(rms_error, nan=np.inf) / span,
+        "anomaly": np.nan_to_num(rms_error + mae_error, nan=np.inf) / span,
+        "error_std": np.nan_to_num(sigma_error, nan=np.inf) / span,
+    }
 
 
 @pytest.mark.parametrize(
@@ -269,14 +339,14 @@ def test_replicate_sums_cut_into_small_products_equal_one_product(
     np.testing.assert_allclose(replicate_sums(counts, rows), counts @ rows, rtol=1e-13, atol=1e-12)
 
 
-def test_stacked_intervals_are_percentile_intervals() -> None:
+def test_stacked_intervals_are_standard_intervals() -> None:
     rng = np.random.default_rng(6)
-    table = rng.normal(size=(5, 1000))
+    table = rng.normal(size=(5, REPLICATES))
     table[2, 10] = np.nan  # a row with a non-finite replicate is handled on its own
     values = [0.1, 5.0, 0.0, float("nan"), -0.2]
     found = stacked_intervals(values, table)
     for value, row, interval in zip(values, table, found, strict=True):
-        expected = percentile_interval(value, row)
+        expected = standard_interval(value, row)
         assert interval.value == expected.value or math.isnan(value)
         assert interval.low == pytest.approx(expected.low, abs=1e-15, nan_ok=True)
         assert interval.high == pytest.approx(expected.high, abs=1e-15, nan_ok=True)
