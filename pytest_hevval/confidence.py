@@ -1,10 +1,13 @@
 """Intervals on every λ, λ7 and Φ of a spec, from each signal's block sums.
 
-Each signal's λ1–λ6 get an interval from its own bootstrap block length
-(:mod:`pytest_hevval.core.uncertainty`). λ7 and Φ combine several signals, so they are
-computed per replicate from every signal drawn with the *same* blocks: one block length for the
-spec (the longest any of its signals needs) and one matrix of draws. Their intervals then carry
-the dependence between signals, which averaging per-signal intervals would lose.
+λ7 and Φ combine several signals, so they are computed per replicate from every signal drawn
+with the *same* blocks: one block length for the spec (the longest any of its signals needs)
+and one matrix of draws. Their intervals then carry the dependence between signals, which
+averaging per-signal intervals would lose. Each signal's λ1–λ6 get their intervals from those
+common blocks too when its own bootstrap block length
+(:mod:`pytest_hevval.core.uncertainty`) is within
+:data:`~pytest_hevval.core.uncertainty.SHARED_BLOCK_FACTOR` of them, and from its own blocks
+otherwise.
 Characteristics that are not ratios of the block sums (registered ones, the standard metrics)
 enter each replicate at their point value.
 
@@ -22,9 +25,15 @@ from typing import Any
 import numpy as np
 
 from .core.tree import ScoredNode, global_metric_arrays, iter_nodes, replicate_tree
-from .core.uncertainty import BlockSums, Interval, stacked_intervals, stacked_replicates
+from .core.uncertainty import (
+    SHARED_BLOCK_FACTOR,
+    BlockSums,
+    Interval,
+    stacked_intervals,
+    stacked_replicates,
+)
 
-__all__ = ["SpecConfidence", "spec_confidence"]
+__all__ = ["SpecConfidence", "resampled_blocks", "spec_confidence"]
 
 NodePath = tuple[str, ...]
 
@@ -33,10 +42,10 @@ NodePath = tuple[str, ...]
 class SpecConfidence:
     """The intervals of one scored spec."""
 
-    #: Per node path: λ1–λ6 from the signal's own blocks, λ7 from the spec's common blocks.
+    #: Per node path: λ1–λ6 (see :func:`resampled_blocks`), λ7 from the spec's common blocks.
     signals: dict[NodePath, dict[str, Interval]]
     phi: Interval
-    #: Bootstrap block length per node path, in samples.
+    #: The bootstrap block length of each node path's λ1–λ6 intervals, in samples.
     block_samples: dict[NodePath, int]
 
 
@@ -61,12 +70,12 @@ def spec_confidence(
     for node in nodes:
         first.setdefault(signature_of(node.path), node)
     keys = list(first)
-    common = max(blocks[key].per_block for key in keys)
-    # Replicate λ at the common block length for every signal (λ7, Φ, and the own intervals
-    # of the signals whose blocks are the common ones), and at its own length for every other
-    # signal: one product per distinct length, λ for all in one pass.
-    others = [key for key in keys if blocks[key].per_block != common]
-    requests = [(key, common) for key in keys] + [(key, blocks[key].per_block) for key in others]
+    common, used = resampled_blocks({key: blocks[key].per_block for key in keys})
+    # Replicate λ at the common block length for every signal (λ7, Φ, and the λ1–λ6 intervals
+    # of the signals that share it), and at its own length for every other signal: one product
+    # per distinct length, λ for all in one pass.
+    others = [key for key in keys if used[key] != common]
+    requests = [(key, common) for key in keys] + [(key, used[key]) for key in others]
     lambdas = stacked_replicates(
         [blocks[key].table for key, _ in requests],
         [per_block for _, per_block in requests],
@@ -119,8 +128,21 @@ def spec_confidence(
     return SpecConfidence(
         signals=signals,
         phi=found[-1],
-        block_samples={node.path: blocks[signature_of(node.path)].block_samples for node in nodes},
+        block_samples={
+            node.path: used[signature_of(node.path)] * blocks[signature_of(node.path)].fine
+            for node in nodes
+        },
     )
+
+
+def resampled_blocks(own: Mapping[Any, int]) -> tuple[int, dict[Any, int]]:
+    """The spec's common block length (in fine rows) and the length each signal's λ1–λ6 are
+    resampled at: the common one where its ``own`` is at least 1 / SHARED_BLOCK_FACTOR of it."""
+    common = max(own.values())
+    return common, {
+        key: common if length * SHARED_BLOCK_FACTOR >= common else length
+        for key, length in own.items()
+    }
 
 
 def _fixed(value: float, replicate: float) -> Interval:

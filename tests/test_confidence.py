@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from pytest_hevval import cli
-from pytest_hevval.core.uncertainty import block_sums, signal_intervals
+from pytest_hevval.confidence import resampled_blocks
+from pytest_hevval.core.uncertainty import SHARED_BLOCK_FACTOR, block_sums, signal_intervals
 from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import SpecError
 from pytest_hevval.history.compare import compare, parse_compare_fail, regressions
@@ -48,17 +49,35 @@ def test_every_lambda_and_phi_carry_an_interval_around_their_value(tmp_path: Pat
     assert emergent.low < emergent.high
 
 
+def test_signals_share_the_common_blocks_within_the_factor() -> None:
+    common, used = resampled_blocks({"a": 40, "b": 20, "c": 19, "d": 1})
+    assert common == 40
+    assert used == {"a": 40, "b": 40, "c": 19, "d": 1}  # 20 · 2 ≥ 40 > 19 · 2
+    assert SHARED_BLOCK_FACTOR == 2
+
+
 def test_batched_intervals_equal_each_signal_scored_alone(tmp_path: Path) -> None:
     """The spec's signals are resampled together; each λ1–λ6 interval is still the one its
-    signal gets alone from its own blocks (signal_intervals), to rounding."""
+    signal gets alone (signal_intervals) at the block length reported, to rounding: its own, or
+    the spec's common one within SHARED_BLOCK_FACTOR of its own."""
     write_data(tmp_path, fault="leaf")
     spec = parse_spec_text(TREE_SPEC, tmp_path / "pack.hevval.yaml")
     evaluation = evaluate_spec(spec, keep_arrays=True)
+    lengths = {}
+    for signal in evaluation.result.signals:
+        ref, sim = evaluation.arrays[signal.path]
+        lengths[signal.path] = block_sums(ref, sim).block_samples
+    common = max(lengths.values())
+    assert len(set(lengths.values())) > 1  # the check below sees both cases
     for signal in evaluation.result.signals:
         ref, sim = evaluation.arrays[signal.path]
         span = evaluation.characteristics[signal.path].reference_range
-        alone = signal_intervals(block_sums(ref, sim), signal.lambdas, span)
-        assert block_sums(ref, sim).block_samples == signal.block_samples
+        blocks = block_sums(ref, sim)
+        own = lengths[signal.path]
+        assert signal.block_samples == (common if own * SHARED_BLOCK_FACTOR >= common else own)
+        assert signal.block_samples is not None
+        per_block = signal.block_samples // blocks.fine
+        alone = signal_intervals(blocks, signal.lambdas, span, per_block=per_block)
         for name, interval in alone.items():
             batched = signal.intervals[name]
             assert batched.value == interval.value

@@ -75,10 +75,11 @@ def test_nominal_95_percent_intervals_cover_ar1_truth_90_to_99_percent_of_the_ti
 
 
 def test_intervals_ignoring_the_correlation_would_not_cover() -> None:
-    """The same simulation with blocks of 5 samples, far shorter than the correlation: the check
-    above can fail."""
+    """The same simulation with blocks of 5 samples (one fine block of a record of 5 · FINE_BLOCKS
+    samples), far shorter than the correlation: the check above can fail."""
     rng = np.random.default_rng(5)
-    n, rho, repeats = 20_000, 0.9, 60
+    n, rho, repeats = 5 * FINE_BLOCKS, 0.9, 60
+    assert fine_block_size(n) == 5
     reference = 50.0 * np.sin(np.arange(n) / 500.0)
     truth = 1.0 - math.sqrt(2.0 / math.pi) / float(np.ptp(reference))
     covered = 0
@@ -110,13 +111,13 @@ def test_block_length(n: int, rho: float, expected: int) -> None:
 def test_blocks_are_whole_fine_blocks_at_least_as_long_as_the_rule_asks() -> None:
     n = 360_000
     fine = fine_block_size(n)
-    assert fine == math.ceil(n / FINE_BLOCKS) == 88
+    assert fine == math.ceil(n / FINE_BLOCKS) == 352
     rows = math.ceil(n / fine)
     blocks = BlockSums(
         labelled_table(np.zeros(n), np.zeros(n), np.zeros(n, np.int64), rows), fine, n, 0.99
     )
-    # 2,813 samples (360000 / MAX_BLOCKS) → 32 fine blocks of 88 = 2,816 samples
-    assert blocks.per_block == 32
+    # 2,813 samples (360000 / MAX_BLOCKS) → 8 fine blocks of 352 = 2,816 samples
+    assert blocks.per_block == 8
     assert blocks.block_samples == 2_816
 
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from statistics import NormalDist
 
 import numpy as np
@@ -59,6 +59,7 @@ __all__ = [
     "MIN_BLOCKS",
     "NORMAL_QUANTILE",
     "REPLICATES",
+    "SHARED_BLOCK_FACTOR",
     "BlockSums",
     "Interval",
     "block_length",
@@ -98,7 +99,14 @@ MIN_BLOCKS = 10
 #: little, while every replicate costs one multiply-add per block and sum.
 MAX_BLOCKS = 128
 #: At most this many rows of sums are kept per signal; a bootstrap block is a run of them.
-FINE_BLOCKS = 4096
+#: Eight times :data:`MAX_BLOCKS`: rounding a block up to whole rows lengthens the shortest
+#: block by less than an eighth, and fewer rows make the pass and every coarsening cheaper.
+FINE_BLOCKS = 1024
+#: A signal's λ1–λ6 are resampled with the spec's common blocks (the longest any of its signals
+#: needs, which λ7 and Φ use) when those are at most this many times as long as its own rule
+#: asks. The rule's length is an estimate whose error is of that order, and a longer block only
+#: keeps more of the dependence; resampling once instead of twice halves the work per signal.
+SHARED_BLOCK_FACTOR = 2
 #: The seed of the draws: one record, one interval.
 SEED = 20_140_601
 #: Multiply-adds per matrix product at most. OpenBLAS runs a dgemm on its own threads above
@@ -112,6 +120,10 @@ GEMM_LIMIT = 1 << 18
 #: :data:`STACK_ELEMENTS` samples); a longer record is read signal by signal.
 STACK_SAMPLES = 1 << 16
 STACK_ELEMENTS = 1 << 16
+#: Up to this many samples the stacked pass beats the compiled one even where the kernel is
+#: available (10 signals: 0.51 against 0.70 ms at 6,000 samples; 2.4 against 1.5 ms at 20,000;
+#: ``benchmarks/bench_campaign.py`` records of 6,000 samples), so the kernel is not asked.
+STACK_BEFORE_KERNEL = 1 << 13
 
 
 @dataclass(frozen=True)
@@ -192,7 +204,7 @@ class BlockSums:
     #: overflow or underflow); λ are scale-free, so a range is scaled alike.
     scale: float = 1.0
 
-    @property
+    @cached_property
     def per_block(self) -> int:
         """Fine blocks per bootstrap block: :func:`block_length` rounded up to whole rows."""
         rows = self.table.values.shape[0]
@@ -222,8 +234,9 @@ def block_sums_many(
     """:func:`block_sums` of several signals of one record (all of one length), in order.
 
     Records up to :data:`STACK_SAMPLES` samples are summed for all signals at once, as a stack;
-    longer ones signal by signal, on the compiled pass where
-    :func:`pytest_hevval.core.kernel.kernel_for` (decided once for all) or ``compiled`` says.
+    longer ones signal by signal. Records over :data:`STACK_BEFORE_KERNEL` samples take the
+    compiled pass where :func:`pytest_hevval.core.kernel.kernel_for` (decided once for all) says;
+    ``compiled`` decides instead where given.
     """
     if not pairs:
         return []
@@ -235,7 +248,7 @@ def block_sums_many(
                 f"(got {np.asarray(ref).shape}, {np.asarray(sim).shape})"
             )
     if compiled is None:
-        compiled = kernel.kernel_for(n, ("grouped_sums",)) is not None
+        compiled = n > STACK_BEFORE_KERNEL and kernel.kernel_for(n, ("grouped_sums",)) is not None
     if compiled or n > STACK_SAMPLES:
         fine = fine_block_size(n)
         labels = fine_labels(n, fine)
@@ -534,7 +547,7 @@ def signal_intervals(
 
 def stacked_intervals(values: Sequence[float], replicates: FloatArray) -> list[Interval]:
     """:func:`standard_interval` of every value, with the replicates of ``values[i]`` in row
-    ``i`` of ``replicates``; one pass over all rows whose replicates are all finite."""
+    ``i`` of ``replicates``; one pass over all rows when every replicate is finite."""
     table = np.asarray(replicates, dtype=np.float64)
     if table.ndim != 2 or table.shape[0] != len(values):
         raise ValueError(
@@ -543,17 +556,16 @@ def stacked_intervals(values: Sequence[float], replicates: FloatArray) -> list[I
     finite = bool(np.isfinite(table).all()) if table.size else True
     if not finite or table.shape[1] < 2:
         return [standard_interval(value, row) for value, row in zip(values, table, strict=True)]
+    point = np.asarray(values, dtype=np.float64)
     spread = NORMAL_QUANTILE * np.std(table, axis=1, ddof=1)
-    lowest, highest = np.min(table, axis=1), np.max(table, axis=1)
+    with np.errstate(invalid="ignore"):
+        low = np.maximum(point - spread, np.minimum(np.min(table, axis=1), point))
+        high = np.minimum(point + spread, np.maximum(np.max(table, axis=1), point))
+    bare = ~np.isfinite(point)
+    low[bare] = high[bare] = point[bare]
     return [
-        _cut(
-            value,
-            value - float(spread[row]),
-            value + float(spread[row]),
-            float(lowest[row]),
-            float(highest[row]),
-        )
-        for row, value in enumerate(values)
+        Interval(value, lo, hi)
+        for value, lo, hi in zip(point.tolist(), low.tolist(), high.tolist(), strict=True)
     ]
 
 
@@ -570,10 +582,6 @@ def standard_interval(value: float, replicates: FloatArray) -> Interval:
     if finite.size < 2 or not math.isfinite(value):
         return Interval(value, value, value)
     spread = NORMAL_QUANTILE * float(np.std(finite, ddof=1))
-    return _cut(value, value - spread, value + spread, float(finite.min()), float(finite.max()))
-
-
-def _cut(value: float, low: float, high: float, lowest: float, highest: float) -> Interval:
-    if not math.isfinite(value):
-        return Interval(value, value, value)
-    return Interval(value, max(low, min(lowest, value)), min(high, max(highest, value)))
+    low = max(value - spread, min(float(finite.min()), value))
+    high = min(value + spread, max(float(finite.max()), value))
+    return Interval(value, low, high)
