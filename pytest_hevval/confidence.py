@@ -125,13 +125,11 @@ def spec_confidence(
         }
         for node in nodes
     }
+    samples = {key: used[key] * blocks[key].fine for key in keys}
     return SpecConfidence(
         signals=signals,
         phi=found[-1],
-        block_samples={
-            node.path: used[signature_of(node.path)] * blocks[signature_of(node.path)].fine
-            for node in nodes
-        },
+        block_samples={node.path: samples[signature_of(node.path)] for node in nodes},
     )
 
 
