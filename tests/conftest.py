@@ -54,6 +54,12 @@ def _kernel_unavailable() -> str | None:
     return None
 
 
+#: Skips a test where the compiled kernel cannot run.
+needs_kernel = pytest.mark.skipif(
+    _kernel_unavailable() is not None, reason=str(_kernel_unavailable())
+)
+
+
 @pytest.fixture(params=["numpy", "numba"])
 def kernel_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
     """Runs a test once on the numpy reference path and once on the compiled kernel."""

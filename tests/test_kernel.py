@@ -16,15 +16,11 @@ from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
-from tests.conftest import _kernel_unavailable
+from tests.conftest import _kernel_unavailable, needs_kernel
 from tests.strategies import signal_pairs
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIPS = sorted((ROOT / "example_project" / "data" / "i3").glob("*.parquet"))
-
-needs_kernel = pytest.mark.skipif(
-    _kernel_unavailable() is not None, reason=str(_kernel_unavailable())
-)
 
 
 def _on(

@@ -36,6 +36,7 @@ from pytest_hevval.core.uncertainty import (
     standard_interval,
     sums_lambdas,
 )
+from tests.conftest import needs_kernel
 from tests.strategies import signal_pairs
 
 
@@ -233,7 +234,74 @@ def test_huge_values_are_summed_at_a_power_of_two_scale_signal_by_signal() -> No
     assert other.scale != 1.0
     assert math.log2(other.scale).is_integer()
     assert np.all(np.isfinite(other.table.values))
-    assert np.array_equal(one.table.values, block_sums(*small).table.values)
+    assert np.array_equal(one.table.values, block_sums(*small, compiled=False).table.values)
+
+
+def _shifted_sums_with(
+    ref: np.ndarray, sim: np.ndarray, blocks: BlockSums
+) -> tuple[np.ndarray, np.ndarray]:
+    """Σd and Σd² per fine block, d the scaled error less ``blocks``' own shift, added as
+    ``np.bincount`` adds them."""
+    n = ref.shape[0]
+    labels = fine_labels(n, blocks.fine)
+    d = (ref * blocks.scale - sim * blocks.scale) - blocks.table.shift
+    rows = math.ceil(n / blocks.fine)
+    return np.bincount(labels, d, minlength=rows), np.bincount(labels, d * d, minlength=rows)
+
+
+@needs_kernel
+@given(st.lists(signal_pairs(max_size=3000), min_size=1, max_size=4))
+@settings(max_examples=60, deadline=None)
+def test_compiled_block_sums_are_the_numpy_pass(pairs: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """The compiled fine-block pass: the same scale and fine blocks; every column the shift
+    does not enter bit for bit; the shift (a mean of up to 1,024 errors, added in another
+    order) to rounding, and Σd, Σd² exactly as ``np.bincount`` adds them with that shift;
+    ρ to rounding."""
+    n = min(ref.shape[0] for ref, _ in pairs)
+    pairs = [(ref[:n], sim[:n]) for ref, sim in pairs]
+    plain = block_sums_many(pairs, compiled=False)
+    fast = block_sums_many(pairs, compiled=True)
+    unshifted = [c for c, name in enumerate(SUM_COLUMNS) if not name.startswith("shifted")]
+    for (ref, sim), a, b in zip(pairs, plain, fast, strict=True):
+        assert (b.fine, b.n, b.scale) == (a.fine, a.n, a.scale)
+        np.testing.assert_array_equal(b.table.values[:, unshifted], a.table.values[:, unshifted])
+        errors = np.abs(ref * a.scale - sim * a.scale)[: min(n, 1024)]
+        assert abs(b.table.shift - a.table.shift) <= 1e-13 * float(errors.max(initial=0.0))
+        shifted_sum, shifted_sq = _shifted_sums_with(ref, sim, b)
+        np.testing.assert_array_equal(b.table.values[:, 1], shifted_sum)
+        np.testing.assert_array_equal(b.table.values[:, 2], shifted_sq)
+        assert b.rho == pytest.approx(a.rho, abs=1e-9)
+
+
+@needs_kernel
+def test_compiled_block_sums_of_long_records_and_extreme_scales() -> None:
+    rng = np.random.default_rng(8)
+    for n in (1_023, 1_025, 6_000, 70_001):
+        drift = np.cumsum(rng.normal(size=n))
+        pairs = [
+            (rng.normal(size=n), rng.normal(size=n)),
+            (1e300 * rng.normal(size=n), 1e300 * rng.normal(size=n)),
+            (1e-300 * rng.normal(size=n), 1e-300 * rng.normal(size=n)),
+            (drift + 1e6, drift + rng.normal(size=n)),
+        ]
+        plain = block_sums_many(pairs, compiled=False)
+        for a, b in zip(plain, block_sums_many(pairs, compiled=True), strict=True):
+            assert (b.fine, b.scale) == (a.fine, a.scale)
+            assert np.all(np.isfinite(b.table.values))
+            np.testing.assert_array_equal(b.table.values[:, 0], a.table.values[:, 0])
+            np.testing.assert_array_equal(b.table.values[:, 3:], a.table.values[:, 3:])
+            assert b.rho == pytest.approx(a.rho, abs=1e-9)
+            assert b.per_block == a.per_block
+
+
+@pytest.mark.parametrize("compiled", [False, pytest.param(True, marks=needs_kernel)])
+def test_a_constant_error_has_no_autocorrelation(compiled: bool) -> None:
+    """The mean of a constant 0.1 is not exactly 0.1; centring on it must not leave a constant
+    remainder whose ρ is near 1."""
+    ref = np.full(5_000, 0.1)
+    (blocks,) = block_sums_many([(ref, np.zeros_like(ref))], compiled=compiled)
+    assert blocks.rho == 0.0
+    assert lag1_autocorrelation(ref) == 0.0
 
 
 @given(signal_pairs(min_size=30), st.sampled_from(["xcorr", "pearson"]))

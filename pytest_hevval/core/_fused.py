@@ -425,6 +425,113 @@ def grouped_sums(r, s, labels, shift, out):  # type: ignore[no-untyped-def]
         _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
 
 
+# -- bootstrap fine blocks ------------------------------------------------------------------
+
+_TOO_BIG = 2.0**400
+_TOO_SMALL = 2.0**-400
+
+
+@numba.njit(cache=True, fastmath=_FAST)
+def _peak_magnitude(r, s):  # type: ignore[no-untyped-def]
+    """The largest |value| of r and s (a maximum: the same in any order)."""
+    peak = 0.0
+    for j in range(r.shape[0]):
+        peak = _fmax(peak, _fmax(abs(r[j]), abs(s[j])))
+    return peak
+
+
+@numba.njit(cache=True, fastmath=_FAST)
+def _lag1_correlation(r, s, scale, mean):  # type: ignore[no-untyped-def]
+    """Lag-1 autocorrelation of the error (r − s)·scale centred on ``mean``; 0 if constant.
+
+    Reassociated so the sums vectorise: ρ only sets a block length, and a rounding-level
+    difference from ``uncertainty.lag1_autocorrelation`` cannot move it but at a boundary.
+    """
+    n = r.shape[0]
+    if n < 3:
+        return 0.0
+    first = r[0] * scale - s[0] * scale
+    power = 0.0
+    lagged = 0.0
+    varies = False
+    for j in range(1, n):
+        e = r[j] * scale - s[j] * scale
+        centred = e - mean
+        before = r[j - 1] * scale - s[j - 1] * scale - mean
+        power += centred * centred
+        lagged += centred * before
+        varies |= e != first
+    if not varies:
+        return 0.0
+    power += (first - mean) * (first - mean)
+    if power > 0.0 and math.isfinite(power):
+        return lagged / power
+    return 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-def]
+    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples into ``out``
+    (10, rows); returns (scale, shift, ρ).
+
+    The scale is ``characteristics.power_of_two_scale`` of the peak magnitude and every sum is
+    taken of the scaled values; the shift is the mean of the first ``shift_samples`` errors.
+    Each run's samples are added left to right from zero, as ``np.bincount`` adds them, so
+    every column the shift does not enter is bit-identical to the numpy pass.
+    """
+    n = r.shape[0]
+    rows = out.shape[1]
+    peak = _peak_magnitude(r, s)
+    scale = 1.0
+    if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
+        scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+    head = min(shift_samples, n)
+    total = 0.0
+    for j in range(head):
+        total += r[j] * scale - s[j] * scale
+    shift = total / head if head else 0.0
+    shifted_total = 0.0
+    for row in range(rows):
+        first = row * fine
+        last = min(first + fine, n)
+        a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
+        for j in range(first, last):
+            ri = r[j] * scale
+            si = s[j] * scale
+            e = ri - si
+            d = e - shift
+            a1 += d
+            a2 += d * d
+            a3 += abs(e)
+            a4 += ri
+            a5 += si
+            a6 += ri * ri
+            a7 += si * si
+            a8 += ri * si
+            if 0 < j < n - 1:
+                r2 = r[j + 1] * scale
+                r0 = r[j - 1] * scale
+                s2 = s[j + 1] * scale
+                s0 = s[j - 1] * scale
+                # No branch on the data: the signs of noisy signals agree at random.
+                a9 += ((r2 > r0) == (s2 > s0)) & ((r2 < r0) == (s2 < s0))
+            else:
+                a9 += 1.0
+        out[0, row] = last - first
+        out[1, row] = a1
+        out[2, row] = a2
+        out[3, row] = a3
+        out[4, row] = a4
+        out[5, row] = a5
+        out[6, row] = a6
+        out[7, row] = a7
+        out[8, row] = a8
+        out[9, row] = a9
+        shifted_total += a1
+    mean = shift + shifted_total / n if n else 0.0
+    return scale, shift, _lag1_correlation(r, s, scale, mean)
+
+
 @numba.njit(cache=True, nogil=True)
 def dtw_path(x, y, band):  # type: ignore[no-untyped-def]
     """ISO/TS 18571's warping path of x onto y with |i − j| ≤ band: (rows, cols) from (0, 0).

@@ -416,6 +416,26 @@ def grouped_sums(
     return out
 
 
+def fine_block_sums(
+    module: ModuleType,
+    ref: AnyFloatArray,
+    sim: AnyFloatArray,
+    fine: int,
+    shift_samples: int,
+    out: npt.NDArray[np.float64],
+) -> tuple[float, float, float]:
+    """One signal's sums over runs of ``fine`` samples into ``out`` (10, rows), and its
+    (scale, shift, ρ), in one compiled call (see ``_fused.fine_block_sums``)."""
+    scale, shift, rho = module.fine_block_sums(
+        np.ascontiguousarray(ref, dtype=np.float64),
+        np.ascontiguousarray(sim, dtype=np.float64),
+        int(fine),
+        int(shift_samples),
+        out,
+    )
+    return float(scale), float(shift), float(rho)
+
+
 def dtw_path(
     module: ModuleType, x: AnyFloatArray, y: AnyFloatArray, band: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:

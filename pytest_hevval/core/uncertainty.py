@@ -37,6 +37,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from statistics import NormalDist
+from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
@@ -121,10 +122,6 @@ GEMM_LIMIT = 1 << 18
 #: :data:`STACK_ELEMENTS` samples); a longer record is read signal by signal.
 STACK_SAMPLES = 1 << 16
 STACK_ELEMENTS = 1 << 16
-#: Up to this many samples the stacked pass beats the compiled one even where the kernel is
-#: available (10 signals: 0.51 against 0.70 ms at 6,000 samples; 2.4 against 1.5 ms at 20,000;
-#: ``benchmarks/bench_campaign.py`` records of 6,000 samples), so the kernel is not asked.
-STACK_BEFORE_KERNEL = 1 << 13
 
 
 @dataclass(frozen=True)
@@ -159,7 +156,9 @@ def value_text(value: float, interval: Interval | None) -> str:
 def lag1_autocorrelation(x: FloatArray) -> float:
     """Lag-1 autocorrelation of ``x`` (0 for a constant or too short series)."""
     values = np.asarray(x, dtype=np.float64)
-    if values.shape[0] < 3:
+    # A constant series is caught before centring: its mean's rounding would leave a constant
+    # non-zero remainder, whose ρ is near 1.
+    if values.shape[0] < 3 or not values.max() > values.min():
         return 0.0
     centred = values - values.mean()
     power = float(np.dot(centred, centred))
@@ -234,10 +233,10 @@ def block_sums_many(
 ) -> list[BlockSums]:
     """:func:`block_sums` of several signals of one record (all of one length), in order.
 
-    Records up to :data:`STACK_SAMPLES` samples are summed for all signals at once, as a stack;
-    longer ones signal by signal. Records over :data:`STACK_BEFORE_KERNEL` samples take the
-    compiled pass where :func:`pytest_hevval.core.kernel.kernel_for` (decided once for all) says;
-    ``compiled`` decides instead where given.
+    Where :func:`pytest_hevval.core.kernel.kernel_for` says (``compiled`` decides instead where
+    given), each signal is one compiled call that finds its scale, shift, sums and ρ in two
+    loops over its samples. On numpy, records up to :data:`STACK_SAMPLES` samples are summed
+    for all signals at once, as a stack; longer ones signal by signal.
     """
     if not pairs:
         return []
@@ -249,11 +248,15 @@ def block_sums_many(
                 f"(got {np.asarray(ref).shape}, {np.asarray(sim).shape})"
             )
     if compiled is None:
-        compiled = n > STACK_BEFORE_KERNEL and kernel.kernel_for(n, ("grouped_sums",)) is not None
-    if compiled or n > STACK_SAMPLES:
+        module = kernel.kernel_for(n, ("fine_block_sums",))
+    else:
+        module = kernel.load_or_raise() if compiled else None
+    if module is not None:
+        return _compiled_block_sums(module, pairs, n)
+    if n > STACK_SAMPLES:
         fine = fine_block_size(n)
         labels = fine_labels(n, fine)
-        return [_one_block_sums(ref, sim, labels, fine, compiled) for ref, sim in pairs]
+        return [_one_block_sums(ref, sim, labels, fine) for ref, sim in pairs]
     step = max(1, STACK_ELEMENTS // max(n, 1))
     out: list[BlockSums] = []
     for first in range(0, len(pairs), step):
@@ -261,15 +264,26 @@ def block_sums_many(
     return out
 
 
-def _one_block_sums(
-    ref: FloatArray, sim: FloatArray, labels: IntArray, fine: int, compiled: bool
-) -> BlockSums:
+def _compiled_block_sums(
+    module: ModuleType, pairs: Sequence[tuple[FloatArray, FloatArray]], n: int
+) -> list[BlockSums]:
+    fine = fine_block_size(n)
+    # (signal, column, row): each signal's table one contiguous block, written once.
+    tables = np.empty((len(pairs), len(SUM_COLUMNS), math.ceil(n / fine)), dtype=np.float64)
+    out: list[BlockSums] = []
+    for table, (ref, sim) in zip(tables, pairs, strict=True):
+        scale, shift, rho = kernel.fine_block_sums(module, ref, sim, fine, SHIFT_SAMPLES, table)
+        out.append(BlockSums(SumTable(table.T, shift), fine, n, rho, scale))
+    return out
+
+
+def _one_block_sums(ref: FloatArray, sim: FloatArray, labels: IntArray, fine: int) -> BlockSums:
     n = int(np.asarray(ref).shape[0])
     scale = _power_of_two_scale(ref, sim)
     if scale != 1.0:
         ref = np.multiply(ref, scale, dtype=np.float64)
         sim = np.multiply(sim, scale, dtype=np.float64)
-    table = labelled_table(ref, sim, labels, math.ceil(n / fine), compiled=compiled)
+    table = labelled_table(ref, sim, labels, math.ceil(n / fine), compiled=False)
     residual = np.subtract(ref, sim, dtype=np.float64)
     return BlockSums(table, fine, n, lag1_autocorrelation(residual), scale)
 
