@@ -23,8 +23,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from .core.tree import ScoredNode, global_metric_arrays, iter_nodes, replicate_tree
+from .core.tree import ScoredNode, emergent_replicates, global_metric_arrays, iter_nodes
 from .core.uncertainty import (
     SHARED_BLOCK_FACTOR,
     BlockSums,
@@ -36,6 +37,7 @@ from .core.uncertainty import (
 __all__ = ["SpecConfidence", "resampled_blocks", "spec_confidence"]
 
 NodePath = tuple[str, ...]
+FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -98,24 +100,20 @@ def spec_confidence(
         for i, key in enumerate(keys)
     }
 
-    def base(path: NodePath) -> dict[str, Any]:
-        node = by_path[path]
-        column = common_column[signature_of(path)]
-        fixed = {name: value for name, value in node.lambdas.items() if name != "emergent"}
-        return {**fixed, **{name: replicated[a, column] for a, name in enumerate(names)}}
-
-    by_path = {node.path: node for node in nodes}
-    per_node: dict[NodePath, dict[str, Any]] = {}
-    for root in roots:
-        per_node.update(replicate_tree(root, base, variant="V1" if variant == "V1" else "V2"))
-    phi_replicates = global_metric_arrays(
-        ((node.alpha, per_node[node.path]) for node in nodes), beta
+    # λ7 and Φ per replicate, at the common blocks. Every node enters through its λ1 + … + λ6
+    # (λ7) and its α-weighted λ (Φ), taken for all columns at once.
+    columns = np.array([common_column[signature_of(node.path)] for node in nodes])
+    basis = replicated.sum(axis=0)  # (column, replicate)
+    emergent_found = emergent_replicates(
+        roots,
+        {node.path: basis[column] for node, column in zip(nodes, columns, strict=True)},
+        variant="V1" if variant == "V1" else "V2",
     )
-    # λ7 of a leaf is the constant 1 (no replicates): its interval is the point.
-    varying = [node for node in nodes if np.ndim(per_node[node.path]["emergent"]) > 0]
+    varying = [node for node in nodes if node.path in emergent_found]
+    phi_replicates = _phi_replicates(nodes, columns, names, replicated, emergent_found, beta)
     found = stacked_intervals(
         [node.lambdas["emergent"] for node in varying] + [phi],
-        np.stack([per_node[node.path]["emergent"] for node in varying] + [phi_replicates]),
+        np.stack([emergent_found[node.path] for node in varying] + [phi_replicates]),
     )
     emergent = {node.path: found[i] for i, node in enumerate(varying)}
     signals = {
@@ -131,6 +129,43 @@ def spec_confidence(
         phi=found[-1],
         block_samples={node.path: samples[signature_of(node.path)] for node in nodes},
     )
+
+
+def _phi_replicates(
+    nodes: Sequence[ScoredNode],
+    columns: npt.NDArray[np.intp],
+    names: Sequence[str],
+    replicated: FloatArray,
+    emergent_found: Mapping[NodePath, FloatArray],
+    beta: Mapping[str, float],
+) -> FloatArray:
+    """Φ of every replicate: node i's λ1–λ6 are row ``columns[i]`` of ``replicated``
+    (characteristic, column, replicate), its λ7 is in ``emergent_found`` (1 for a leaf), and
+    every other characteristic keeps its point value.
+
+    Φ's own rule (:func:`~pytest_hevval.core.tree.global_metric_arrays`) is given one row per
+    characteristic: the nodes' Σ α and their α-weighted mean of it, which makes the same
+    Σ α·β·λ / Σ α·β with a product per characteristic instead of one per node.
+    """
+    alphas = np.array([node.alpha for node in nodes], dtype=np.float64)
+    per_column = np.bincount(columns, weights=alphas, minlength=replicated.shape[1])
+    weighted = dict(zip(names, np.tensordot(per_column, replicated, axes=(0, 1)), strict=True))
+    leaves = sum(node.alpha for node in nodes if node.path not in emergent_found)
+    weighted["emergent"] = sum(
+        (node.alpha * emergent_found[node.path] for node in nodes if node.path in emergent_found),
+        np.full(replicated.shape[2], float(leaves)),
+    )
+    fixed: dict[str, tuple[float, float]] = {}  # name: (Σ α·λ, Σ α) of point values
+    for node in nodes:
+        for name, value in node.lambdas.items():
+            if name not in weighted:
+                total, alpha = fixed.get(name, (0.0, 0.0))
+                fixed[name] = (total + node.alpha * value, alpha + node.alpha)
+    total_alpha = float(alphas.sum())
+    rows = [(total_alpha, {name: value / total_alpha}) for name, value in weighted.items()]
+    rows += [(alpha, {name: total / alpha}) for name, (total, alpha) in fixed.items()]
+    # Σ α > 0: the point Φ, computed before, raised otherwise.
+    return global_metric_arrays([row for row in rows if row[0] > 0], beta)
 
 
 def resampled_blocks(own: Mapping[Any, int]) -> tuple[int, dict[Any, int]]:

@@ -7,7 +7,9 @@ from hypothesis import assume
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-__all__ = ["finite", "signal_pairs"]
+from pytest_hevval.core.tree import TreeNode
+
+__all__ = ["finite", "signal_pairs", "signal_trees"]
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
@@ -23,3 +25,18 @@ def signal_pairs(
     assume(np.ptp(reference) > 1e-6 * (np.abs(reference).max() + 1))
     simulated = draw(hnp.arrays(np.float64, n, elements=finite))
     return reference, simulated
+
+
+@st.composite
+def signal_trees(draw: st.DrawFn, max_depth: int = 3, max_children: int = 3) -> TreeNode:
+    """A validation tree of up to ``max_depth`` levels with random weights α and unique names."""
+    counter = iter(range(10_000))
+
+    def grow(depth: int) -> TreeNode:
+        count = draw(st.integers(0, max_children)) if depth < max_depth else 0
+        children = tuple(grow(depth + 1) for _ in range(count))
+        alpha = draw(st.sampled_from([0.0, 0.5, 1.0, 2.0]))
+        return TreeNode(f"s{next(counter)}", alpha, children)
+
+    root = grow(1)
+    return TreeNode(root.name, draw(st.sampled_from([0.5, 1.0, 3.0])), root.children)

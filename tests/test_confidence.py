@@ -7,10 +7,21 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pytest_hevval import cli
-from pytest_hevval.confidence import resampled_blocks
+from pytest_hevval.confidence import _phi_replicates, resampled_blocks
+from pytest_hevval.core.registry import FUSED_CHARACTERISTICS
+from pytest_hevval.core.tree import (
+    TreeNode,
+    emergent_replicates,
+    global_metric,
+    iter_nodes,
+    score_tree,
+)
 from pytest_hevval.core.uncertainty import SHARED_BLOCK_FACTOR, block_sums, signal_intervals
 from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import SpecError
@@ -18,6 +29,7 @@ from pytest_hevval.history.compare import compare, parse_compare_fail, regressio
 from pytest_hevval.history.trends import detect_steps
 from pytest_hevval.result import SpecResult
 from pytest_hevval.spec.load import parse_spec_text
+from tests.strategies import signal_trees
 from tests.test_plugin import TREE_SPEC, write_data
 
 pytest_plugins = ["pytester"]
@@ -54,6 +66,57 @@ def test_signals_share_the_common_blocks_within_the_factor() -> None:
     assert common == 40
     assert used == {"a": 40, "b": 40, "c": 19, "d": 1}  # 20 · 2 ≥ 40 > 19 · 2
     assert SHARED_BLOCK_FACTOR == 2
+
+
+@given(
+    signal_trees(),
+    st.integers(0, 2**32 - 1),
+    st.sampled_from(["V1", "V2"]),
+    st.sampled_from([{}, {"emergent": 0.0, "mae": 2.0}, {"theil": 3.0}]),
+)
+@settings(max_examples=60, deadline=None)
+def test_batched_tree_replicates_are_the_tree_scored_per_replicate(
+    tree: TreeNode, seed: int, variant: str, beta: dict[str, float]
+) -> None:
+    """λ7 and Φ of every replicate at once (per-node sums, one product per characteristic)
+    are what scoring the tree afresh on each replicate's λ gives, to rounding; a node's other
+    characteristics (here Theil's U) keep their point value in every replicate."""
+    rng = np.random.default_rng(seed)
+    paths = [node.path for node in iter_nodes([score_tree(tree, lambda p: [0.5] * 6)])]
+    columns = rng.integers(0, len(paths), size=len(paths))  # some nodes share a signal
+    replicated = rng.uniform(0.0, 1.0, size=(6, len(paths), 5))
+    theil = {path: float(rng.uniform()) for path in paths}
+    column_of = dict(zip(paths, columns.tolist(), strict=True))
+
+    def scored(replicate: int | None) -> object:
+        def base(path: tuple[str, ...]) -> dict[str, float]:
+            own = replicated[:, column_of[path], 0 if replicate is None else replicate]
+            return {
+                **dict(zip(FUSED_CHARACTERISTICS, own.tolist(), strict=True)),
+                "theil": theil[path],
+            }
+
+        return score_tree(tree, base, variant=variant)  # type: ignore[arg-type]
+
+    point = scored(None)
+    nodes = list(iter_nodes([point]))  # type: ignore[list-item]
+    basis = replicated.sum(axis=0)
+    found = emergent_replicates(
+        [point],
+        {path: basis[column_of[path]] for path in paths},
+        variant=variant,  # type: ignore[list-item,arg-type]
+    )
+    assert set(found) == {node.path for node in nodes if node.children}
+    if sum(node.alpha for node in nodes) == 0:
+        return
+    phi = _phi_replicates(nodes, columns, FUSED_CHARACTERISTICS, replicated, found, beta)
+    for replicate in range(5):
+        again = list(iter_nodes([scored(replicate)]))  # type: ignore[list-item]
+        for node in again:
+            if node.children:
+                assert found[node.path][replicate] == pytest.approx(node.emergent, abs=1e-12)
+        expected = global_metric(((n.alpha, n.lambdas) for n in again), beta)
+        assert phi[replicate] == pytest.approx(expected, abs=1e-12)
 
 
 def test_batched_intervals_equal_each_signal_scored_alone(tmp_path: Path, kernel_path: str) -> None:

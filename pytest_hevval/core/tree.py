@@ -20,11 +20,11 @@ __all__ = [
     "EmergentVariant",
     "ScoredNode",
     "TreeNode",
+    "emergent_replicates",
     "error_origins",
     "global_metric",
     "global_metric_arrays",
     "iter_nodes",
-    "replicate_tree",
     "score_tree",
 ]
 
@@ -118,30 +118,42 @@ def _emergent_rule(parent: Any, children: Sequence[tuple[Any, bool]], variant: s
         if variant == "V2" and has_children:
             values.append(_own_emergent(lambdas))
     child_mean = sum(values) / len(values)
+    return _emergent_of_means(parent_mean, child_mean)
+
+
+def _emergent_of_means(parent_mean: Any, child_mean: Any) -> Any:
+    """λ7 = 1 − |mean of the parent's λ − mean of its children's|, clipped to [0, 1]."""
     return np.clip(1.0 - np.abs(parent_mean - child_mean), 0.0, 1.0)
 
 
-def replicate_tree(
-    root: ScoredNode,
-    base: Callable[[tuple[str, ...]], Mapping[str, Any]],
+def emergent_replicates(
+    roots: Iterable[ScoredNode],
+    basis_sums: Mapping[tuple[str, ...], FloatArray],
     *,
     variant: EmergentVariant = "V2",
-) -> dict[tuple[str, ...], dict[str, Any]]:
-    """Every node's characteristics with λ7, on arrays of replicates (one entry per replicate).
-
-    ``base(path)`` gives a node's own characteristics as arrays (or fixed floats); λ7 follows
-    the same rule as :func:`emergent`, elementwise.
+) -> dict[tuple[str, ...], FloatArray]:
+    """λ7 of every node that has children, per bootstrap replicate: the rule of
+    :func:`emergent`, elementwise, from each node's λ1 + … + λ6 (an array of replicates per
+    node path in ``basis_sums``). A leaf's λ7 is the constant 1 and is left out.
     """
-    out: dict[tuple[str, ...], dict[str, Any]] = {}
+    out: dict[tuple[str, ...], FloatArray] = {}
 
-    def visit(node: ScoredNode) -> dict[str, Any]:
-        own = dict(base(node.path))
-        kids = [(visit(child), bool(child.children)) for child in node.children]
-        own["emergent"] = _emergent_rule(own, kids, variant)
-        out[node.path] = own
-        return own
+    def visit(node: ScoredNode) -> None:
+        if not node.children:
+            return
+        total: Any = 0.0
+        count = 0
+        for child in node.children:
+            visit(child)
+            total = total + basis_sums[child.path]
+            count += 6
+            if variant == "V2" and child.children:
+                total = total + out[child.path]
+                count += 1
+        out[node.path] = _emergent_of_means(basis_sums[node.path] / 6.0, total / count)
 
-    visit(root)
+    for root in roots:
+        visit(root)
     return out
 
 
