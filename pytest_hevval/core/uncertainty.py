@@ -71,6 +71,7 @@ __all__ = [
     "fine_block_size",
     "fine_labels",
     "lag1_autocorrelation",
+    "lag1_autocorrelations",
     "replicate_lambdas",
     "replicate_sums",
     "replicate_table",
@@ -156,15 +157,25 @@ def value_text(value: float, interval: Interval | None) -> str:
 def lag1_autocorrelation(x: FloatArray) -> float:
     """Lag-1 autocorrelation of ``x`` (0 for a constant or too short series)."""
     values = np.asarray(x, dtype=np.float64)
-    # A constant series is caught before centring: its mean's rounding would leave a constant
-    # non-zero remainder, whose ρ is near 1.
-    if values.shape[0] < 3 or not values.max() > values.min():
-        return 0.0
-    centred = values - values.mean()
-    power = float(np.dot(centred, centred))
-    if not (power > 0.0 and math.isfinite(power)):
-        return 0.0
-    return float(np.dot(centred[1:], centred[:-1]) / power)
+    return float(lag1_autocorrelations(values.reshape(1, -1))[0])
+
+
+def lag1_autocorrelations(rows: FloatArray, scratch: FloatArray | None = None) -> FloatArray:
+    """:func:`lag1_autocorrelation` of every row of a (series, samples) array; ``scratch``
+    (its shape) holds the centred values if given."""
+    values = np.asarray(rows, dtype=np.float64)
+    k, n = values.shape
+    if n < 3:
+        return np.zeros(k)
+    centred = np.subtract(values, values.mean(axis=1, keepdims=True), out=scratch)
+    power = np.einsum("ij,ij->i", centred, centred)
+    lagged = np.einsum("ij,ij->i", centred[:, 1:], centred[:, :-1])
+    # A constant series is caught before dividing: its mean's rounding leaves a constant
+    # non-zero remainder, whose ρ would be near 1.
+    varies = np.max(values, axis=1) > np.min(values, axis=1)
+    usable = varies & (power > 0.0) & np.isfinite(power)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(usable, lagged / np.where(usable, power, 1.0), 0.0)
 
 
 def block_length(n: int, rho: float) -> int:
@@ -317,7 +328,7 @@ def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) 
         s *= scales[:, None]
     np.subtract(r, s, out=e)
     shift = np.mean(e[:, :SHIFT_SAMPLES], axis=1) if n else np.zeros(k)
-    rho = [lag1_autocorrelation(row) for row in e]
+    rho = lag1_autocorrelations(e, scratch).tolist()
     # (column, signal, row): each column of every signal's table is one contiguous run.
     columns = np.empty((len(SUM_COLUMNS), k, rows), dtype=np.float64)
     columns[0] = fine
