@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from pytest_hevval import history as h
 from pytest_hevval.errors import SpecError
+from pytest_hevval.history._base import json_safe
 from pytest_hevval.result import SpecResult
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
@@ -257,6 +258,31 @@ def test_store_round_trip_and_file_names(tmp_path: Path) -> None:
     assert records[1] == record("v1.1", T0 + timedelta(days=1))
     assert store.problems == []
     assert not list((tmp_path / "hist").glob(".tmp-*"))
+
+
+def test_a_record_file_holds_one_spec_per_line(tmp_path: Path) -> None:
+    """Strict JSON that reads line by line: each top-level key, and each spec, on its own."""
+    two = record("v1", T0)
+    two["specs"] = two["specs"] * 2
+    path = h.HistoryStore(tmp_path).append(two)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "{"
+    assert lines[-1] == "}"
+    specs = [json.loads(line.rstrip(",")) for line in lines if line.startswith("  {")]
+    assert specs == h.validate_record(two)["specs"]
+    assert len(specs) == 2
+    assert json.loads(path.read_text(encoding="utf-8")) == h.validate_record(two)
+
+
+def test_numpy_numbers_are_stored_and_a_bad_value_is_named_by_its_key() -> None:
+    data = {"a": [np.float64(0.5), np.int64(3), float("nan")], "b": {"c": (1.0, True)}}
+    assert json_safe(data) == {"a": [0.5, 3, None], "b": {"c": [1.0, True]}}
+    with pytest.raises(h.HistoryError, match="cannot store a value of type set") as bad:
+        json_safe({"specs": [{"signals": [{"x": {1, 2}}]}]})
+    assert bad.value.key == "specs[0].signals[0].x"
+    with pytest.raises(h.HistoryError, match="keys must be strings") as bad_key:
+        json_safe({"specs": [{1: 2.0}]})
+    assert bad_key.value.key == "specs[0]"
 
 
 def test_store_is_append_only(tmp_path: Path) -> None:

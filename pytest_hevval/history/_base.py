@@ -49,12 +49,45 @@ def _is_np_number(value: Any) -> bool:
     return type(value).__module__ == "numpy" and hasattr(value, "item")
 
 
+class _NotPlain(Exception):
+    """A value :func:`_plain_copy` cannot store; :func:`json_safe` then finds where it is."""
+
+
 def json_safe(value: Any, *, where: str = "") -> Any:
     """Deep-copy ``value`` into plain JSON types; non-finite floats become ``None``.
 
     Strict JSON (``allow_nan=False``) keeps records readable by every JSON parser, so NaN from a
     degenerate signal is stored as ``null``.
     """
+    # A run's record holds tens of thousands of numbers: copy them without building the key
+    # path of each, and build the paths only to name the key of a value that cannot be stored.
+    try:
+        return _plain_copy(value)
+    except _NotPlain:
+        return _located_copy(value, where)
+
+
+def _plain_copy(value: Any) -> Any:
+    kind = type(value)
+    if kind is float:
+        return value if math.isfinite(value) else None
+    if kind is str or kind is int or kind is bool or value is None:
+        return value
+    if kind is dict:
+        out: dict[str, Any] = {}
+        for key, item in value.items():
+            if type(key) is not str:
+                raise _NotPlain
+            out[key] = _plain_copy(item)
+        return out
+    if kind is list or kind is tuple:
+        return [_plain_copy(item) for item in value]
+    if isinstance(value, float):  # numpy's float64
+        return float(value) if math.isfinite(value) else None
+    raise _NotPlain  # other numpy scalars, other mappings, subclasses: the general copy
+
+
+def _located_copy(value: Any, where: str) -> Any:
     if value is None or isinstance(value, (bool, str)):
         return value
     if isinstance(value, int):
@@ -62,7 +95,7 @@ def json_safe(value: Any, *, where: str = "") -> Any:
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if _is_np_number(value):
-        return json_safe(value.item(), where=where)
+        return _located_copy(value.item(), where)
     if isinstance(value, Mapping):
         out: dict[str, Any] = {}
         for key, item in value.items():
@@ -72,10 +105,10 @@ def json_safe(value: Any, *, where: str = "") -> Any:
                     key=where or None,
                     hint="convert the result to plain JSON data before recording it",
                 )
-            out[key] = json_safe(item, where=f"{where}.{key}" if where else key)
+            out[key] = _located_copy(item, f"{where}.{key}" if where else key)
         return out
     if isinstance(value, (list, tuple)):
-        return [json_safe(item, where=f"{where}[{i}]") for i, item in enumerate(value)]
+        return [_located_copy(item, f"{where}[{i}]") for i, item in enumerate(value)]
     raise HistoryError(
         f"cannot store a value of type {type(value).__name__} (got {value!r})",
         key=where or None,

@@ -80,7 +80,7 @@ class HistoryStore:
         """Validate ``record`` and write it as a new file; return the file's path."""
         checked = validate_record(record)
         started = parse_utc(checked["started_utc"])
-        payload = (json.dumps(checked, indent=1, allow_nan=False) + "\n").encode("utf-8")
+        payload = record_text(checked).encode("utf-8")
         try:
             self.directory.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -177,6 +177,24 @@ class HistoryStore:
         for entry in self.entries():
             seen.setdefault(entry.record["model_version"], None)
         return list(seen)
+
+
+def record_text(record: Mapping[str, Any]) -> str:
+    """A record as strict JSON: one top-level key per line, and each spec on one line.
+
+    Readable line by line, and written by ``json``'s compiled encoder: an indented dump goes
+    through its pure-Python one, several times slower on a campaign's tens of thousands of
+    numbers.
+    """
+    lines = []
+    for key, value in record.items():
+        if key == "specs" and isinstance(value, list):
+            specs = ",\n  ".join(json.dumps(spec, allow_nan=False) for spec in value)
+            text = f"[\n  {specs}\n ]" if value else "[]"
+        else:
+            text = json.dumps(value, allow_nan=False)
+        lines.append(f" {json.dumps(key)}: {text}")
+    return "{\n" + ",\n".join(lines) + "\n}\n"
 
 
 def _write_error(directory: Path, exc: OSError) -> HistoryError:
