@@ -245,7 +245,7 @@ def block_sums_many(
     """:func:`block_sums` of several signals of one record (all of one length), in order.
 
     Where :func:`pytest_hevval.core.kernel.kernel_for` says (``compiled`` decides instead where
-    given), each signal is one compiled call that finds its scale, shift, sums and ρ in two
+    given), each signal is one compiled call that finds its scale, shift, sums and ρ in three
     loops over its samples. On numpy, records up to :data:`STACK_SAMPLES` samples are summed
     for all signals at once, as a stack; longer ones signal by signal.
     """
