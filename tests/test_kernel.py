@@ -15,6 +15,7 @@ from hypothesis import given, settings
 from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
+from pytest_hevval.core.local import labelled_table
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
 from tests.conftest import _kernel_unavailable, needs_kernel
 from tests.strategies import signal_pairs
@@ -303,3 +304,18 @@ def test_kernel_is_safe_from_several_threads_at_once() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "same"
+
+
+@needs_kernel
+def test_compiled_group_sums_count_sign_agreement_with_ties_as_numpy_does() -> None:
+    """Small integer signals have many equal neighbours: a central difference of 0 agrees only
+    with another 0, on both paths."""
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        n = int(rng.integers(3, 300))
+        ref = rng.integers(0, 3, n).astype(np.float64)
+        sim = rng.integers(0, 3, n).astype(np.float64)
+        labels = np.sort(rng.integers(-1, 5, n))
+        fast = labelled_table(ref, sim, labels, 5, compiled=True).values
+        plain = labelled_table(ref, sim, labels, 5, compiled=False).values
+        np.testing.assert_array_equal(fast[:, 9], plain[:, 9])
