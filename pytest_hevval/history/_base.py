@@ -49,8 +49,8 @@ def _is_np_number(value: Any) -> bool:
     return type(value).__module__ == "numpy" and hasattr(value, "item")
 
 
-class _NotPlain(Exception):
-    """A value :func:`_plain_copy` cannot store; :func:`json_safe` then finds where it is."""
+#: Where a value sits in the data, built as the copy descends: (parent, key), None at the top.
+_Location = tuple[Any, str | int] | None
 
 
 def json_safe(value: Any, *, where: str = "") -> Any:
@@ -59,61 +59,53 @@ def json_safe(value: Any, *, where: str = "") -> Any:
     Strict JSON (``allow_nan=False``) keeps records readable by every JSON parser, so NaN from a
     degenerate signal is stored as ``null``.
     """
-    # A run's record holds tens of thousands of numbers: copy them without building the key
-    # path of each, and build the paths only to name the key of a value that cannot be stored.
-    try:
-        return _plain_copy(value)
-    except _NotPlain:
-        return _located_copy(value, where)
+    return _copy(value, (None, where) if where else None)
 
 
-def _plain_copy(value: Any) -> Any:
+def _copy(value: Any, location: _Location) -> Any:
+    # A run's record holds tens of thousands of numbers: the exact types come first, and a
+    # value's key path is kept as linked pairs, joined into text only to name a bad value.
     kind = type(value)
     if kind is float:
         return value if math.isfinite(value) else None
     if kind is str or kind is int or kind is bool or value is None:
         return value
-    if kind is dict:
-        out: dict[str, Any] = {}
-        for key, item in value.items():
-            if type(key) is not str:
-                raise _NotPlain
-            out[key] = _plain_copy(item)
-        return out
-    if kind is list or kind is tuple:
-        return [_plain_copy(item) for item in value]
-    if isinstance(value, float):  # numpy's float64
-        return float(value) if math.isfinite(value) else None
-    raise _NotPlain  # other numpy scalars, other mappings, subclasses: the general copy
-
-
-def _located_copy(value: Any, where: str) -> Any:
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, int):
-        return value
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if _is_np_number(value):
-        return _located_copy(value.item(), where)
     if isinstance(value, Mapping):
         out: dict[str, Any] = {}
         for key, item in value.items():
             if not isinstance(key, str):
                 raise HistoryError(
                     f"mapping keys must be strings (got {key!r})",
-                    key=where or None,
+                    key=_key_text(location),
                     hint="convert the result to plain JSON data before recording it",
                 )
-            out[key] = _located_copy(item, f"{where}.{key}" if where else key)
+            out[key] = _copy(item, (location, key))
         return out
     if isinstance(value, (list, tuple)):
-        return [_located_copy(item, f"{where}[{i}]") for i, item in enumerate(value)]
+        return [_copy(item, (location, i)) for i, item in enumerate(value)]
+    if isinstance(value, (bool, int, str)):
+        return value
+    if isinstance(value, float):  # numpy's float64
+        return value if math.isfinite(value) else None
+    if _is_np_number(value):
+        return _copy(value.item(), location)
     raise HistoryError(
         f"cannot store a value of type {type(value).__name__} (got {value!r})",
-        key=where or None,
+        key=_key_text(location),
         hint="results must be plain JSON data: numbers, strings, lists and mappings",
     )
+
+
+def _key_text(location: _Location) -> str | None:
+    """``specs[0].signals[2].x`` from the linked pairs, or None at the top."""
+    keys: list[str | int] = []
+    while location is not None:
+        location, key = location
+        keys.append(key)
+    text = ""
+    for key in reversed(keys):
+        text = f"{text}[{key}]" if isinstance(key, int) else (f"{text}.{key}" if text else key)
+    return text or None
 
 
 def spec_key(spec: Mapping[str, Any]) -> str:
