@@ -278,7 +278,35 @@ def _parser() -> argparse.ArgumentParser:
         default=0.01,
         help="smallest change of Φ or λ reported as a step (default 0.01)",
     )
+    kernel = commands.add_parser(
+        "kernel",
+        help="show which path scores records; --compile fills the compiled kernel's cache",
+        description="Show which path scores records (numpy, or the compiled kernel of the fast "
+        "extra) and whether numba's cache holds the kernel. Short records take the kernel only "
+        "once it is cached; --compile caches it now.",
+    )
+    kernel.add_argument(
+        "--compile",
+        action="store_true",
+        help="compile every function of the kernel into numba's cache (seconds, once per "
+        "environment; NUMBA_CACHE_DIR chooses the folder)",
+    )
     return parser
+
+
+def _kernel(args: argparse.Namespace) -> int:
+    from .core import kernel
+
+    if args.compile:
+        for name, seconds in kernel.compile_all().items():
+            print(f"compiled {name:<16} {seconds:6.2f} s")
+    print(kernel.describe())
+    if kernel.active_path() == "numba":
+        cached = kernel.cached_functions()
+        missing = [name for name, found in cached.items() if not found]
+        state = f"missing {', '.join(missing)}" if missing else "every function"
+        print(f"cache: {kernel.cache_folder()} ({state})")
+    return EXIT_OK
 
 
 def _version_text(version: str) -> str:
@@ -312,6 +340,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from .diagnose import run_diagnose
 
         return run_diagnose(args)
+    if args.command == "kernel":
+        return _kernel(args)
     from .history.cli import run_compare, run_history
 
     return run_compare(args) if args.command == "compare" else run_history(args)

@@ -210,17 +210,28 @@ def test_a_forked_child_spreads_a_long_record_over_new_helper_threads() -> None:
 def test_the_cache_is_looked_for_where_numba_files_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from numba.core.caching import _CacheLocator
+    from numba.core.caching import UserWideCacheLocator, _CacheLocator
 
     from pytest_hevval.core import _fused
 
-    folder = kernel._cache_folders(str(tmp_path))[0]
+    # Where this process's numba keeps it, found without asking numba.
+    assert kernel.cache_folder() == Path(_fused.main_pass._cache._cache_path)
+    folder = kernel._cache_folder(str(tmp_path))
     assert folder == tmp_path / _CacheLocator.get_suitable_cache_subpath(_fused.__file__)
+    # A read-only install: numba falls back to its user-wide folder, and so does the look.
+    monkeypatch.setattr(kernel.os, "access", lambda path, mode: False)
+    kernel._cache_folder.cache_clear()
+    try:
+        user_wide = UserWideCacheLocator(_fused.main_pass.py_func, _fused.__file__)
+        assert kernel._cache_folder(None) == Path(user_wide.get_cache_path())
+    finally:
+        monkeypatch.undo()
+        kernel._cache_folder.cache_clear()
     names = ("main_pass", "lag_window")
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(kernel, "_warm_found", set())
     monkeypatch.setattr(kernel, "_cold_seen", {})
-    monkeypatch.setattr(kernel, "_cache_folders", lambda custom=None: (folder,))
+    assert kernel.cache_folder() == folder
     assert not kernel.cache_warm(names)
     folder.mkdir(parents=True)
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
@@ -228,6 +239,101 @@ def test_the_cache_is_looked_for_where_numba_files_it(
         (folder / f"_fused.{name}-100.{tag}.nbi").write_bytes(b"")
     monkeypatch.setattr(kernel, "_COLD_RECHECK_S", 0.0)
     assert kernel.cache_warm(names)
+    assert kernel.cached_functions() == {name: name in names for name in kernel.COMPILED}
+
+
+@needs_kernel
+def test_each_compiled_function_has_one_signature_for_writable_and_read_only_input() -> None:
+    """A record read from Parquet is read-only, one computed in memory is not: both reach the
+    kernel read-only, so a warm cache never compiles again mid-run."""
+    module = kernel.load_or_raise()
+    kernel.compile_all()  # writable inputs
+    x = np.sin(np.linspace(0.0, 6.0, 512))
+    y = np.cos(np.linspace(0.0, 6.0, 512))
+    for a in (x, y):
+        a.flags.writeable = False
+    kernel.main_pass(module, x, y, 1.0, 1, None)
+    kernel.lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, 510), 1)
+    kernel.quarter_level(module, x, 1)
+    kernel.grouped_sums(module, x, y, np.arange(512) // 8, 64, 0.0)
+    kernel.fine_block_sums(module, x, y, 4, 8, np.empty((10, 128)))
+    kernel.dtw_path(module, x[:40], y[:40], 3)
+    plan = np.arange(511, dtype=np.intp)
+    plan.flags.writeable = False
+    kernel.interpolate(module, x, plan, np.zeros(511), np.ones(511), 1)
+    for name in kernel.COMPILED:
+        assert len(getattr(module, name).signatures) == 1, name
+
+
+@needs_kernel
+def test_hevval_kernel_compile_fills_an_empty_cache_for_every_record(tmp_path: Path) -> None:
+    """``hevval kernel --compile`` in a fresh cache folder, then a run of the auto path on a
+    short record read from Parquet: it takes the kernel and compiles nothing more."""
+    python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    env = {
+        **os.environ,
+        "PYTHONPATH": python_path,
+        "NUMBA_CACHE_DIR": str(tmp_path / "numba"),
+        "HEVVAL_KERNEL": "auto",
+    }
+
+    def hevval(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "pytest_hevval", "kernel", *args],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=300,
+        )
+
+    cold = hevval()
+    assert cold.returncode == 0, cold.stderr
+    assert "cache cold: hevval kernel --compile fills it" in cold.stdout
+    assert "missing main_pass, lag_window" in cold.stdout
+    done = hevval("--compile")
+    assert done.returncode == 0, done.stderr
+    assert [line.split()[1] for line in done.stdout.splitlines()[: len(kernel.COMPILED)]] == list(
+        kernel.COMPILED
+    )
+    assert "cache warm: every record" in done.stdout
+    assert "(every function)" in done.stdout
+    cached = sorted(p.name for p in (tmp_path / "numba").rglob("*.nbc"))
+    script = (
+        "import numpy as np, pyarrow as pa, pyarrow.parquet as pq\n"
+        "from pytest_hevval.core import kernel\n"
+        "from pytest_hevval import signal_characteristics as sc\n"
+        "from pytest_hevval.core.uncertainty import block_sums_many\n"
+        "t = np.arange(3000) * 0.1\n"
+        "pq.write_table(pa.table({'r': np.sin(t), 's': np.sin(t - 0.2)}), 'rec.parquet')\n"
+        "table = pq.read_table('rec.parquet').to_pandas()\n"
+        "r, s = table['r'].to_numpy(), table['s'].to_numpy()\n"
+        "assert kernel.kernel_for(r.size, ('fine_block_sums',)) is not None\n"
+        "sc(r, s, dt=0.1, max_lag_s=1.0)\n"
+        "block_sums_many([(r, s), (r.copy(), s)])\n"
+        "print('ok')\n"
+    )
+    scored = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=tmp_path,
+        timeout=300,
+    )
+    assert scored.returncode == 0, scored.stderr
+    assert sorted(p.name for p in (tmp_path / "numba").rglob("*.nbc")) == cached
+
+
+def test_hevval_kernel_compile_without_numba_names_the_extra(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from pytest_hevval import cli
+
+    monkeypatch.setattr(kernel, "_load", lambda: None)
+    assert cli.main(["kernel", "--compile"]) == cli.EXIT_USAGE
+    err = capsys.readouterr().err
+    assert err.startswith("hevval kernel: error: the compiled kernel cannot be loaded")
+    assert 'pip install "pytest-hevval[fast]"' in err
 
 
 def test_auto_path_keeps_short_records_on_numpy_while_the_cache_is_cold(

@@ -92,6 +92,27 @@ def test_passing_spec(project: pytest.Pytester) -> None:
     )
 
 
+def test_header_says_when_short_records_stay_on_numpy_for_a_cold_kernel_cache(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from pytest_hevval.core import kernel
+
+    write_data(project.path)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "empty-cache"))
+    monkeypatch.setenv("HEVVAL_KERNEL", "auto")
+    monkeypatch.setattr(kernel, "_numba_installed", lambda: True)
+    note = "hevval: the compiled kernel is not cached, so records under * samples are scored on"
+    result = project.runpytest("--hevval")
+    result.stdout.fnmatch_lines([note + " numpy; 'hevval kernel --compile' caches it once"])
+    result.assert_outcomes(passed=6)
+    for path, installed in (("numpy", True), ("auto", False)):
+        monkeypatch.setenv("HEVVAL_KERNEL", path)
+        monkeypatch.setattr(kernel, "_numba_installed", lambda installed=installed: installed)
+        result = project.runpytest("--hevval")
+        result.stdout.no_fnmatch_line(note + "*")
+        result.assert_outcomes(passed=6)
+
+
 def test_ini_switch_and_custom_glob(pytester: pytest.Pytester) -> None:
     pytester.makefile(".yaml", custom=TREE_SPEC)
     pytester.makeini("[pytest]\nhevval = true\nhevval_files = custom.yaml\n")

@@ -30,6 +30,7 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
@@ -41,10 +42,16 @@ import numpy.typing as npt
 from ..errors import HevvalError, MissingExtraError
 
 __all__ = [
+    "COMPILED",
     "KERNEL_ENV",
     "KERNEL_MIN_SAMPLES",
     "KernelPath",
     "active_path",
+    "cache_folder",
+    "cache_warm",
+    "cached_functions",
+    "cold_cache_note",
+    "compile_all",
     "describe",
     "kernel_for",
     "load_or_raise",
@@ -89,12 +96,24 @@ FIELDS = 13
     SIGN_MATCHES,
 ) = range(FIELDS)
 
+#: Every compiled function a scoring run may call, as named in ``_fused``.
+COMPILED = (
+    "main_pass",
+    "lag_window",
+    "quarter_level",
+    "interpolate",
+    "grouped_sums",
+    "fine_block_sums",
+    "dtw_path",
+)
+
 _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
 _failure: dict[str, str] = {}
-# Sets of compiled functions found in the cache: numba only adds to it, so found stays found.
-_warm_found: set[tuple[str, ...]] = set()
+# (cache folder, compiled functions) found in the cache: numba only adds to it, so found stays
+# found.
+_warm_found: set[tuple[Path, tuple[str, ...]]] = set()
 
 FloatArray = npt.NDArray[np.float64]
 AnyFloatArray = npt.NDArray[np.floating]
@@ -126,22 +145,36 @@ def _load() -> ModuleType | None:
 
 
 @functools.lru_cache(maxsize=4)
-def _cache_folders(custom: str | None = None) -> tuple[Path, ...]:
-    """Where numba keeps this module's cache: ``__pycache__`` beside it, or with
-    ``NUMBA_CACHE_DIR`` set, the folder ``<its name>_<SHA-1 of its absolute path>`` there
-    (numba's ``_CacheLocator.get_suitable_cache_subpath``)."""
+def _cache_folder(custom: str | None = None) -> Path:
+    """The folder numba keeps this module's cache in, as its locators choose it: with
+    ``NUMBA_CACHE_DIR`` set, ``<that>/<folder name>_<SHA-1 of its path>``
+    (``_CacheLocator.get_suitable_cache_subpath``); else ``__pycache__`` beside the module
+    when it can be written (a venv); else numba's user-wide cache folder (a read-only
+    install). Found without importing numba, which costs a third of a second."""
     here = os.path.dirname(os.path.abspath(__file__))
-    folders = [Path(here) / "__pycache__"]
+    subpath = f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
     if custom:
-        digest = hashlib.sha1(here.encode()).hexdigest()
-        folders.insert(0, Path(custom) / f"{os.path.basename(here)}_{digest}")
-    return tuple(folders)
+        return Path(custom) / subpath
+    in_tree = Path(here) / "__pycache__"
+    if os.access(in_tree if in_tree.is_dir() else here, os.W_OK):
+        return in_tree
+    return _user_cache_root() / subpath
+
+
+def _user_cache_root() -> Path:
+    """numba's ``appdirs.user_cache_dir("numba", appauthor=False)``."""
+    if sys.platform == "win32":
+        local = os.environ.get("LOCALAPPDATA") or os.path.expanduser("~\\AppData\\Local")
+        return Path(local) / "numba" / "Cache"
+    if sys.platform == "darwin":
+        return Path(os.path.expanduser("~/Library/Caches")) / "numba"
+    return Path(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache")) / "numba"
 
 
 #: A cold cache is looked at again after this many seconds at the soonest: the look costs a
 #: directory listing, and the engine asks once per signal.
 _COLD_RECHECK_S = 1.0
-_cold_seen: dict[tuple[str, ...], float] = {}
+_cold_seen: dict[tuple[Path, tuple[str, ...]], float] = {}
 
 
 def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
@@ -150,19 +183,84 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     A stale entry (another numba version or an edited source) costs one compile, after which
     the cache is warm again.
     """
-    if names in _warm_found:
+    key = (cache_folder(), names)
+    if key in _warm_found:
         return True
-    seen = _cold_seen.get(names)
+    seen = _cold_seen.get(key)
     if seen is not None and time.monotonic() - seen < _COLD_RECHECK_S:
         return False
-    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    for folder in _cache_folders(os.environ.get("NUMBA_CACHE_DIR") or None):
-        if all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names):
-            _warm_found.add(names)
-            _cold_seen.pop(names, None)
-            return True
-    _cold_seen[names] = time.monotonic()
+    if _cache_holds(names):
+        _warm_found.add(key)
+        _cold_seen.pop(key, None)
+        return True
+    _cold_seen[key] = time.monotonic()
     return False
+
+
+def _cache_holds(names: tuple[str, ...]) -> bool:
+    """Whether numba's cache folder has an index for every one of ``names`` under this Python."""
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    folder = cache_folder()
+    return all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names)
+
+
+def cache_folder() -> Path:
+    """Where numba keeps this module's cache now: under ``NUMBA_CACHE_DIR`` when it is set."""
+    return _cache_folder(os.environ.get("NUMBA_CACHE_DIR") or None)
+
+
+def cached_functions() -> dict[str, bool]:
+    """Whether numba's cache holds each function of :data:`COMPILED` for this Python."""
+    return {name: _cache_holds((name,)) for name in COMPILED}
+
+
+def compile_all() -> dict[str, float]:
+    """Compile every function of :data:`COMPILED` into numba's on-disk cache, in seconds each.
+
+    Each runs once through its wrapper on a small record, so numba compiles the signature a
+    scoring run calls (float64, contiguous) and stores it; from then on the auto path takes the
+    kernel for every record. Raises :class:`~pytest_hevval.errors.MissingExtraError` when numba
+    cannot be loaded, and :class:`~pytest_hevval.errors.HevvalError` when the cache could not
+    be written.
+    """
+    module = _load()
+    if module is None:
+        raise MissingExtraError(
+            f"the compiled kernel cannot be loaded ({_failure.get('reason', 'unknown reason')})",
+            hint='install the extra: pip install "pytest-hevval[fast]"',
+        )
+    n = 4 * 64
+    x = np.sin(np.linspace(0.0, 6.0, n))
+    y = np.cos(np.linspace(0.0, 6.0, n))
+    fine = 4
+    calls: dict[str, Callable[[], object]] = {
+        "main_pass": lambda: main_pass(module, x, y, 1.0, 1, None),
+        "lag_window": lambda: lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, n - 2), 1),
+        "quarter_level": lambda: quarter_level(module, x, 1),
+        "interpolate": lambda: interpolate(
+            module, x, np.arange(n - 1, dtype=np.intp), np.zeros(n - 1), np.ones(n - 1), 1
+        ),
+        "grouped_sums": lambda: grouped_sums(module, x, y, np.arange(n) // fine, n // fine, 0.0),
+        "fine_block_sums": lambda: fine_block_sums(
+            module, x, y, fine, 8, np.empty((10, n // fine), dtype=np.float64)
+        ),
+        "dtw_path": lambda: dtw_path(module, x[:32], y[:32], 3),
+    }
+    seconds: dict[str, float] = {}
+    for name in COMPILED:
+        started = time.perf_counter()
+        calls[name]()
+        seconds[name] = time.perf_counter() - started
+    _cold_seen.clear()
+    missing = [name for name, cached in cached_functions().items() if not cached]
+    if missing:
+        raise HevvalError(
+            f"compiled, but numba could not store {', '.join(missing)} in its cache "
+            f"({cache_folder()})",
+            key="NUMBA_CACHE_DIR",
+            hint="set NUMBA_CACHE_DIR to a folder you can write to, then compile again",
+        )
+    return seconds
 
 
 @functools.lru_cache(maxsize=1)
@@ -210,6 +308,19 @@ def active_path() -> str:
     return "numba" if _load() is not None else "numpy"
 
 
+def cold_cache_note() -> str | None:
+    """A line for a run's header when numba is installed but not every compiled function is
+    cached, so short records are scored on numpy; None otherwise. Imports nothing."""
+    if os.environ.get(KERNEL_ENV, "auto").strip().lower() not in ("", "auto"):
+        return None
+    if not _numba_installed() or cache_warm(COMPILED):
+        return None
+    return (
+        f"hevval: the compiled kernel is not cached, so records under {KERNEL_MIN_SAMPLES:,} "
+        "samples are scored on numpy; 'hevval kernel --compile' caches it once"
+    )
+
+
 def describe() -> str:
     """One line for ``hevval --version``: the active path and why."""
     path = requested_path()
@@ -224,7 +335,11 @@ def describe() -> str:
     version = getattr(numba, "__version__", "?")
     if path == "numba":
         return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
-    warm = "cache warm: every record" if cache_warm() else "cache cold"
+    warm = (
+        "cache warm: every record"
+        if cache_warm()
+        else "cache cold: hevval kernel --compile fills it"
+    )
     return (
         f"kernel: numba {version} for records of ≥ {KERNEL_MIN_SAMPLES:,} samples ({warm}); "
         "numpy otherwise"
@@ -281,6 +396,17 @@ def accepts(*arrays: AnyFloatArray) -> bool:
     return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
 
 
+def _read_only(array: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """A read-only view of an input. numba compiles one signature for each mix of writable and
+    read-only arrays (a record read from Parquet is read-only, one computed in memory is not),
+    so a warm cache could still compile mid-run; every input goes in read-only instead."""
+    if not array.flags.writeable:
+        return array
+    view: npt.NDArray[Any] = array.view()
+    view.flags.writeable = False
+    return view
+
+
 def main_pass(
     module: ModuleType,
     ref: AnyFloatArray,
@@ -302,8 +428,8 @@ def main_pass(
         workers,
         n,
         KERNEL_PARALLEL_MIN,
-        ref,
-        sim,
+        _read_only(ref),
+        _read_only(sim),
         float(scale),
         KERNEL_CHUNK,
         ref4,
@@ -340,8 +466,8 @@ def lag_window(
         workers,
         width,
         KERNEL_PARALLEL_MIN,
-        r,
-        s,
+        _read_only(r),
+        _read_only(s),
         int(lo),
         int(count),
         float(r_mean),
@@ -364,7 +490,14 @@ def quarter_level(module: ModuleType, x: AnyFloatArray, workers: int) -> FloatAr
     per = KERNEL_CHUNK // 4
     chunks = (out.shape[0] + per - 1) // per
     _spread(
-        module.quarter_level, chunks, workers, x.shape[0], KERNEL_PARALLEL_MIN, x, out, KERNEL_CHUNK
+        module.quarter_level,
+        chunks,
+        workers,
+        x.shape[0],
+        KERNEL_PARALLEL_MIN,
+        _read_only(x),
+        out,
+        KERNEL_CHUNK,
     )
     return out
 
@@ -382,6 +515,7 @@ def interpolate(
     out = np.empty(n, dtype=np.float64)
     chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
+    values, index, offset, step = (_read_only(a) for a in (values, index, offset, step))
 
     def run(first: int, last: int) -> None:
         module.interpolate(values, index, offset, step, out, int(bounds[first]), int(bounds[last]))
@@ -407,9 +541,9 @@ def grouped_sums(
     """
     out = np.zeros((groups, 10), dtype=np.float64)
     module.grouped_sums(
-        np.ascontiguousarray(ref, dtype=np.float64),
-        np.ascontiguousarray(sim, dtype=np.float64),
-        np.ascontiguousarray(labels, dtype=np.int64),
+        _read_only(np.ascontiguousarray(ref, dtype=np.float64)),
+        _read_only(np.ascontiguousarray(sim, dtype=np.float64)),
+        _read_only(np.ascontiguousarray(labels, dtype=np.int64)),
         float(shift),
         out,
     )
@@ -427,8 +561,8 @@ def fine_block_sums(
     """One signal's sums over runs of ``fine`` samples into ``out`` (10, rows), and its
     (scale, shift, ρ), in one compiled call (see ``_fused.fine_block_sums``)."""
     scale, shift, rho = module.fine_block_sums(
-        np.ascontiguousarray(ref, dtype=np.float64),
-        np.ascontiguousarray(sim, dtype=np.float64),
+        _read_only(np.ascontiguousarray(ref, dtype=np.float64)),
+        _read_only(np.ascontiguousarray(sim, dtype=np.float64)),
         int(fine),
         int(shift_samples),
         out,
@@ -441,8 +575,8 @@ def dtw_path(
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """ISO/TS 18571's warping path (rows of x, columns of y), one sequential compiled pass."""
     rows, cols = module.dtw_path(
-        np.ascontiguousarray(x, dtype=np.float64),
-        np.ascontiguousarray(y, dtype=np.float64),
+        _read_only(np.ascontiguousarray(x, dtype=np.float64)),
+        _read_only(np.ascontiguousarray(y, dtype=np.float64)),
         int(band),
     )
     return rows, cols
