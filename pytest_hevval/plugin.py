@@ -73,14 +73,6 @@ def pytest_runtest_makereport(
     return report
 
 
-def pytest_report_header(config: pytest.Config) -> str | None:
-    if state_of(config) is None:
-        return None
-    from .core.kernel import cold_cache_note
-
-    return cold_cache_note()
-
-
 def pytest_sessionstart(session: pytest.Session) -> None:
     state = state_of(session.config)
     if state is not None:

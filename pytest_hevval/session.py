@@ -118,6 +118,7 @@ class HevvalSession:
     # -- session start: the baseline --------------------------------------------------------
     def start(self) -> None:
         """Pick the baseline before this run records anything (every process reads it)."""
+        from .core.kernel import cold_cache_note
         from .history import (
             HistoryStore,
             is_ci,
@@ -128,6 +129,9 @@ class HevvalSession:
         self.model_version = resolve_model_version(
             self.option("model-version"), os.environ, self.rootdir
         )
+        kernel_note = cold_cache_note() if self.is_controller else None
+        if kernel_note is not None:
+            self.notes.append(kernel_note)
         if not self.wants_comparison():
             return
         wanted = str(self.option("compare") or "latest")

@@ -92,8 +92,9 @@ def test_passing_spec(project: pytest.Pytester) -> None:
     )
 
 
-def test_header_says_when_short_records_stay_on_numpy_for_a_cold_kernel_cache(
-    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+@pytest.mark.parametrize("workers", [[], ["-n", "2"]], ids=["serial", "xdist"])
+def test_summary_says_when_short_records_stay_on_numpy_for_a_cold_kernel_cache(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, workers: list[str]
 ) -> None:
     from pytest_hevval.core import kernel
 
@@ -102,8 +103,11 @@ def test_header_says_when_short_records_stay_on_numpy_for_a_cold_kernel_cache(
     monkeypatch.setenv("HEVVAL_KERNEL", "auto")
     monkeypatch.setattr(kernel, "_numba_installed", lambda: True)
     note = "hevval: the compiled kernel is not cached, so records under * samples are scored on"
-    result = project.runpytest("--hevval")
-    result.stdout.fnmatch_lines([note + " numpy; 'hevval kernel --compile' caches it once"])
+    result = project.runpytest("--hevval", "-q", *workers)
+    result.stdout.fnmatch_lines(
+        ["*hevval validation summary*", note + " numpy; 'hevval kernel --compile' caches it once"]
+    )
+    assert result.stdout.str().count("the compiled kernel is not cached") == 1
     result.assert_outcomes(passed=6)
     for path, installed in (("numpy", True), ("auto", False)):
         monkeypatch.setenv("HEVVAL_KERNEL", path)

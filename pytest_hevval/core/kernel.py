@@ -12,7 +12,8 @@ in the kernel too.
 Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
 kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
 on-disk cache is already warm. numba writes that cache next to this module (``__pycache__``)
-or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that folder.
+or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that folder, and
+``hevval kernel --compile`` (:func:`compile_all`) fills it at once.
 
 ``HEVVAL_KERNEL`` forces a path: ``numpy``, ``numba`` (an error if numba cannot be loaded) or
 ``auto`` (the default). numba is imported only when the kernel is about to run, and any
