@@ -190,7 +190,7 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     seen = _cold_seen.get(key)
     if seen is not None and time.monotonic() - seen < _COLD_RECHECK_S:
         return False
-    if _cache_holds(names):
+    if _cache_holds(key[0], names):
         _warm_found.add(key)
         _cold_seen.pop(key, None)
         return True
@@ -198,10 +198,9 @@ def cache_warm(names: tuple[str, ...] = ("main_pass", "lag_window")) -> bool:
     return False
 
 
-def _cache_holds(names: tuple[str, ...]) -> bool:
-    """Whether numba's cache folder has an index for every one of ``names`` under this Python."""
+def _cache_holds(folder: Path, names: tuple[str, ...]) -> bool:
+    """Whether ``folder`` has numba's index of every one of ``names`` under this Python."""
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    folder = cache_folder()
     return all(any(folder.glob(f"_fused.{name}-*.{tag}.nbi")) for name in names)
 
 
@@ -212,7 +211,8 @@ def cache_folder() -> Path:
 
 def cached_functions() -> dict[str, bool]:
     """Whether numba's cache holds each function of :data:`COMPILED` for this Python."""
-    return {name: _cache_holds((name,)) for name in COMPILED}
+    folder = cache_folder()
+    return {name: _cache_holds(folder, (name,)) for name in COMPILED}
 
 
 def compile_all() -> dict[str, float]:
@@ -310,9 +310,12 @@ def active_path() -> str:
 
 
 def cold_cache_note() -> str | None:
-    """A line for a run's header when numba is installed but not every compiled function is
-    cached, so short records are scored on numpy; None otherwise. Imports nothing."""
-    if os.environ.get(KERNEL_ENV, "auto").strip().lower() not in ("", "auto"):
+    """A line for the end of a run's summary when numba is installed but not every compiled
+    function is cached, so short records are scored on numpy; None otherwise. Imports nothing."""
+    try:
+        if requested_path() != "auto":
+            return None
+    except HevvalError:  # a bad value: the scoring itself reports it, with its hint
         return None
     if not _numba_installed() or cache_warm(COMPILED):
         return None
@@ -338,7 +341,7 @@ def describe() -> str:
         return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
     warm = (
         "cache warm: every record"
-        if cache_warm()
+        if cache_warm(COMPILED)
         else "cache cold: hevval kernel --compile fills it"
     )
     return (
@@ -397,14 +400,18 @@ def accepts(*arrays: AnyFloatArray) -> bool:
     return all(a.dtype == np.float64 and a.flags.c_contiguous for a in arrays)
 
 
-def _read_only(array: npt.NDArray[Any]) -> npt.NDArray[Any]:
-    """A read-only view of an input. numba compiles one signature for each mix of writable and
-    read-only arrays (a record read from Parquet is read-only, one computed in memory is not),
-    so a warm cache could still compile mid-run; every input goes in read-only instead."""
-    if not array.flags.writeable:
-        return array
-    view: npt.NDArray[Any] = array.view()
-    view.flags.writeable = False
+def _read_only(array: npt.ArrayLike, dtype: npt.DTypeLike = np.float64) -> npt.NDArray[Any]:
+    """An input as the kernel's one signature takes it: contiguous, of ``dtype``, read-only.
+
+    numba compiles one signature for each mix of writable and read-only arrays (a record read
+    from Parquet is read-only, one computed in memory is not), so a warm cache could still
+    compile mid-run; every input goes in as a read-only view instead (no copy where the array
+    already has the layout and type).
+    """
+    view: npt.NDArray[Any] = np.ascontiguousarray(array, dtype=dtype)
+    if view.flags.writeable:
+        view = view.view()
+        view.flags.writeable = False
     return view
 
 
@@ -516,7 +523,8 @@ def interpolate(
     out = np.empty(n, dtype=np.float64)
     chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
-    values, index, offset, step = (_read_only(a) for a in (values, index, offset, step))
+    values, offset, step = (_read_only(a) for a in (values, offset, step))
+    index = _read_only(index, np.intp)
 
     def run(first: int, last: int) -> None:
         module.interpolate(values, index, offset, step, out, int(bounds[first]), int(bounds[last]))
@@ -542,9 +550,9 @@ def grouped_sums(
     """
     out = np.zeros((groups, 10), dtype=np.float64)
     module.grouped_sums(
-        _read_only(np.ascontiguousarray(ref, dtype=np.float64)),
-        _read_only(np.ascontiguousarray(sim, dtype=np.float64)),
-        _read_only(np.ascontiguousarray(labels, dtype=np.int64)),
+        _read_only(ref),
+        _read_only(sim),
+        _read_only(labels, np.int64),
         float(shift),
         out,
     )
@@ -562,8 +570,8 @@ def fine_block_sums(
     """One signal's sums over runs of ``fine`` samples into ``out`` (10, rows), and its
     (scale, shift, ρ), in one compiled call (see ``_fused.fine_block_sums``)."""
     scale, shift, rho = module.fine_block_sums(
-        _read_only(np.ascontiguousarray(ref, dtype=np.float64)),
-        _read_only(np.ascontiguousarray(sim, dtype=np.float64)),
+        _read_only(ref),
+        _read_only(sim),
         int(fine),
         int(shift_samples),
         out,
@@ -576,8 +584,8 @@ def dtw_path(
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """ISO/TS 18571's warping path (rows of x, columns of y), one sequential compiled pass."""
     rows, cols = module.dtw_path(
-        _read_only(np.ascontiguousarray(x, dtype=np.float64)),
-        _read_only(np.ascontiguousarray(y, dtype=np.float64)),
+        _read_only(x),
+        _read_only(y),
         int(band),
     )
     return rows, cols
