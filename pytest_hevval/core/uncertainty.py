@@ -211,9 +211,12 @@ class BlockSums:
     fine: int
     n: int
     rho: float
-    #: The exact power of two the sums were taken at (1 unless the values' squares would
-    #: overflow or underflow); λ are scale-free, so a range is scaled alike.
-    scale: float = 1.0
+
+    @property
+    def scale(self) -> float:
+        """The exact power of two the sums were taken at (1 unless the values' squares would
+        overflow or underflow); λ are scale-free, so a range is scaled alike."""
+        return self.table.scale
 
     @cached_property
     def per_block(self) -> int:
@@ -284,19 +287,18 @@ def _compiled_block_sums(
     out: list[BlockSums] = []
     for table, (ref, sim) in zip(tables, pairs, strict=True):
         scale, shift, rho = kernel.fine_block_sums(module, ref, sim, fine, SHIFT_SAMPLES, table)
-        out.append(BlockSums(SumTable(table.T, shift), fine, n, rho, scale))
+        out.append(BlockSums(SumTable(table.T, shift, scale), fine, n, rho))
     return out
 
 
 def _one_block_sums(ref: FloatArray, sim: FloatArray, labels: IntArray, fine: int) -> BlockSums:
     n = int(np.asarray(ref).shape[0])
-    scale = _power_of_two_scale(ref, sim)
-    if scale != 1.0:
-        ref = np.multiply(ref, scale, dtype=np.float64)
-        sim = np.multiply(sim, scale, dtype=np.float64)
     table = labelled_table(ref, sim, labels, math.ceil(n / fine), compiled=False)
+    if table.scale != 1.0:  # ρ of the rescaled residual, whose squares stay finite
+        ref = np.multiply(ref, table.scale, dtype=np.float64)
+        sim = np.multiply(sim, table.scale, dtype=np.float64)
     residual = np.subtract(ref, sim, dtype=np.float64)
-    return BlockSums(table, fine, n, lag1_autocorrelation(residual), scale)
+    return BlockSums(table, fine, n, lag1_autocorrelation(residual))
 
 
 def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) -> list[BlockSums]:
@@ -353,7 +355,7 @@ def _stacked_block_sums(pairs: Sequence[tuple[FloatArray, FloatArray]], n: int) 
         np.logical_and((r2 > r0) == (s2 > s0), (r2 < r0) == (s2 < s0), out=matches[:, 1:-1])
     _fine_sums(matches, fine, columns[9])
     return [
-        BlockSums(SumTable(columns[:, i, :].T, float(shift[i])), fine, n, rho[i], float(scales[i]))
+        BlockSums(SumTable(columns[:, i, :].T, float(shift[i]), float(scales[i])), fine, n, rho[i])
         for i in range(k)
     ]
 
@@ -399,17 +401,12 @@ def _fine_sums(x: FloatArray, fine: int, out: FloatArray) -> None:
         out[:, runs] = tail
 
 
-def _power_of_two_scale(ref: FloatArray, sim: FloatArray) -> float:
-    peak = max(float(np.max(np.abs(ref), initial=0.0)), float(np.max(np.abs(sim), initial=0.0)))
-    return power_of_two_scale(peak) if math.isfinite(peak) else 1.0
-
-
 def coarsen(table: SumTable, per_block: int) -> SumTable:
     """Runs of ``per_block`` consecutive rows summed into one (the last run may be short)."""
     if per_block <= 1:
         return table
     starts = np.arange(0, table.values.shape[0], per_block)
-    return SumTable(np.add.reduceat(table.values, starts, axis=0), table.shift)
+    return SumTable(np.add.reduceat(table.values, starts, axis=0), table.shift, table.scale)
 
 
 @lru_cache(maxsize=64)
@@ -456,7 +453,7 @@ def replicate_sums(counts: FloatArray, rows: FloatArray) -> FloatArray:
 
 def replicate_table(blocks: SumTable, counts: FloatArray) -> SumTable:
     """The sums of every replicate record: one row per row of ``counts``."""
-    return SumTable(replicate_sums(counts, blocks.values), blocks.shift)
+    return SumTable(replicate_sums(counts, blocks.values), blocks.shift, blocks.scale)
 
 
 def replicate_lambdas(
