@@ -150,6 +150,7 @@ def diagnose_pair(
         # A channel the model reads is an input; the spec can name more causes.
         causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
         min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
+        groups=[members for _, members in settings.groups],
     )
 
 
@@ -175,6 +176,7 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         "signal": path,
         "unit": result.unit,
         "passed": result.passed,
+        "dt": evaluation.aligned.grid.dt,
         "origin": {"path": origin.path, "level": origin.level},
         "origins": [{"path": p, "level": by_path[p].level} for p in result.origins if p in by_path],
     }
@@ -223,9 +225,14 @@ def _lambda_change(before: Mapping[str, Any], after: Mapping[str, Any]) -> str:
     )
 
 
+def _label(name: str) -> str:
+    """A channel's name, quoted when it has surrounding spaces (two logged columns can differ
+    only by a trailing space)."""
+    return repr(name) if name != name.strip() else name
+
+
 def _share_text(share: float) -> str:
-    # A negative share: adding the term alone would make the fit worse (it only compensates).
-    return f"{100 * share:.1f} %" if share >= 0 else "worse alone"
+    return f"{100 * share:.1f} %"
 
 
 def _describe_effects(found: Mapping[str, Any]) -> list[str]:
@@ -234,34 +241,51 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     share = float(found.get("min_share", MIN_SHARE))
     before = found.get("lambdas") or {}
     relevant = [e for e in effects if e["relevant"]]
-    minor = [e for e in effects if e["significant"] and not e["relevant"]]
+    named = {e["name"] for e in relevant}
+    stand_ins = [
+        e
+        for e in effects
+        if e["significant"] and not e["relevant"] and named & set(e.get("interchangeable") or ())
+    ]
+    minor = [e for e in effects if e["significant"] and not e["relevant"] and e not in stand_ins]
     lines: list[str] = []
     if relevant:
         lines.append(
-            f"  effects (significant, each removing at least {100 * share:.0f} % of the "
-            "residual), largest first:"
+            f"  effects (significant, each explaining at least {100 * share:.0f} % of the "
+            "residual), largest first; shares add up to what they explain together:"
         )
     for i, e in enumerate(relevant, start=1):
         mean = float(e.get("offset_explained") or 0.0)
         carries = (
             f"; carries {mean:+.3g}{unit} of the mean shift"
-            if e["kind"]
-            not in (
-                "gain",
-                "lag",
-                "offset",
-            )
-            and abs(mean) > 0
+            if e["kind"] not in ("gain", "lag", "offset") and abs(mean) > 0
             else ""
         )
+        scale = float(e.get("time_scale_s") or 0.0)
+        tested = f" (tested on {scale:g} s means)" if scale > float(found.get("dt") or 0) else ""
         lines.append(
-            f"   {i}. {e['text']}: removes {100 * e['share']:.1f} % of the residual{carries}"
+            f"   {i}. {e['text']}: explains {100 * e['share']:.1f} % of the residual"
+            f"{carries}{tested}"
         )
+        if e.get("members"):
+            lines.append(
+                "      one effect, also measured by: " + ", ".join(map(_label, e["members"]))
+            )
+        if e.get("interchangeable"):
+            lines.append(
+                "      on this record, interchangeable with: " + ", ".join(e["interchangeable"])
+            )
         if e.get("predicted") and before:
             lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
+    for e in stand_ins:
+        instead = ", ".join(n for n in e["interchangeable"] if n in named)
+        lines.append(
+            f"  could stand in for {instead} on this record, not a finding of its own: "
+            f"{e['text']} ({_share_text(e['share'])})"
+        )
     if minor:
         lines.append(
-            f"  minor (significant, under {100 * share:.0f} % each): "
+            f"  minor (significant, but under {100 * share:.0f} % each or not helping alone): "
             + "; ".join(f"{e['text']} ({_share_text(e['share'])})" for e in minor)
         )
     if len(relevant) > 1 and found.get("predicted") and before:
@@ -300,12 +324,23 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def _strongest_finding(found: dict[str, Any]) -> float:
-    """The largest share of the residual that one significant candidate explains alone."""
-    return max(
+def _strongest_finding(found: dict[str, Any]) -> tuple[float, float]:
+    """How well a diagnosis names a cause: the share of its largest relevant effect that is a
+    channel, expression or derivative (a gain, offset or lag names no cause), then the largest
+    share of the residual one significant candidate explains alone."""
+    named = max(
+        (
+            float(e["share"])
+            for e in found.get("effects", [])
+            if e["relevant"] and e["kind"] not in ("gain", "offset", "lag")
+        ),
+        default=0.0,
+    )
+    alone = max(
         (float(c["explained_fraction"]) for c in found.get("candidates", []) if c["significant"]),
         default=0.0,
     )
+    return named, alone
 
 
 def diagnose_origin(evaluation: Evaluation, path: str) -> dict[str, Any]:
@@ -313,8 +348,11 @@ def diagnose_origin(evaluation: Evaluation, path: str) -> dict[str, Any]:
 
     When the origin has children (they pass, and the error emerges where they combine), the
     origin's own residual may be a running sum or a product, and the weakest child's residual
-    often names the cause more directly. Both are diagnosed and the one with the stronger
-    significant finding is returned, with ``diagnosed`` saying which.
+    often names the cause more directly: a missing load shows in the power at each instant,
+    while in the energy it is a slow drift that any warming temperature can mimic. Both are
+    diagnosed and the one that names a cause (a relevant channel, expression or derivative)
+    with the larger share is returned, else the one with the stronger significant finding,
+    with ``diagnosed`` saying which.
     """
     found = diagnose_signal(evaluation, path)
     found["diagnosed"] = path
@@ -341,10 +379,13 @@ def _describe(found: dict[str, Any]) -> list[str]:
         f"  {found['summary']}",
         f"  timing: lag {found['lag_s']:+.3g} s"
         + (" (significant)" if found.get("timing_significant") else ""),
-        f"  gain: {found['gain']:.4g} [{found['gain_interval'][0]:.4g}, "
+        # The headline fit is the simulated signal alone against the reference; the effects
+        # below are fitted together, so their gain and offset can differ.
+        "  before any effect, reference ≈ gain · simulated + offset:",
+        f"    gain {found['gain']:.4g} [{found['gain_interval'][0]:.4g}, "
         f"{found['gain_interval'][1]:.4g}]"
         + (" (significant)" if found["gain_significant"] else ""),
-        f"  offset: {found['offset']:+.4g}{unit} [{found['offset_interval'][0]:.4g}, "
+        f"    offset {found['offset']:+.4g}{unit} [{found['offset_interval'][0]:.4g}, "
         f"{found['offset_interval'][1]:.4g}]"
         + (" (significant)" if found["offset_significant"] else ""),
     ]

@@ -9,7 +9,7 @@ from hypothesis.extra import numpy as hnp
 
 from pytest_hevval.core.tree import TreeNode
 
-__all__ = ["finite", "signal_pairs", "signal_trees"]
+__all__ = ["finite", "regression_terms", "signal_pairs", "signal_trees"]
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
@@ -40,3 +40,29 @@ def signal_trees(draw: st.DrawFn, max_depth: int = 3, max_children: int = 3) -> 
 
     root = grow(1)
     return TreeNode(root.name, draw(st.sampled_from([0.5, 1.0, 3.0])), root.children)
+
+
+@st.composite
+def regression_terms(
+    draw: st.DrawFn, max_terms: int = 6, max_size: int = 200
+) -> tuple[np.ndarray, np.ndarray]:
+    """A target y and 1–``max_terms`` columns of terms (rows of the returned matrix) that may
+    be correlated, duplicated, constant or unrelated, as the effects of a diagnosis are."""
+    n = draw(st.integers(8, max_size))
+    k = draw(st.integers(1, max_terms))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    latent = rng.standard_normal((3, n))
+    rows = np.empty((k, n))
+    for j in range(k):
+        form = draw(st.sampled_from(["mix", "copy", "constant", "noise"]))
+        if form == "copy" and j > 0:
+            rows[j] = draw(st.sampled_from([-1.0, 1.0])) * draw(st.floats(0.1, 3.0)) * rows[j - 1]
+        elif form == "constant":
+            rows[j] = 1.0
+        elif form == "noise":
+            rows[j] = rng.standard_normal(n)
+        else:
+            rows[j] = rng.standard_normal(3) @ latent + 0.3 * rng.standard_normal(n)
+    y = rng.standard_normal(3) @ latent + draw(st.floats(-2.0, 2.0)) + rng.standard_normal(n)
+    return y, rows

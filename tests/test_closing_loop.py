@@ -24,6 +24,7 @@ B03_V2 = "specs/i3-B03-winter-v2.hevval.yaml"
 A12_V1 = "specs/i3-A12-hills-v1.hevval.yaml"
 A12_V2 = "specs/i3-A12-hills-v2.hevval.yaml"
 POWER = "E_batt/P_batt"
+FULL_LOG = Path(__file__).resolve().parent / "data" / "i3" / "TripB03_full.parquet"
 
 
 def _without_candidates(spec: Path, target: Path) -> None:
@@ -62,6 +63,14 @@ def loop(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("loop")
     channels_only = out / "b03-v1-channels-only.yaml"
     _without_candidates(EXAMPLE / B03_V1, channels_only)
+    # The same trip's full log: the heater is measured five ways there.
+    full_log = out / "b03-v1-full-log.yaml"
+    full_log.write_text(
+        (EXAMPLE / B03_V1)
+        .read_text(encoding="utf-8")
+        .replace("../data/i3/TripB03.parquet", str(FULL_LOG)),
+        encoding="utf-8",
+    )
     run = ["--no-history", "--quiet", "--json"]
     commands = {
         "b03-v1": ["run", B03_V1, *run, str(out / "b03-v1.json")],
@@ -70,6 +79,7 @@ def loop(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "b03-diagnosis": ["diagnose", B03_V1, "--signal", POWER],
         "b03-declared": ["diagnose", B03_V1, "--signal", POWER, "--no-channels"],
         "b03-channels": ["diagnose", str(channels_only), "--signal", POWER],
+        "b03-full": ["diagnose", str(full_log), "--signal", POWER],
         "a12-declared": ["diagnose", A12_V1, "--signal", POWER, "--no-channels"],
     }
     for name, argv in commands.items():
@@ -96,12 +106,8 @@ def _read(path: Path) -> dict[str, Any]:
 
 
 def _top(diagnosis: Mapping[str, Any]) -> Mapping[str, Any]:
-    """The best candidate the diagnosis selected and found significant (not the offset)."""
-    return next(
-        c
-        for c in diagnosis["candidates"]
-        if c["selected"] and c["significant"] and c["kind"] not in ("offset", "gain", "lag")
-    )
+    """The diagnosis' first finding: its first relevant effect."""
+    return next(e for e in diagnosis["effects"] if e["relevant"])
 
 
 def _signal(spec: Mapping[str, Any], path: str) -> Mapping[str, Any]:
@@ -125,7 +131,6 @@ def test_b03_diagnosis_names_the_heating_load(loop: dict[str, Path]) -> None:
         found = _read(loop[name])
         top = _top(found)
         assert top["name"] == "heating_aircon_kw", (name, top)
-        assert top["rank"] == 1
         # The heater runs off the traction battery: about 1 kW more battery power per kW of
         # logged heater power is what physics expects, and the interval must allow it.
         low, high = top["interval"]
@@ -136,8 +141,34 @@ def test_b03_measured_channel_alone_points_at_the_heater(loop: dict[str, Path]) 
     found = _read(loop["b03-channels"])
     assert not any(c["kind"] == "declared" for c in found["candidates"])
     top = _top(found)
-    assert (top["name"], top["kind"], top["rank"]) == ("Heating Power CAN [kW]", "channel", 1)
+    assert (top["name"], top["kind"]) == ("Heating Power CAN [kW]", "channel")
     assert top["interval"][0] > 0.0
+
+
+def test_b03_full_log_reports_the_heater_channels_as_one_effect(loop: dict[str, Path]) -> None:
+    """Five channels measure the heater in the full log; fitted side by side they split it with
+    opposite signs and none is credited. As one effect, it is the first finding."""
+    found = _read(loop["b03-full"])
+    top = _top(found)
+    heater = {
+        "heating_aircon_kw",
+        "Heating Power CAN [kW]",
+        "Heating Power LIN [W]",
+        "Heater Current [A]",
+        "Requested Heating Power [W]",
+    }
+    assert top["name"] in heater
+    assert heater <= {top["name"], *top["members"]}
+    assert top["coefficient"] > 0.0
+    assert top["interval"][0] > 0.0
+    # No member of the heater group is offered again on its own.
+    assert not any(e["name"] in heater for e in found["effects"] if e is not top)
+    # The effects' shares partition what they explain together.
+    shares = [e["share"] for e in found["effects"]]
+    assert all(s >= 0.0 for s in shares)
+    assert sum(shares) <= 1.0
+    # Only the heater is a finding: the warming battery, which mimics it, is not one of its own.
+    assert [e["name"] for e in found["effects"] if e["relevant"]] == [top["name"]]
 
 
 def test_b03_v2_halves_the_energy_error_and_compare_pairs_the_runs(
@@ -165,7 +196,7 @@ def test_b03_v2_halves_the_energy_error_and_compare_pairs_the_runs(
 def test_a12_declared_climb_rate_explains_the_power_residual(loop: dict[str, Path]) -> None:
     found = _read(loop["a12-declared"])
     top = _top(found)
-    assert (top["name"], top["rank"]) == ("climb_rate_m_s", 1)
+    assert top["name"] == "climb_rate_m_s"
     # kW of battery power per m/s of climb: m·g is about 13.6 kW per m/s for this car.
     assert top["interval"][0] > 5.0
 

@@ -487,8 +487,11 @@ def test_constant_and_collinear_candidates_are_dropped_with_a_note() -> None:
     assert "flat" not in names
     assert "elevation in cm" not in names
     assert any("'flat' is constant" in note for note in d.notes)
-    assert any("'elevation in cm' duplicates 'elevation'" in note for note in d.notes)
+    # The same channel in another unit measures the same thing: one effect, named by the
+    # first, the other listed as its member.
     assert d.candidates[0].name == "elevation"
+    assert d.relevant[0].name == "elevation"
+    assert d.relevant[0].members == ("elevation in cm",)
 
 
 def test_exact_match() -> None:

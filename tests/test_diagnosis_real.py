@@ -145,18 +145,43 @@ def test_a_missing_load_with_a_mean_is_one_finding_with_its_offset(cases: dict[s
     assert first["share"] > 0.1
 
 
+def _stand_ins(found: Mapping[str, Any]) -> list[str]:
+    """Significant effects that are no finding of their own because a finding can stand in
+    for them on this record."""
+    named = set(_names(found["effects"], relevant=True))
+    return [
+        e["name"]
+        for e in found["effects"]
+        if e["significant"] and not e["relevant"] and named & set(e["interchangeable"])
+    ]
+
+
 def test_small_significant_effects_are_minor(cases: dict[str, Any]) -> None:
     found = cases["minor"]
     relevant = _names(found["effects"], relevant=True)
-    minor = _names(found["effects"], relevant=False)
     assert relevant == ["heating_aircon_kw"], found["effects"]
+    by_name = {e["name"]: e for e in found["effects"]}
+    # The warming battery mimics the heater that is turned down on this trip: the heater
+    # explains more, so the battery temperature is named as its stand-in, not as a finding.
+    stand_ins = _stand_ins(found)
+    assert stand_ins == ["Battery Temperature [°C]"], found["effects"]
+    assert by_name[stand_ins[0]]["coefficient"] < 0.0
+    assert f"{stand_ins[0]} could stand in for heating_aircon_kw on this record" in found["summary"]
+    minor = [n for n in _names(found["effects"], relevant=False) if n not in stand_ins]
     assert minor, found["effects"]
-    assert all(e["share"] < 0.05 for e in found["effects"] if e["name"] in minor)
-    assert "minor: " + ", ".join(minor) in found["summary"]
-    # With no minimum share, the small terms that help on their own are listed as effects.
-    helping = {n for n in minor if next(e for e in found["effects"] if e["name"] == n)["share"] > 0}
-    assert helping
-    assert helping <= set(_names(cases["minor_all"]["effects"], relevant=True))
+    assert all(by_name[n]["share"] < 0.05 for n in minor)
+    assert "minor: " + ", ".join(minor[:3]) in found["summary"]
+    # With no minimum share, every significant effect is a finding unless adding it alone makes
+    # the fit worse (it only compensates another, as the throttle and the gain do) or a larger
+    # finding can stand in for it.
+    every = cases["minor_all"]
+    left_out = {
+        e["name"]
+        for e in every["effects"]
+        if e["significant"] and not e["relevant"] and e["alone_share"] >= 0.0
+    }
+    assert left_out <= set(_stand_ins(every)), every["effects"]
+    assert set(_names(every["effects"], relevant=True)) >= {"heating_aircon_kw"}
 
 
 def test_the_diagnosis_says_where_the_residual_concentrates(cases: dict[str, Any]) -> None:

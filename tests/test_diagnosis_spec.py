@@ -6,11 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 from scipy import signal as sps
 
-from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, _unique_shares, diagnose_residual
+from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
 from pytest_hevval.errors import SpecError
 from pytest_hevval.spec.load import parse_spec_text
 from pytest_hevval.spec.model import DiagnosisSpec
@@ -37,6 +35,13 @@ def test_keys_are_read() -> None:
         MINIMAL + 'diagnosis:\n  min_share: 0.1\n  responses: ["SoC [%]"]\n  causes: [heater_kw]\n'
     )
     assert settings == DiagnosisSpec(min_share=0.1, responses=("SoC [%]",), causes=("heater_kw",))
+
+
+def test_groups_are_read() -> None:
+    settings = parse(
+        MINIMAL + 'diagnosis:\n  groups:\n    heater: ["Heater Current [A]", heater_kw]\n'
+    )
+    assert settings.groups == (("heater", ("Heater Current [A]", "heater_kw")),)
 
 
 @pytest.mark.parametrize(
@@ -67,6 +72,24 @@ def test_keys_are_read() -> None:
             "keep it in one of the two lists",
         ),
         ("diagnosis: [a]\n", "/p/t.hevval.yaml:5: diagnosis: must be a mapping"),
+        (
+            "diagnosis:\n  groups:\n    heater: [a]\n",
+            "/p/t.hevval.yaml:7: diagnosis.groups.heater: must be a list of at least two channel "
+            "or candidate names (got 1 item); write e.g. groups: {heater: ",
+        ),
+        (
+            "diagnosis:\n  groups:\n    heater: [a, b]\n    other: [b, c]\n",
+            "/p/t.hevval.yaml:8: diagnosis.groups.other: 'b' is already in group 'heater'; a "
+            "candidate measures one effect: keep it in one group",
+        ),
+        (
+            "diagnosis:\n  responses: [a]\n  groups:\n    heater: [a, b]\n",
+            "/p/t.hevval.yaml:8: diagnosis.groups.heater: 'a' is declared a response",
+        ),
+        (
+            "diagnosis:\n  groups: [a, b]\n",
+            "/p/t.hevval.yaml:6: diagnosis.groups: must be a mapping",
+        ),
     ],
 )
 def test_bad_diagnosis_block(block: str, message: str) -> None:
@@ -130,23 +153,43 @@ def test_min_share_moves_an_effect_between_relevant_and_minor() -> None:
         diagnose_residual(ref, sim, dt=DT, min_share=1.0)
 
 
-@settings(max_examples=30, deadline=None)
-@given(
-    seed=st.integers(0, 2**32 - 1),
-    scale=st.floats(1e-3, 1e3),
-    offset=st.floats(-5.0, 5.0),
-)
-def test_unique_shares_are_bounded_scale_free_and_zero_for_a_duplicate(
-    seed: int, scale: float, offset: float
-) -> None:
-    rng = np.random.default_rng(seed)
-    n = 500
-    a, b = rng.standard_normal(n) + 1.0, rng.standard_normal(n)
-    r = 0.7 * a - 0.3 * b + offset + 0.5 * rng.standard_normal(n)
-    shares = _unique_shares(r, [a, b], offset)
-    assert all(0.0 <= s <= 1.0 for s in shares)
-    assert _unique_shares(r, [scale * a, b], offset) == pytest.approx(shares, abs=1e-9)
-    # A column that repeats another explains nothing beyond it, nor does the other beyond it.
-    twice = _unique_shares(r, [a, a, b], offset)
-    assert twice[0] == pytest.approx(0.0, abs=1e-9)
-    assert twice[1] == pytest.approx(0.0, abs=1e-9)
+def test_channels_that_measure_one_effect_are_one_finding() -> None:
+    """The same load logged three ways (a current, a power in W, a power in kW with a small
+    offset and its own noise): fitted side by side they split the load with opposite signs;
+    grouped, the load is one finding, named by the member that explains most, with the others
+    listed."""
+    ref, sim, load, _ = _case(11)
+    rng = np.random.default_rng(12)
+    n = load.shape[0]
+    current = load * 1000 / 380 + 0.05 * rng.standard_normal(n)
+    watts = load * 1000 + 20 * rng.standard_normal(n)
+    candidates = [
+        Candidate("Heater Current [A]", "channel", current),
+        Candidate("Heating Power LIN [W]", "channel", watts),
+        Candidate("Heating Power CAN [kW]", "channel", load),
+    ]
+    found = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
+    (first,) = found.relevant
+    assert first.name == "Heating Power CAN [kW]"
+    assert set(first.members) == {"Heater Current [A]", "Heating Power LIN [W]"}
+    assert first.coefficient > 0.0
+    assert first.interval[0] < 1.0 < first.interval[1]
+    assert first.name in found.summary
+    assert "one effect with" in found.summary
+    assert sum(e.share for e in found.effects) <= found.explained_fraction + 1.0
+
+
+def test_a_declared_group_is_one_effect_whatever_the_correlation() -> None:
+    ref, sim, load, _ = _case(5)
+    rng = np.random.default_rng(6)
+    # Two loads that together make the missing one, barely correlated with each other.
+    part = np.clip(rng.standard_normal(load.shape[0]).cumsum() / 40, -1, 1)
+    candidates = [Candidate("first", "channel", load - part), Candidate("second", "channel", part)]
+    apart = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
+    assert all(not e.members for e in apart.effects)
+    together = diagnose_residual(
+        ref, sim, dt=DT, candidates=candidates, groups=[("first", "second")]
+    )
+    named = [e for e in together.effects if e.kind == "channel"]
+    assert len(named) == 1
+    assert {named[0].name, *named[0].members} == {"first", "second"}

@@ -32,6 +32,7 @@ from scipy import signal as sps
 from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
+from .importance import explained_sums, shapley_shares
 from .lag import search_lag
 from .local import concentration, fixed_windows, group_lambdas, segment_sums
 
@@ -74,6 +75,21 @@ RESPONSE_LEAD_WINDOW_S = 2.0
 RESPONSE_MIN_LEAD_S = 0.2
 #: Windows over which the diagnosis says where the residual concentrates.
 LOCAL_WINDOW_S = 30.0
+#: Candidates whose series correlate at least this strongly (either sign) measure the same
+#: thing: a heater's current, its power on two buses and its requested power are one effect.
+GROUP_MIN_CORRELATION = 0.9
+#: Besides the regression grid, every candidate is also tested on block means of this length.
+#: A missing load acts over tens of seconds to minutes, while most of a model's 10 Hz residual
+#: is its own fast dynamics error; pre-whitening that residual is nearly a difference filter
+#: and removes the slow variation the load lives in. Block means of 10 s keep it.
+SLOW_SCALE_S = 10.0
+#: The slow scale is used only when the record holds at least this many of its blocks.
+MIN_SLOW_BLOCKS = 20
+#: Two effects are interchangeable on a record when what they explain in common is at least
+#: this fraction of what the smaller of the two explains alone; the smaller one is then no
+#: finding of its own (a gain and an offset can mimic a slowly varying load, a warming
+#: battery can mimic a heater that is turned down).
+INTERCHANGEABLE_OVERLAP = 0.5
 #: The characteristics the diagnosis predicts after a fix.
 PREDICTED_CHARACTERISTICS: tuple[str, ...] = ("mae", "rms")
 #: Ljung-Box lags, in samples of the (possibly decimated) regression grid.
@@ -91,6 +107,11 @@ _COLLINEAR = 1e-6
 _RCOND = 1e-10
 _DEFAULT_MAX_LAG_S = 10.0
 _KINDS: tuple[str, ...] = ("declared", "channel", "derivative", "lag", "gain", "offset")
+_GENERIC_KINDS: tuple[str, ...] = ("lag", "gain", "offset")
+# Which member names a group when members explain about as much: the spec's own expression
+# (the user's words), then a logged channel, then a derivative.
+_NAMING_PREFERENCE = {"declared": 0, "channel": 1, "derivative": 2}
+_NAMING_TOLERANCE = 0.05
 _N_PEAKS = 3
 
 
@@ -227,6 +248,10 @@ class Effect:
     relevant: bool
     predicted: Mapping[str, float]
     hot_share: float | None
+    members: tuple[str, ...] = ()
+    interchangeable: tuple[str, ...] = ()
+    time_scale_s: float = 0.0
+    alone_share: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -745,6 +770,8 @@ class _Series:
     std: float
     # Multiplies a coefficient fitted on the rescaled data to give it in the caller's units.
     unit: float
+    # Other candidates that measure the same thing (see _grouped); this one names the effect.
+    members: tuple[str, ...] = ()
 
 
 def _format_pct(fraction: float) -> str:
@@ -809,6 +836,7 @@ def diagnose_residual(
     causes: Collection[str] = (),
     min_share: float = MIN_SHARE,
     window_s: float = LOCAL_WINDOW_S,
+    groups: Sequence[Collection[str]] = (),
 ) -> Diagnosis:
     """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
 
@@ -839,6 +867,9 @@ def diagnose_residual(
         the residual's mean square; smaller ones are minor.
     window_s:
         Window length, in seconds, over which the concentration of the residual is found.
+    groups:
+        Sets of candidate names that measure one effect, whatever their correlation; each is
+        reported as one effect (strongly correlated candidates are grouped anyway).
 
     Returns
     -------
@@ -916,20 +947,28 @@ def diagnose_residual(
         notes.append("the simulated signal is constant: gain and lag cannot be estimated")
 
     user, echoes = _split_responses(ref, ref - sim, dt, user, responses, causes)
-    series = _candidate_series(sim, lag, dt, window, factor, user, units, names)
+    series = _grouped(
+        _candidate_series(sim, lag, dt, window, factor, user, units, names), r_g, groups
+    )
     kept, z_rows = _independent(series, r_g.shape[0], notes)
     m = len(kept)
     # Alone: every candidate with an intercept.
     ones = np.ones((r_g.shape[0], 1))
     alone = _screen(r_g, ones, z_rows, order) if m else None
-    selected, holm_levels, base = _forward_selection(
-        r_g, z_rows, order, alpha=alpha, max_selected=max_selected
+    scales = [_Scale(factor, r_g, z_rows, order)]
+    slow = _slow_scale(r, kept, dt, factor) if m else None
+    if slow is not None:
+        scales.append(slow)
+    weights = _holm_weights([s.kind for s in kept])
+    selected, holm_levels, bases = _forward_selection(
+        scales, alpha=alpha, max_selected=max_selected, weights=weights
     )
+    base = bases[0]
 
     findings, explained, remaining_full, remaining_grid = _joint_model(
         r, r_g, kept, selected, holm_levels, base, order, alpha
     )
-    findings.extend(_alone_findings(r, kept, selected, alone, alpha))
+    findings.extend(_alone_findings(r, kept, selected, alone, alpha, weights))
     mean_sq = _dot(r, r) / n_w
     offset_finding = CandidateFinding(
         name=_free_name("offset", names),
@@ -944,7 +983,6 @@ def diagnose_residual(
         rank=0,
     )
     ordered = _rank([*findings, offset_finding])
-    timing_significant = _timing_significant(ordered, lag, dt)
 
     remaining = ljung_box(remaining_grid, LJUNG_BOX_LAGS, alpha=alpha)
     frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
@@ -955,11 +993,10 @@ def diagnose_residual(
     effects, lambdas, predicted, where = _effects(
         ref[window],
         sim[window],
-        r_g,
+        scales,
         kept,
         selected,
         holm_levels,
-        order,
         alpha=alpha,
         dt=dt,
         start_s=window.start * dt,
@@ -968,14 +1005,24 @@ def diagnose_residual(
         scale=s_sig,
         offset_name=_free_name("offset", names),
     )
+    # A selected candidate is an effect: the table shows the effect's numbers, so that one
+    # effect reads the same everywhere.
+    as_effect = {e.name: e for e in effects}
+    ordered = [
+        replace(
+            f,
+            coefficient=e.coefficient,
+            interval=e.interval,
+            p_value=e.p_value,
+            significant=e.significant,
+        )
+        if f.selected and (e := as_effect.get(f.name)) is not None
+        else f
+        for f in ordered
+    ]
+    timing_significant = _timing_significant(ordered, lag, dt)
     summary = _summary(
-        effects,
-        echoes,
-        lag_s=lag_s,
-        timing_significant=timing_significant,
-        gain=head.gain,
-        gain_significant=head.gain_significant,
-        remaining=remaining,
+        effects, echoes, lag_s=lag_s, timing_significant=timing_significant, remaining=remaining
     )
     return Diagnosis(
         lag_s=lag_s,
@@ -1227,23 +1274,127 @@ def _independent(
     return kept, z_rows
 
 
-def _forward_selection(
-    r_g: FloatArray, z_rows: FloatArray, order: int, *, alpha: float, max_selected: int
-) -> tuple[list[int], list[float], FloatArray]:
-    """Holm-guarded forward selection; (selected rows, their levels, the final design)."""
+def _grouped(
+    series: list[_Series], r_g: FloatArray, declared: Sequence[Collection[str]] = ()
+) -> list[_Series]:
+    """One series per effect: candidates that measure the same thing become one group.
+
+    Candidates are taken by how much of the residual each explains alone, best first; each
+    joins the first group whose leading member it correlates with at least
+    :data:`GROUP_MIN_CORRELATION` (either sign), or starts a group of its own. A group is named
+    by its best member (the spec's own expression, then a logged channel, when members explain
+    within 5 % as much) and lists the others as ``members``. Only that member enters the
+    selection: offered side by side, near copies split one effect between them with opposite
+    signs, and none is credited with it. The automatic lag and gain are never grouped. The
+    spec's declared groups are groups from the start, whatever their correlation.
+    """
+    pool = [i for i, s in enumerate(series) if s.kind not in _GENERIC_KINDS and s.std > 0.0]
+    if len(pool) < 2:
+        return series
     ng = r_g.shape[0]
-    m = z_rows.shape[0]
+    rows = np.stack([(series[i].grid - series[i].mean) / series[i].std for i in pool])
+    rc = r_g - float(np.mean(r_g))
+    sst = _dot(rc, rc)
+    score = (rows @ rc) ** 2 / (ng * sst) if sst > 0.0 else np.zeros(len(pool))
+    corr = np.abs(rows @ rows.T) / ng
+    order = [int(a) for a in np.argsort(-score, kind="stable")]
+    position = {series[i].name: a for a, i in enumerate(pool)}
+    groups: list[list[int]] = []
+    placed: set[int] = set()
+    for names in declared:
+        found = sorted((position[n] for n in names if n in position), key=order.index)
+        if found:
+            groups.append(found)
+            placed.update(found)
+    for a in order:
+        if a in placed:
+            continue
+        home = next((g for g in groups if corr[a, g[0]] >= GROUP_MIN_CORRELATION), None)
+        if home is None:
+            groups.append([int(a)])
+        else:
+            home.append(int(a))
+    leaders: dict[int, _Series] = {}
+    dropped: set[int] = set()
+    for g in groups:
+        best = float(score[g[0]])
+        lead = min(
+            g,
+            key=lambda a: (
+                _NAMING_PREFERENCE.get(series[pool[a]].kind, 3)
+                if score[a] >= (1.0 - _NAMING_TOLERANCE) * best
+                else 9,
+                -float(score[a]),
+            ),
+        )
+        members = tuple(series[pool[a]].name for a in g if a != lead)
+        leaders[pool[lead]] = replace(series[pool[lead]], members=members)
+        dropped.update(pool[a] for a in g if a != lead)
+    return [leaders.get(i, s) for i, s in enumerate(series) if i not in dropped]
+
+
+@dataclass(frozen=True)
+class _Scale:
+    """The residual and the standardised candidates on one grid of block means."""
+
+    factor: int
+    r: FloatArray
+    z_rows: FloatArray
+    order: int
+
+
+def _slow_scale(r: FloatArray, kept: Sequence[_Series], dt: float, factor: int) -> _Scale | None:
+    """The grid of :data:`SLOW_SCALE_S` block means, when it is coarser than the regression
+    grid and the record holds at least :data:`MIN_SLOW_BLOCKS` of its blocks."""
+    slow = max(1, round(SLOW_SCALE_S / dt))
+    if slow <= factor or r.shape[0] // slow < MIN_SLOW_BLOCKS:
+        return None
+    r_s = _block_means(r, slow)
+    rows = np.empty((len(kept), r_s.shape[0]))
+    for i, s in enumerate(kept):
+        block = _block_means(s.full, slow)
+        spread = float(np.std(block))
+        rows[i] = (block - float(np.mean(block))) / spread if spread > 0.0 else 0.0
+    return _Scale(slow, r_s, rows, _ar_order(r_s - float(np.mean(r_s))))
+
+
+def _holm_weights(kinds: Sequence[str]) -> FloatArray:
+    """Weights of the weighted Holm procedure: the spec's declared candidates (the user's own
+    suspects) share half of the level, every other candidate the other half; equal weights when
+    there are only one or the other."""
+    declared = np.array([k == "declared" for k in kinds])
+    d = int(np.count_nonzero(declared))
+    if d == 0 or d == len(kinds):
+        return np.ones(len(kinds))
+    return np.where(declared, (len(kinds) - d) / d, 1.0)
+
+
+def _forward_selection(
+    scales: Sequence[_Scale], *, alpha: float, max_selected: int, weights: FloatArray
+) -> tuple[list[int], list[float], list[FloatArray]]:
+    """Holm-guarded forward selection; (selected rows, their levels, the final design per scale).
+
+    A candidate is tested at every scale and passes when its smallest p-value, times the number
+    of scales (Bonferroni), is under its weighted Holm level α·w_j / Σ w of the candidates not
+    yet selected (Holm 1979): an effect counts at the time scale where it acts, and the user's
+    declared suspects weigh more than the many channels tried automatically. The largest
+    increase of R² on the regression grid (the first scale) picks among those that pass.
+    """
+    fine = scales[0]
+    r_g = fine.r
+    ng = r_g.shape[0]
+    m = fine.z_rows.shape[0]
     rc_g = r_g - float(np.mean(r_g))
     sst_g = _dot(rc_g, rc_g)
     selected: list[int] = []
     holm_levels: list[float] = []
     remaining_idx = list(range(m))
-    base = np.ones((ng, 1))
+    bases = [np.ones((sc.r.shape[0], 1)) for sc in scales]
     while remaining_idx and len(selected) < max_selected and sst_g > 0.0:
-        level = alpha / (m - len(selected))
-        q = _orthonormal(base)
+        levels = alpha * weights / float(np.sum(weights[remaining_idx]))
+        q = _orthonormal(bases[0])
         resid = _project_out(r_g[None, :], q)[0]
-        z_rem = z_rows[remaining_idx]
+        z_rem = fine.z_rows[remaining_idx]
         z_perp = _project_out(z_rem, q)
         zz = np.einsum("jt,jt->j", z_perp, z_perp)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -1254,16 +1405,26 @@ def _forward_selection(
         material = np.flatnonzero(gain_r2 >= MIN_EXPLAINED_INCREASE)
         if material.shape[0] == 0:
             break
-        screen = _screen(r_g, base, z_rem[material], order)
-        passed = screen.p <= level
+        chosen_rows = [remaining_idx[int(j)] for j in material]
+        p = np.min(
+            [
+                _screen(sc.r, base, sc.z_rows[chosen_rows], sc.order).p
+                for sc, base in zip(scales, bases, strict=True)
+            ],
+            axis=0,
+        ) * len(scales)
+        passed = p <= levels[chosen_rows]
         if not np.any(passed):
             break
         pick = int(material[int(np.argmax(np.where(passed, gain_r2[material], -np.inf)))])
         chosen = remaining_idx.pop(pick)
         selected.append(chosen)
-        holm_levels.append(level)
-        base = np.column_stack([base, z_rows[chosen]])
-    return selected, holm_levels, base
+        holm_levels.append(float(levels[chosen]))
+        bases = [
+            np.column_stack([base, sc.z_rows[chosen]])
+            for sc, base in zip(scales, bases, strict=True)
+        ]
+    return selected, holm_levels, bases
 
 
 def _joint_model(
@@ -1323,11 +1484,12 @@ def _alone_findings(
     selected: list[int],
     alone: _Screen | None,
     alpha: float,
+    weights: FloatArray,
 ) -> list[CandidateFinding]:
-    """Each candidate not selected, tested alone with an intercept (Bonferroni over all)."""
+    """Each candidate not selected, tested alone with an intercept (weighted Bonferroni over
+    all, with the weights of the selection)."""
     if alone is None:
         return []
-    m = len(kept)
     findings = []
     for j, s in enumerate(kept):
         if j in selected:
@@ -1345,7 +1507,7 @@ def _alone_findings(
                     _interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha), s.unit
                 ),
                 p_value=p,
-                significant=p <= alpha / m,
+                significant=p <= alpha * float(weights[j]) / float(np.sum(weights)),
                 selected=False,
                 rank=0,
             )
@@ -1427,53 +1589,75 @@ def _p_value(beta: float, se: float, df: int) -> float:
     return float(2.0 * stats.t.sf(abs(beta) / se, df))
 
 
+#: The summary names at most this many effects or channels per list; the table has the rest.
+SUMMARY_NAMES = 3
+
+
+def _names_text(names: Sequence[str]) -> str:
+    """At most :data:`SUMMARY_NAMES` names, the rest counted; trailing spaces shown as such,
+    so that two logged columns that differ only by one stay apart."""
+    shown = [repr(n) if n != n.strip() else n for n in names[:SUMMARY_NAMES]]
+    rest = len(names) - len(shown)
+    return ", ".join(shown) + (f" and {rest} more (see the table)" if rest > 0 else "")
+
+
+def _effect_phrase(e: Effect) -> str:
+    """One effect, with the numbers every output shows for it: its share of the residual and
+    its coefficient with its interval."""
+    share = f"explains {_format_pct(e.share)} of the residual"
+    low, high = e.interval
+    if e.kind == "gain":
+        return (
+            f"gain error {100.0 * e.coefficient:+.1f} % [{100.0 * low:+.1f}, {100.0 * high:+.1f}]"
+            f" {share}"
+        )
+    if e.kind == "offset":
+        return f"offset {e.coefficient:+.3g} [{low:.3g}, {high:.3g}] {share}"
+    if e.kind == "lag":
+        direction = "lags" if e.coefficient > 0 else "leads"
+        return (
+            f"the simulation {direction} the reference by {abs(e.coefficient):.2g} s "
+            f"[{low:.3g}, {high:.3g}], which {share}"
+        )
+    group = f" (one effect with {_names_text(e.members)})" if e.members else ""
+    return f"{e.name}{group} {share} (coef {e.coefficient:+.3g} [{low:.3g}, {high:.3g}])"
+
+
 def _summary(
     effects: Sequence[Effect],
     echoes: Sequence[Response],
     *,
     lag_s: float,
     timing_significant: bool,
-    gain: float,
-    gain_significant: bool,
     remaining: Whiteness,
 ) -> str:
-    parts: list[str] = []
-    for e in effects:
-        if not e.relevant:
-            continue
-        half = (e.interval[1] - e.interval[0]) / 2.0
-        if e.kind == "offset":
-            parts.append(
-                f"offset {e.coefficient:+.3g} ± {half:.2g} carries "
-                f"{_format_pct(e.share)} of the residual's mean square"
-            )
-        else:
-            parts.append(
-                f"{e.name} explains {_format_pct(e.share)} of the residual "
-                f"(coef {e.coefficient:.3g} ± {half:.2g})"
-            )
-    if timing_significant:
+    parts = [_effect_phrase(e) for e in effects if e.relevant]
+    if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
         direction = "lags" if lag_s < 0 else "leads"
         parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
-    if gain_significant:
-        parts.append(f"gain error {100.0 * (gain - 1.0):+.1f} %")
-    minor = [e.name for e in effects if e.significant and not e.relevant]
+    relevant = {e.name for e in effects if e.relevant}
+    stand_ins = [
+        e for e in effects if e.significant and not e.relevant and relevant & set(e.interchangeable)
+    ]
+    minor = [e.name for e in effects if e.significant and not e.relevant and e not in stand_ins]
     if not parts:
         text = "no significant effect found: the residual is indistinguishable from noise"
-        if minor:
+        if minor or stand_ins:
             text = "no relevant effect found"
         elif not remaining.white:
             text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
         parts.append(text)
     elif not remaining.white:
         parts.append("the remaining residual is still autocorrelated")
+    for e in stand_ins:
+        instead = [n for n in e.interchangeable if n in relevant]
+        parts.append(f"{e.name} could stand in for {_names_text(instead)} on this record")
     if minor:
-        parts.append("minor: " + ", ".join(minor))
+        parts.append("minor: " + _names_text(minor))
     # Only the echoes that would have been offered as an effect are worth a word here.
-    loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    loud = [e.name for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
     if loud:
-        names = ", ".join(e.name for e in loud)
-        parts.append(f"moves with the measured signal, probably a consequence: {names}")
+        parts.append(f"moves with the measured signal, probably a consequence: {_names_text(loud)}")
     return "; ".join(parts)
 
 
@@ -1594,41 +1778,6 @@ def _least_squares_fit(r: FloatArray, columns: Sequence[FloatArray]) -> FloatArr
     return np.asarray(design @ coef, dtype=np.float64)
 
 
-def _unique_shares(r: FloatArray, columns: Sequence[FloatArray], offset: float) -> list[float]:
-    """What each term alone adds to the fit of r, as a share of Σr²; the intercept last.
-
-    A term's share is the rise of the sum of squares left when it is dropped and the other
-    terms are refitted, with the offset held at the value left over: a channel credited with
-    the mean shift it causes keeps that credit, instead of the intercept taking it over. The
-    intercept's share is the same rise for the intercept itself. A term that only compensates
-    another (a gain error and an offset that cancel in the mean) adds little once the other is
-    there, so it cannot claim the residual.
-    """
-    total = _dot(r, r)
-    k = len(columns)
-    if total <= 0.0:
-        return [0.0] * (k + 1)
-
-    def explained(target: FloatArray, design: Sequence[FloatArray], keep: list[int]) -> float:
-        if not keep:
-            return 0.0
-        gram = np.array([[_dot(design[a], design[b]) for b in keep] for a in keep])
-        cross = np.array([_dot(design[a], target) for a in keep])
-        coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
-        return float(coef @ cross)
-
-    held = r - offset
-    every = list(range(k))
-    full = explained(held, columns, every)
-    shares = [
-        (full - explained(held, columns, [i for i in every if i != j])) / total for j in every
-    ]
-    with_intercept = [*columns, np.ones_like(r)]
-    everything = explained(r, with_intercept, [*every, k])
-    shares.append((everything - explained(r, with_intercept, every)) / total)
-    return [min(max(share, 0.0), 1.0) for share in shares]
-
-
 def _hot_mask(where: Localisation, n: int, dt: float, start_s: float) -> npt.NDArray[np.bool_]:
     times = start_s + np.arange(n) * dt
     mask = np.zeros(n, dtype=bool)
@@ -1659,11 +1808,10 @@ def _localise(
 def _effects(
     ref: FloatArray,
     sim: FloatArray,
-    r_g: FloatArray,
+    scales: Sequence[_Scale],
     kept: list[_Series],
     selected: list[int],
     holm_levels: list[float],
-    order: int,
     *,
     alpha: float,
     dt: float,
@@ -1677,23 +1825,40 @@ def _effects(
 
     A candidate credited with the mean shift it carries enters uncentred (see
     :func:`_credited_centres`), so the intercept is the offset left over: a missing load with
-    a nonzero mean is one effect, not a load and an offset.
+    a nonzero mean is one effect, not a load and an offset. The joint model is fitted at every
+    scale; each effect's coefficient, interval and test come from the scale where it is tested
+    most sharply (Bonferroni over the scales), the one where it acts. Shares are the Shapley
+    (LMG) decomposition of what all effects together explain of Σr² (:mod:`.importance`).
     """
     r = ref - sim
     n = r.shape[0]
     reference_range = float(np.ptp(ref))
     chosen = [kept[i] for i in selected]
-    centres = _credited_centres(r_g, chosen)
-    design = np.column_stack(
-        [np.ones_like(r_g), *((s.grid - c) / s.std for s, c in zip(chosen, centres, strict=True))]
-    )
-    joint = _hac_fit(r_g, design, order)
-    se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
-    raw: list[tuple[str, str, float, tuple[float, float], float, bool, FloatArray, float]] = []
+    fine = scales[0]
+    centres = _credited_centres(fine.r, chosen)
+    fits: list[_Fit] = []
+    for sc in scales:
+        columns = [
+            (s.grid if sc is fine else _block_means(s.full, sc.factor)) - c
+            for s, c in zip(chosen, centres, strict=True)
+        ]
+        design = np.column_stack(
+            [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
+        )
+        fits.append(_hac_fit(sc.r, design, sc.order))
+    errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
+    raw: list[tuple[str, str, float, tuple[float, float], float, bool, FloatArray, float, float]]
+    raw = []
     for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
-        b_std, se_std, df = float(joint.beta[pos]), float(se[pos]), int(joint.df[pos])
+        tests = [
+            _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
+            for fit, se in zip(fits, errors, strict=True)
+        ]
+        at = int(np.argmin(tests))
+        fit, se = fits[at], errors[at]
+        b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
         coef = b_std / s.std
-        p = _p_value(b_std, se_std, df)
+        p = min(1.0, tests[at] * len(scales))
         term = coef * (s.full - centre)
         raw.append(
             (
@@ -1705,8 +1870,10 @@ def _effects(
                 p <= holm_levels[pos - 1],
                 term,
                 coef * (float(np.mean(s.full)) - centre) / scale,
+                scales[at].factor * dt,
             )
         )
+    joint, se = fits[0], errors[0]
     intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
     interval0 = _interval(intercept, se0, df0, alpha)
     p0 = _p_value(intercept, se0, df0)
@@ -1725,24 +1892,54 @@ def _effects(
             offset_significant,
             np.full(n, intercept),
             intercept / scale,
+            fine.factor * dt,
         )
     )
     where = _localise(ref, sim, dt, start_s, window_s)
     hot = _hot_mask(where, n, dt, start_s) if where is not None and where.windows else None
-    shares = _unique_shares(
-        r, [s.full - c for s, c in zip(chosen, centres, strict=True)], float(intercept)
-    )
+    terms = [*(s.full - c for s, c in zip(chosen, centres, strict=True)), np.ones_like(r)]
+    design = np.column_stack(terms)
+    gram = np.einsum("ti,tj->ij", design, design)
+    cross = np.einsum("ti,t->i", design, r)
+    total = _dot(r, r)
+    shapley = shapley_shares(gram, cross, total)
+    together = explained_sums(gram, cross)
+    names = [name for name, *_ in raw]
+    swaps = _interchangeable(together, names, min_share * total)
+    members = [*(s.members for s in chosen), ()]
+    shares = [float(x) for x in shapley]
+    # Largest share first, an effect is a finding of its own unless a larger finding can stand
+    # in for it: the explanation with the fewest terms is the one named.
+    findings: set[int] = set()
+    alone_shares = [0.0] * len(raw)
+    for i in sorted(range(len(raw)), key=lambda i: -shares[i]):
+        kind, significant, term = raw[i][1], raw[i][5], raw[i][6]
+        # A term that only helps together with one that compensates it (a throttle term and a
+        # gain error of opposite sign, the throttle being nearly proportional to the power)
+        # makes the fit worse on its own, and is not an effect to add. Over one record, the
+        # mean shift of a gain error and an offset are the same thing, so the gain is taken
+        # about its mean here.
+        alone = _removed_share(r, term - float(np.mean(term)) if kind == "gain" else term)
+        alone_shares[i] = alone
+        if (
+            significant
+            and shares[i] >= min_share
+            and alone >= min_share
+            and not findings.intersection(swaps[i])
+        ):
+            findings.add(i)
     effects: list[Effect] = []
-    for (name, kind, coef_out, interval_out, p, significant, term, mean_shift), unique in zip(
-        raw, shares, strict=True
-    ):
-        # An effect must explain its share both beyond the others and on its own: a term that
-        # only helps together with one that compensates it (a throttle term and a gain error
-        # that cancel) makes the fit worse when added alone.
-        # Over one record, the mean shift of a gain error and an offset are the same thing; a
-        # gain injected with an opposite offset must not look harmful alone for its mean.
-        alone = term - float(np.mean(term)) if kind == "gain" else term
-        share = min(unique, _removed_share(r, alone))
+    for i, (
+        name,
+        kind,
+        coef_out,
+        interval_out,
+        p,
+        significant,
+        term,
+        mean_shift,
+        at_s,
+    ) in enumerate(raw):
         effects.append(
             Effect(
                 name=name,
@@ -1750,18 +1947,22 @@ def _effects(
                 coefficient=coef_out,
                 interval=interval_out,
                 p_value=p,
-                share=share,
+                share=shares[i],
                 offset_explained=mean_shift,
                 significant=significant,
-                relevant=significant and share >= min_share,
+                relevant=i in findings,
                 predicted=_lambdas(ref, sim + term, reference_range),
                 hot_share=None if hot is None else _removed_share(r[hot], term[hot]),
+                members=members[i],
+                interchangeable=tuple(names[j] for j in swaps[i]),
+                time_scale_s=at_s,
+                alone_share=alone_shares[i],
             )
         )
     # The joint coefficients share the residual between correlated terms; fixing only the
     # relevant ones is predicted with their own least-squares fit, so that a minor term that
     # compensated one of them in the joint model does not spoil the prediction.
-    relevant_terms = [term for (*_, term, _), e in zip(raw, effects, strict=True) if e.relevant]
+    relevant_terms = [raw[i][6] for i in sorted(findings)]
     predicted = (
         _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
         if relevant_terms
@@ -1769,3 +1970,19 @@ def _effects(
     )
     effects.sort(key=lambda e: (not e.relevant, not e.significant, -e.share))
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
+
+
+def _interchangeable(together: FloatArray, names: Sequence[str], floor: float) -> list[list[int]]:
+    """For each term, the other terms that can stand in for it on this record: each explains
+    at least ``floor`` alone, and what they explain in common is at least
+    :data:`INTERCHANGEABLE_OVERLAP` of what the smaller explains alone."""
+    k = len(names)
+    found: list[list[int]] = [[] for _ in range(k)]
+    for a in range(k):
+        for b in range(a + 1, k):
+            ea, eb = float(together[1 << a]), float(together[1 << b])
+            common = ea + eb - float(together[(1 << a) | (1 << b)])
+            if min(ea, eb) >= floor and common >= INTERCHANGEABLE_OVERLAP * min(ea, eb):
+                found[a].append(b)
+                found[b].append(a)
+    return found

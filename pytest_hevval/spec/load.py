@@ -90,7 +90,7 @@ _TOP_KEYS = (
     "measurement",
     "sets",
 )
-_DIAGNOSIS_KEYS = ("min_share", "responses", "causes")
+_DIAGNOSIS_KEYS = ("min_share", "responses", "causes", "groups")
 _RECORDING_KEYS = ("id", "path", "role", "params")
 _CAMPAIGN_KEYS = ("min_pass_rate", "phi_quantile")
 _SOURCE_KEYS = (
@@ -848,7 +848,58 @@ def _diagnosis(context: _Context, top: LineDict) -> DiagnosisSpec:
             f"{both[0]!r} is declared both a response and a cause",
             hint="keep it in one of the two lists",
         )
-    return DiagnosisSpec(min_share=min_share, responses=names["responses"], causes=names["causes"])
+    return DiagnosisSpec(
+        min_share=min_share,
+        responses=names["responses"],
+        causes=names["causes"],
+        groups=_diagnosis_groups(context, mapping, set(names["responses"])),
+    )
+
+
+def _diagnosis_groups(
+    context: _Context, mapping: LineDict, responses: set[str]
+) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """``diagnosis.groups``: name → at least two candidate names, each in one group only."""
+    value = mapping.get("groups")
+    if value is None:
+        return ()
+    line = mapping.line_of("groups")
+    table = context.mapping(value, line, "diagnosis.groups")
+    hint = 'write e.g. groups: {heater: ["Heating Power CAN [kW]", "Heater Current [A]"]}'
+    seen: dict[str, str] = {}
+    groups: list[tuple[str, tuple[str, ...]]] = []
+    for name, members in table.items():
+        key = f"diagnosis.groups.{name}"
+        at = table.line_of(name)
+        if not (
+            isinstance(members, list)
+            and len(members) >= 2
+            and all(isinstance(m, str) and m for m in members)
+        ):
+            problem = "must be a list of at least two channel or candidate names"
+            if isinstance(members, list):
+                problem += f" (got {len(members)} item{'s' if len(members) != 1 else ''})"
+            raise context.error(
+                at, key, problem, got=None if isinstance(members, list) else members, hint=hint
+            )
+        for member in members:
+            if member in seen:
+                raise context.error(
+                    at,
+                    key,
+                    f"{member!r} is already in group {seen[member]!r}",
+                    hint="a candidate measures one effect: keep it in one group",
+                )
+            if member in responses:
+                raise context.error(
+                    at,
+                    key,
+                    f"{member!r} is declared a response",
+                    hint="a response is never offered as an effect; drop it from the group",
+                )
+            seen[member] = str(name)
+        groups.append((str(name), tuple(members)))
+    return tuple(groups)
 
 
 def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:

@@ -86,6 +86,9 @@ class DiagnosisSpec:
     responses: tuple[str, ...] = ()
     #: Candidate names that are causes, whatever the response rule says.
     causes: tuple[str, ...] = ()
+    #: Named groups of candidates that measure one effect (a heater's current and its power),
+    #: as (group name, candidate names) pairs.
+    groups: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
 
 @dataclass(frozen=True)
