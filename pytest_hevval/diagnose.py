@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.diagnosis import MIN_SHARE, Candidate, Diagnosis, diagnose_residual
+from .core.diagnosis import MIN_SHARE, SLOW_SCALE_S, Candidate, Diagnosis, diagnose_residual
 from .core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from .data.record import Record
 from .engine import Evaluation
@@ -136,10 +136,23 @@ def diagnose_pair(
     reference: FloatArray,
     simulated: FloatArray,
     candidates: Sequence[Candidate],
+    unit: str | None = None,
 ) -> Diagnosis:
-    """Diagnose one aligned pair of the evaluation with the spec's diagnosis settings."""
+    """Diagnose one aligned pair of the evaluation with the spec's diagnosis settings.
+
+    ``unit`` is the scored signal's unit: candidates logged in the same physical dimension (a
+    load in kW for a power in kW) are named first among effects the record cannot tell apart.
+    """
     assert evaluation.aligned is not None
     settings = evaluation.spec.diagnosis
+    signal_unit = unit or ""
+    in_dimension = [
+        c.name
+        for c in candidates
+        if signal_unit
+        and (found := _candidate_unit(c.name, c.kind)) is not None
+        and _same_dimension(found, signal_unit)
+    ]
     return diagnose_residual(
         reference,
         simulated,
@@ -151,6 +164,7 @@ def diagnose_pair(
         causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
         min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
         groups=[members for _, members in settings.groups],
+        in_dimension=in_dimension,
     )
 
 
@@ -166,7 +180,11 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
     reference, simulated = evaluation.arrays[path]
     result = evaluation.result.signal(path)
     diagnosis = diagnose_pair(
-        evaluation, reference, simulated, candidates_for(evaluation, channels=channels)
+        evaluation,
+        reference,
+        simulated,
+        candidates_for(evaluation, channels=channels),
+        result.unit,
     )
     by_path = {s.path: s for s in evaluation.result.signals}
     origin_path = result.origins[0] if result.origins else path
@@ -184,6 +202,25 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
     for effect in payload["effects"]:
         effect["text"] = effect_text(effect, path.rsplit("/", 1)[-1], result.unit)
     return payload
+
+
+#: Decimal prefixes that scale a unit without changing what it measures (kW and W).
+_SI_PREFIXES = ("k", "M", "G", "m", "µ", "u")
+
+
+def _same_dimension(unit: str, other: str) -> bool:
+    """Whether two unit texts measure the same quantity: the same symbol, up to one decimal
+    prefix (``kW`` and ``W``, ``mA`` and ``A``). Deliberately narrow: it only decides which of
+    two effects the record cannot tell apart is named first, so a miss costs nothing."""
+
+    def bare(text: str) -> set[str]:
+        text = text.strip()
+        forms = {text}
+        if len(text) > 1 and text[0] in _SI_PREFIXES:
+            forms.add(text[1:])
+        return forms
+
+    return bool(bare(unit) & bare(other))
 
 
 def _candidate_unit(name: str, kind: str) -> str | None:
@@ -209,6 +246,9 @@ def effect_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str
         return f"gain error {100 * coef:+.2f} % [{100 * low:.2f}, {100 * high:.2f}]"
     if kind == "lag":
         late = "late" if coef > 0 else "early"
+        if coef < 0:
+            # The interval of the delay in the direction named.
+            low, high = -high, -low
         return f"the simulation is {abs(coef):.3g} s {late} [{low:.3g}, {high:.3g}] s"
     per = _candidate_unit(str(effect["name"]), kind)
     per_text = f"{per} of " if per else "unit of "
@@ -262,7 +302,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
             else ""
         )
         scale = float(e.get("time_scale_s") or 0.0)
-        tested = f" (tested on {scale:g} s means)" if scale > float(found.get("dt") or 0) else ""
+        tested = f" (tested on {scale:g} s means)" if scale >= SLOW_SCALE_S else ""
         lines.append(
             f"   {i}. {e['text']}: explains {100 * e['share']:.1f} % of the residual"
             f"{carries}{tested}"

@@ -102,3 +102,54 @@ def test_unknown_signal_is_a_clear_error(pytester: pytest.Pytester) -> None:
     )
     assert result.ret == 2
     assert "no signal 'Q' in this spec" in result.stderr.str()
+
+
+ENERGY_SPEC = """\
+name: energy
+reference: {path: ref.csv, time: t}
+model: {path: sim.csv, time: t}
+alignment: {max_lag_s: 3}
+thresholds: {mae: 0.99}
+sets:
+  - signal: E
+    ref: "integrate(P)"
+    sim: "integrate(P)"
+    children:
+      - {signal: P, thresholds: {mae: 0.8}}
+"""
+
+
+def make_energy(root: Path, seed: int = 8) -> None:
+    """The measured power holds a heater the model lacks, logged twice (in kW and as a current
+    in A): the power passes its gate and the error appears where it adds up, in the energy."""
+    rng = np.random.default_rng(seed)
+    n = 6000
+    t = np.arange(n) * 0.1
+    v = 15 + 10 * np.sin(t / 40) + np.convolve(rng.normal(size=n), np.ones(50) / 50, "same") * 3
+    heater = 1.5 + np.clip(np.convolve(rng.normal(size=n), np.ones(400) / 400, "same") * 40, -1, 2)
+    current = heater * 1000 / 380 + rng.normal(0, 0.05, n)
+    measured = 2 * v + heater + rng.normal(0, 0.5, n)
+    pd.DataFrame(
+        {"t": t, "P": measured, "Heater [kW]": heater, "Heater Current [A]": current}
+    ).to_csv(root / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "P": 2 * v}).to_csv(root / "sim.csv", index=False)
+    (root / "energy.hevval.yaml").write_text(ENERGY_SPEC)
+
+
+@pytest.mark.parametrize("workers", [[], ["-n", "2"]])
+def test_a_failing_running_sum_points_at_the_level_that_names_the_load(
+    pytester: pytest.Pytester, workers: list[str]
+) -> None:
+    """The energy fails, its power passes: the diagnosis looks one level down, where the
+    missing load shows at each instant, names it once for its two channels, and the `next:`
+    hint sends the user there."""
+    make_energy(pytester.path)
+    result = pytester.runpytest("--hevval", "--hevval-no-history", *workers)
+    result.assert_outcomes(passed=2, failed=1)
+    result.stdout.fnmatch_lines(
+        [
+            "E missed its thresholds (energy.hevval.yaml:7)",
+            "*diagnosis: (in E/P, below E) Heater * (one effect with Heater *) explains *",
+            "  next: hevval diagnose energy.hevval.yaml --signal E/P *",
+        ]
+    )

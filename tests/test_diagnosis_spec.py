@@ -193,3 +193,33 @@ def test_a_declared_group_is_one_effect_whatever_the_correlation() -> None:
     named = [e for e in together.effects if e.kind == "channel"]
     assert len(named) == 1
     assert {named[0].name, *named[0].members} == {"first", "second"}
+
+
+def test_a_load_in_the_signals_own_unit_names_the_effect_before_a_temperature_that_follows() -> (
+    None
+):
+    """The missing load is logged with sensor noise; a vent temperature follows the true load
+    smoothly, so it explains more of the residual and correlates with the load channel. By
+    the data alone the temperature names the effect; told which candidates are in the scored
+    signal's dimension (a power in kW), the load channel names it, the temperature a member."""
+    rng = np.random.default_rng(21)
+    n = 6000
+    t = np.arange(n) * DT
+    sim = 20 + 15 * np.sin(t / 7) + 5 * np.sin(t / 2.3)
+    true = sps.lfilter([0.01], [1, -0.99], rng.standard_normal(n)) * 8
+    logged = true + true.std() * sps.lfilter([0.2], [1, -0.8], rng.standard_normal(n))
+    vent = 15 + sps.lfilter([0.3], [1, -0.7], true)
+    ref = sim + true + sps.lfilter([1.0], [1.0, -0.9], rng.standard_normal(n)) * 0.3
+    candidates = [
+        Candidate("Heater [kW]", "channel", logged),
+        Candidate("Vent [°C]", "channel", vent),
+    ]
+    by_data = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
+    assert [(e.name, e.members) for e in by_data.relevant] == [("Vent [°C]", ("Heater [kW]",))]
+    by_units = diagnose_residual(
+        ref, sim, dt=DT, candidates=candidates, in_dimension=["Heater [kW]"]
+    )
+    (first,) = by_units.relevant
+    assert (first.name, first.members) == ("Heater [kW]", ("Vent [°C]",))
+    # Sensor noise on the regressor pulls the coefficient towards 0; its sign stays.
+    assert 0.0 < first.interval[0] < first.coefficient < 1.0

@@ -492,9 +492,50 @@ def test_html_shows_diagnosis_and_history_when_present(
         {"version": "v1", "phi": 0.90, "lambdas": [0.9] * 7},
         {"version": "v2", "phi": 0.81, "lambdas": [0.8] * 7},
     ]
+    signal["diagnosis"]["effects"] = [
+        {
+            "name": "heater_kw",
+            "kind": "declared",
+            "share": 0.111,
+            "coefficient": 0.987,
+            "interval": [0.694, 1.28],
+            "significant": True,
+            "relevant": True,
+            "members": ["Heater Current [A]", "Heating Power LIN [W]"],
+            "interchangeable": ["Battery Temperature [°C]"],
+        },
+        {
+            "name": "Battery Temperature [°C]",
+            "kind": "channel",
+            "share": 0.07,
+            "coefficient": -1.45,
+            "interval": [-2.12, -0.785],
+            "significant": True,
+            "relevant": False,
+            "members": [],
+            "interchangeable": ["heater_kw"],
+        },
+        {
+            "name": "noise",
+            "kind": "channel",
+            "share": 0.001,
+            "coefficient": 0.1,
+            "interval": [-1.0, 1.0],
+            "significant": False,
+            "relevant": False,
+            "members": [],
+            "interchangeable": [],
+        },
+    ]
     html = render_html(results, title="Validation", generated_utc=STAMP)
     assert "lag explains most of the residual" in html
     assert "62.0 %" in html
+    # Effects: each with its one share and coefficient, its members and its reading.
+    assert "11.1 %" in html
+    assert "also measured by Heater Current [A], Heating Power LIN [W]" in html
+    assert ">finding<" in html
+    assert "could stand in for heater_kw" in html
+    assert ">noise<" not in html
     assert html.count('<svg class="hv-plot hv-small"') == 1
     assert ">v2</text>" in html
 

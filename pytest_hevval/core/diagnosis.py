@@ -837,6 +837,7 @@ def diagnose_residual(
     min_share: float = MIN_SHARE,
     window_s: float = LOCAL_WINDOW_S,
     groups: Sequence[Collection[str]] = (),
+    in_dimension: Collection[str] = (),
 ) -> Diagnosis:
     """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
 
@@ -870,6 +871,9 @@ def diagnose_residual(
     groups:
         Sets of candidate names that measure one effect, whatever their correlation; each is
         reported as one effect (strongly correlated candidates are grouped anyway).
+    in_dimension:
+        Candidate names measured in the scored signal's own physical dimension. Of two effects
+        the record cannot tell apart, one of these is named before one that is not.
 
     Returns
     -------
@@ -948,7 +952,10 @@ def diagnose_residual(
 
     user, echoes = _split_responses(ref, ref - sim, dt, user, responses, causes)
     series = _grouped(
-        _candidate_series(sim, lag, dt, window, factor, user, units, names), r_g, groups
+        _candidate_series(sim, lag, dt, window, factor, user, units, names),
+        r_g,
+        groups,
+        in_dimension,
     )
     kept, z_rows = _independent(series, r_g.shape[0], notes)
     m = len(kept)
@@ -1004,6 +1011,7 @@ def diagnose_residual(
         window_s=window_s,
         scale=s_sig,
         offset_name=_free_name("offset", names),
+        in_units=set(in_dimension),
     )
     # A selected candidate is an effect: the table shows the effect's numbers, so that one
     # effect reads the same everywhere.
@@ -1275,7 +1283,10 @@ def _independent(
 
 
 def _grouped(
-    series: list[_Series], r_g: FloatArray, declared: Sequence[Collection[str]] = ()
+    series: list[_Series],
+    r_g: FloatArray,
+    declared: Sequence[Collection[str]] = (),
+    in_dimension: Collection[str] = (),
 ) -> list[_Series]:
     """One series per effect: candidates that measure the same thing become one group.
 
@@ -1283,7 +1294,8 @@ def _grouped(
     joins the first group whose leading member it correlates with at least
     :data:`GROUP_MIN_CORRELATION` (either sign), or starts a group of its own. A group is named
     by its best member (the spec's own expression, then a logged channel, when members explain
-    within 5 % as much) and lists the others as ``members``. Only that member enters the
+    within 5 % as much; a member in the scored signal's dimension when it explains at least
+    half as much) and lists the others as ``members``. Only that member enters the
     selection: offered side by side, near copies split one effect between them with opposite
     signs, and none is credited with it. The automatic lag and gain are never grouped. The
     spec's declared groups are groups from the start, whatever their correlation.
@@ -1318,15 +1330,20 @@ def _grouped(
     dropped: set[int] = set()
     for g in groups:
         best = float(score[g[0]])
-        lead = min(
-            g,
-            key=lambda a: (
-                _NAMING_PREFERENCE.get(series[pool[a]].kind, 3)
-                if score[a] >= (1.0 - _NAMING_TOLERANCE) * best
-                else 9,
+
+        def naming(a: int, best: float = best) -> tuple[int, int, int, float]:
+            near = score[a] >= (1.0 - _NAMING_TOLERANCE) * best
+            kind = series[pool[a]].kind
+            return (
+                0 if kind == "declared" and near else 1,
+                # A coarse or stuck load channel still names the effect before a temperature
+                # that follows the load more smoothly, as long as it explains half as much.
+                0 if series[pool[a]].name in in_dimension and score[a] >= 0.5 * best else 1,
+                _NAMING_PREFERENCE.get(kind, 3) if near else 9,
                 -float(score[a]),
-            ),
-        )
+            )
+
+        lead = min(g, key=naming)
         members = tuple(series[pool[a]].name for a in g if a != lead)
         leaders[pool[lead]] = replace(series[pool[lead]], members=members)
         dropped.update(pool[a] for a in g if a != lead)
@@ -1589,7 +1606,8 @@ def _p_value(beta: float, se: float, df: int) -> float:
     return float(2.0 * stats.t.sf(abs(beta) / se, df))
 
 
-#: The summary names at most this many effects or channels per list; the table has the rest.
+#: The summary names at most this many effects or channels per list; the full output and the
+#: JSON hold the rest.
 SUMMARY_NAMES = 3
 
 
@@ -1598,7 +1616,7 @@ def _names_text(names: Sequence[str]) -> str:
     so that two logged columns that differ only by one stay apart."""
     shown = [repr(n) if n != n.strip() else n for n in names[:SUMMARY_NAMES]]
     rest = len(names) - len(shown)
-    return ", ".join(shown) + (f" and {rest} more (see the table)" if rest > 0 else "")
+    return ", ".join(shown) + (f" and {rest} more" if rest > 0 else "")
 
 
 def _effect_phrase(e: Effect) -> str:
@@ -1615,6 +1633,9 @@ def _effect_phrase(e: Effect) -> str:
         return f"offset {e.coefficient:+.3g} [{low:.3g}, {high:.3g}] {share}"
     if e.kind == "lag":
         direction = "lags" if e.coefficient > 0 else "leads"
+        # The interval of the delay in the direction named: "leads by 0.9 s [0.69, 1.1]".
+        if e.coefficient < 0:
+            low, high = -high, -low
         return (
             f"the simulation {direction} the reference by {abs(e.coefficient):.2g} s "
             f"[{low:.3g}, {high:.3g}], which {share}"
@@ -1820,6 +1841,7 @@ def _effects(
     window_s: float,
     scale: float,
     offset_name: str,
+    in_units: set[str],
 ) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
     """The selected candidates and the intercept, fitted jointly, as effects one can act on.
 
@@ -1909,10 +1931,23 @@ def _effects(
     members = [*(s.members for s in chosen), ()]
     shares = [float(x) for x in shapley]
     # Largest share first, an effect is a finding of its own unless a larger finding can stand
-    # in for it: the explanation with the fewest terms is the one named.
+    # in for it: the explanation with the fewest terms is the one named. Where the record cannot
+    # tell two measured effects apart, physics can: one measured in the scored signal's own
+    # dimension (a load in kW for a power) is taken before one that is not (a temperature
+    # that follows the load), as if it explained what the other does.
+    in_dimension = [
+        kind not in _GENERIC_KINDS and bool(in_units & {name, *group})
+        for (name, kind, *_), group in zip(raw, members, strict=True)
+    ]
+    rank = list(shares)
+    for i in range(len(raw)):
+        if in_dimension[i]:
+            for j in swaps[i]:
+                if raw[j][1] not in _GENERIC_KINDS and not in_dimension[j]:
+                    rank[i] = max(rank[i], shares[j])
     findings: set[int] = set()
     alone_shares = [0.0] * len(raw)
-    for i in sorted(range(len(raw)), key=lambda i: -shares[i]):
+    for i in sorted(range(len(raw)), key=lambda i: (-rank[i], not in_dimension[i], -shares[i])):
         kind, significant, term = raw[i][1], raw[i][5], raw[i][6]
         # A term that only helps together with one that compensates it (a throttle term and a
         # gain error of opposite sign, the throttle being nearly proportional to the power)
