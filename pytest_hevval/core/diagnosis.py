@@ -112,6 +112,9 @@ _GENERIC_KINDS: tuple[str, ...] = ("lag", "gain", "offset")
 # (the user's words), then a logged channel, then a derivative.
 _NAMING_PREFERENCE = {"declared": 0, "channel": 1, "derivative": 2}
 _NAMING_TOLERANCE = 0.05
+# A member in the scored signal's own dimension names its group when it explains at least this
+# fraction of what the best member does.
+_DIMENSION_NAMING_SHARE = 0.5
 _N_PEAKS = 3
 
 
@@ -1338,7 +1341,10 @@ def _grouped(
                 0 if kind == "declared" and near else 1,
                 # A coarse or stuck load channel still names the effect before a temperature
                 # that follows the load more smoothly, as long as it explains half as much.
-                0 if series[pool[a]].name in in_dimension and score[a] >= 0.5 * best else 1,
+                0
+                if series[pool[a]].name in in_dimension
+                and score[a] >= _DIMENSION_NAMING_SHARE * best
+                else 1,
                 _NAMING_PREFERENCE.get(kind, 3) if near else 9,
                 -float(score[a]),
             )
