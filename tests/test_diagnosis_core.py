@@ -632,3 +632,6 @@ def test_bad_candidates_and_options() -> None:
         diagnose_residual(ref, sim, dt=DT, alpha=1.0)
     with pytest.raises(SpecError, match="max_samples"):
         diagnose_residual(ref, sim, dt=DT, max_samples=5)
+    with pytest.raises(SpecError, match="max_selected must lie between 0 and 11, got 12"):
+        diagnose_residual(ref, sim, dt=DT, max_selected=12)
+    assert diagnose_residual(ref, sim, dt=DT, max_selected=11).effects

@@ -32,7 +32,7 @@ from scipy import signal as sps
 from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
-from .importance import explained_sums, shapley_shares
+from .importance import MAX_TERMS, explained_sums, shapley_shares
 from .lag import search_lag
 from .local import concentration, fixed_windows, group_lambdas, segment_sums
 
@@ -859,7 +859,8 @@ def diagnose_residual(
     alpha:
         Family-wise significance level; intervals are (1 − alpha) intervals.
     max_selected:
-        At most this many candidates enter the joint model.
+        At most this many candidates enter the joint model (0 to 11: the shares are exact
+        over every subset of the effects and the intercept).
     max_samples:
         Longer records are reduced by block means to at most this many samples for the
         regressions and tests (explained fractions are computed at the original rate).
@@ -1074,8 +1075,9 @@ def _checked_dt(dt: Any) -> float:
 def _check_settings(alpha: float, max_selected: int, max_samples: int) -> None:
     if not 0.0 < alpha < 1.0:
         raise SpecError(f"alpha must lie strictly between 0 and 1, got {alpha}")
-    if max_selected < 0:
-        raise SpecError(f"max_selected must be 0 or more, got {max_selected}")
+    if not 0 <= max_selected < MAX_TERMS:
+        # The shares are exact over every subset of the effects and the intercept.
+        raise SpecError(f"max_selected must lie between 0 and {MAX_TERMS - 1}, got {max_selected}")
     if max_samples < 10:
         raise SpecError(f"max_samples must be at least 10, got {max_samples}")
 
