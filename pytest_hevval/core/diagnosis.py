@@ -1927,10 +1927,21 @@ def _effects(
     )
     where = _localise(ref, sim, dt, start_s, window_s)
     hot = _hot_mask(where, n, dt, start_s) if where is not None and where.windows else None
-    terms = [*(s.full - c for s, c in zip(chosen, centres, strict=True)), np.ones_like(r)]
-    design = np.column_stack(terms)
-    gram = np.einsum("ti,tj->ij", design, design)
-    cross = np.einsum("ti,t->i", design, r)
+    # The Gram matrix of the effects' terms and the intercept, term by term: the terms are
+    # full-rate series, and a stacked copy of them would double the memory they take. Each
+    # term is its candidate scaled by its coefficient, which spans the same direction, so the
+    # shares are those of the candidates.
+    terms = [row[6] for row in raw[: len(chosen)]]
+    k = len(terms) + 1
+    gram = np.empty((k, k))
+    cross = np.empty(k)
+    for a, term in enumerate(terms):
+        for b in range(a, len(terms)):
+            gram[a, b] = gram[b, a] = _dot(term, terms[b])
+        gram[a, -1] = gram[-1, a] = float(np.sum(term))
+        cross[a] = _dot(term, r)
+    gram[-1, -1] = float(n)
+    cross[-1] = float(np.sum(r))
     total = _dot(r, r)
     shapley = shapley_shares(gram, cross, total)
     together = explained_sums(gram, cross)
