@@ -18,7 +18,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.diagnosis import MIN_SHARE, SLOW_SCALE_S, Candidate, Diagnosis, diagnose_residual
+from .core.diagnosis import (
+    GENERIC_KINDS,
+    MIN_SHARE,
+    SLOW_SCALE_S,
+    Candidate,
+    Diagnosis,
+    diagnose_residual,
+)
 from .core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from .data.record import Record
 from .engine import Evaluation
@@ -194,7 +201,6 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         "signal": path,
         "unit": result.unit,
         "passed": result.passed,
-        "dt": evaluation.aligned.grid.dt,
         "origin": {"path": origin.path, "level": origin.level},
         "origins": [{"path": p, "level": by_path[p].level} for p in result.origins if p in by_path],
     }
@@ -281,13 +287,10 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     share = float(found.get("min_share", MIN_SHARE))
     before = found.get("lambdas") or {}
     relevant = [e for e in effects if e["relevant"]]
-    named = {e["name"] for e in relevant}
-    stand_ins = [
-        e
-        for e in effects
-        if e["significant"] and not e["relevant"] and named & set(e.get("interchangeable") or ())
+    stand_ins = [e for e in effects if e.get("stands_in_for")]
+    minor = [
+        e for e in effects if e["significant"] and not e["relevant"] and not e.get("stands_in_for")
     ]
-    minor = [e for e in effects if e["significant"] and not e["relevant"] and e not in stand_ins]
     lines: list[str] = []
     if relevant:
         lines.append(
@@ -298,7 +301,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
         mean = float(e.get("offset_explained") or 0.0)
         carries = (
             f"; carries {mean:+.3g}{unit} of the mean shift"
-            if e["kind"] not in ("gain", "lag", "offset") and abs(mean) > 0
+            if e["kind"] not in GENERIC_KINDS and abs(mean) > 0
             else ""
         )
         scale = float(e.get("time_scale_s") or 0.0)
@@ -318,7 +321,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
         if e.get("predicted") and before:
             lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
     for e in stand_ins:
-        instead = ", ".join(n for n in e["interchangeable"] if n in named)
+        instead = ", ".join(e["stands_in_for"])
         lines.append(
             f"  could stand in for {instead} on this record, not a finding of its own: "
             f"{e['text']} ({_share_text(e['share'])})"
@@ -372,7 +375,7 @@ def _strongest_finding(found: dict[str, Any]) -> tuple[float, float]:
         (
             float(e["share"])
             for e in found.get("effects", [])
-            if e["relevant"] and e["kind"] not in ("gain", "offset", "lag")
+            if e["relevant"] and e["kind"] not in GENERIC_KINDS
         ),
         default=0.0,
     )

@@ -149,11 +149,12 @@ def _stand_ins(found: Mapping[str, Any]) -> list[str]:
     """Significant effects that are no finding of their own because a finding can stand in
     for them on this record."""
     named = set(_names(found["effects"], relevant=True))
-    return [
-        e["name"]
-        for e in found["effects"]
-        if e["significant"] and not e["relevant"] and named & set(e["interchangeable"])
-    ]
+    stand_ins = [e for e in found["effects"] if e["stands_in_for"]]
+    for e in stand_ins:
+        assert e["significant"]
+        assert not e["relevant"]
+        assert set(e["stands_in_for"]) <= named & set(e["interchangeable"])
+    return [e["name"] for e in stand_ins]
 
 
 def test_small_significant_effects_are_minor(cases: dict[str, Any]) -> None:

@@ -503,6 +503,7 @@ def test_html_shows_diagnosis_and_history_when_present(
             "relevant": True,
             "members": ["Heater Current [A]", "Heating Power LIN [W]"],
             "interchangeable": ["Battery Temperature [°C]"],
+            "stands_in_for": [],
         },
         {
             "name": "Battery Temperature [°C]",
@@ -514,6 +515,7 @@ def test_html_shows_diagnosis_and_history_when_present(
             "relevant": False,
             "members": [],
             "interchangeable": ["heater_kw"],
+            "stands_in_for": ["heater_kw"],
         },
         {
             "name": "noise",
@@ -525,6 +527,7 @@ def test_html_shows_diagnosis_and_history_when_present(
             "relevant": False,
             "members": [],
             "interchangeable": [],
+            "stands_in_for": [],
         },
     ]
     html = render_html(results, title="Validation", generated_utc=STAMP)

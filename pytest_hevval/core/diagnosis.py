@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +32,7 @@ from scipy import signal as sps
 from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
-from .importance import MAX_TERMS, explained_sums, shapley_shares
+from .importance import MAX_TERMS, explained_sums, shapley_from_sums
 from .lag import search_lag
 from .local import concentration, fixed_windows, group_lambdas, segment_sums
 
@@ -107,7 +107,8 @@ _COLLINEAR = 1e-6
 _RCOND = 1e-10
 _DEFAULT_MAX_LAG_S = 10.0
 _KINDS: tuple[str, ...] = ("declared", "channel", "derivative", "lag", "gain", "offset")
-_GENERIC_KINDS: tuple[str, ...] = ("lag", "gain", "offset")
+#: The generic terms, which describe the simulated signal itself rather than name a cause.
+GENERIC_KINDS: tuple[str, ...] = ("lag", "gain", "offset")
 # Which member names a group when members explain about as much: the spec's own expression
 # (the user's words), then a logged channel, then a derivative.
 _NAMING_PREFERENCE = {"declared": 0, "channel": 1, "derivative": 2}
@@ -216,28 +217,42 @@ class Effect:
         As in the :class:`CandidateFinding`; ``kind="offset"`` is the intercept left once the
         other effects have taken the mean shift they explain.
     coefficient, interval, p_value:
-        From the joint model, in the signal's units per unit of the candidate (for the
-        offset: in the signal's units).
+        From the joint model at the time scale where the effect is tested most sharply (the
+        p-value times the number of scales), in the signal's units per unit of the candidate
+        (for the offset: in the signal's units).
     share:
-        Share of the residual's mean square this effect explains: the smaller of what it
-        explains beyond all the others (the others refitted without it, the offset held at the
-        value left over) and what adding it alone removes, at the original sample rate.
+        Its Shapley (LMG) share of the residual's sum of squares at the original rate
+        (:mod:`.importance`): never negative, and the shares of all effects add up to what
+        they explain together, whatever their order.
     offset_explained:
         The mean shift this effect is credited with, in the signal's units: coefficient × mean
         of the candidate when that brings the offset left over closer to zero, else 0. The gain
         always carries its mean (the offset is the one at simulated = 0, as in the headline
         fit); the lag never does.
     significant:
-        The coefficient passed its family-wise level (Holm level at selection; α/2 and
-        material for the offset).
+        The coefficient passed its family-wise level (weighted Holm level at selection; α/2
+        and material for the offset).
     relevant:
-        Significant and ``share`` ≥ the minimum share.
+        A finding: significant, ``share`` and ``alone_share`` at least the minimum share, and
+        no larger finding can stand in for it.
     predicted:
         λ3 and λ4 of the signal if this effect alone were added to the model, with the
         coefficient above.
     hot_share:
         Share of the residual's squared error inside the hot windows that this effect removes;
         ``None`` when the error does not concentrate.
+    members:
+        The other candidates that measure the same thing; this one names the effect.
+    interchangeable:
+        The effects that can stand in for it on this record, and it for them.
+    stands_in_for:
+        For a significant effect that is no finding of its own: the findings among
+        ``interchangeable`` that are named instead of it.
+    time_scale_s:
+        The block length its coefficient was estimated on.
+    alone_share:
+        What adding it alone removes of the residual's sum of squares; negative for a term
+        that only helps together with another.
     """
 
     name: str
@@ -253,6 +268,7 @@ class Effect:
     hot_share: float | None
     members: tuple[str, ...] = ()
     interchangeable: tuple[str, ...] = ()
+    stands_in_for: tuple[str, ...] = ()
     time_scale_s: float = 0.0
     alone_share: float = 0.0
 
@@ -344,8 +360,14 @@ class Diagnosis:
 
     @property
     def minor(self) -> tuple[Effect, ...]:
-        """Significant effects that explain less than the minimum share."""
-        return tuple(e for e in self.effects if e.significant and not e.relevant)
+        """Significant effects that are no finding, and that no finding stands in for: they
+        explain less than the minimum share, or do not help on their own."""
+        return tuple(e for e in self.effects if _is_minor(e))
+
+    @property
+    def stand_ins(self) -> tuple[Effect, ...]:
+        """Significant effects that a finding can stand in for on this record."""
+        return tuple(e for e in self.effects if e.stands_in_for)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-safe mapping: tuples become lists, non-finite floats become ``None``."""
@@ -1305,7 +1327,7 @@ def _grouped(
     signs, and none is credited with it. The automatic lag and gain are never grouped. The
     spec's declared groups are groups from the start, whatever their correlation.
     """
-    pool = [i for i, s in enumerate(series) if s.kind not in _GENERIC_KINDS and s.std > 0.0]
+    pool = [i for i, s in enumerate(series) if s.kind not in GENERIC_KINDS and s.std > 0.0]
     if len(pool) < 2:
         return series
     ng = r_g.shape[0]
@@ -1627,6 +1649,10 @@ def _names_text(names: Sequence[str]) -> str:
     return ", ".join(shown) + (f" and {rest} more" if rest > 0 else "")
 
 
+def _is_minor(e: Effect) -> bool:
+    return e.significant and not e.relevant and not e.stands_in_for
+
+
 def _effect_phrase(e: Effect) -> str:
     """One effect, with the numbers every output shows for it: its share of the residual and
     its coefficient with its interval."""
@@ -1664,11 +1690,8 @@ def _summary(
     if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
         direction = "lags" if lag_s < 0 else "leads"
         parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
-    relevant = {e.name for e in effects if e.relevant}
-    stand_ins = [
-        e for e in effects if e.significant and not e.relevant and relevant & set(e.interchangeable)
-    ]
-    minor = [e.name for e in effects if e.significant and not e.relevant and e not in stand_ins]
+    stand_ins = [e for e in effects if e.stands_in_for]
+    minor = [e.name for e in effects if _is_minor(e)]
     if not parts:
         text = "no significant effect found: the residual is indistinguishable from noise"
         if minor or stand_ins:
@@ -1679,8 +1702,7 @@ def _summary(
     elif not remaining.white:
         parts.append("the remaining residual is still autocorrelated")
     for e in stand_ins:
-        instead = [n for n in e.interchangeable if n in relevant]
-        parts.append(f"{e.name} could stand in for {_names_text(instead)} on this record")
+        parts.append(f"{e.name} could stand in for {_names_text(e.stands_in_for)} on this record")
     if minor:
         parts.append("minor: " + _names_text(minor))
     # Only the echoes that would have been offered as an effect are worth a word here.
@@ -1834,6 +1856,22 @@ def _localise(
     )
 
 
+class _Term(NamedTuple):
+    """One selected candidate, or the intercept, as fitted jointly: what becomes an Effect."""
+
+    name: str
+    kind: str
+    coefficient: float
+    interval: tuple[float, float]
+    p_value: float
+    significant: bool
+    # The effect as a full-rate series in the rescaled signal's units.
+    term: FloatArray
+    mean_shift: float
+    time_scale_s: float
+    members: tuple[str, ...] = ()
+
+
 def _effects(
     ref: FloatArray,
     sim: FloatArray,
@@ -1877,8 +1915,7 @@ def _effects(
         )
         fits.append(_hac_fit(sc.r, design, sc.order))
     errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
-    raw: list[tuple[str, str, float, tuple[float, float], float, bool, FloatArray, float, float]]
-    raw = []
+    raw: list[_Term] = []
     for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
         tests = [
             _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
@@ -1889,18 +1926,18 @@ def _effects(
         b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
         coef = b_std / s.std
         p = min(1.0, tests[at] * len(scales))
-        term = coef * (s.full - centre)
         raw.append(
-            (
-                s.name,
-                s.kind,
-                coef * s.unit,
-                _scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
-                p,
-                p <= holm_levels[pos - 1],
-                term,
-                coef * (float(np.mean(s.full)) - centre) / scale,
-                scales[at].factor * dt,
+            _Term(
+                name=s.name,
+                kind=s.kind,
+                coefficient=coef * s.unit,
+                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                p_value=p,
+                significant=p <= holm_levels[pos - 1],
+                term=coef * (s.full - centre),
+                mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
+                time_scale_s=scales[at].factor * dt,
+                members=s.members,
             )
         )
     joint, se = fits[0], errors[0]
@@ -1913,16 +1950,16 @@ def _effects(
         and abs(intercept) > OFFSET_MATERIALITY * (reference_range or 1.0)
     )
     raw.append(
-        (
-            offset_name,
-            "offset",
-            intercept / scale,
-            _scaled(interval0, 1.0 / scale),
-            p0,
-            offset_significant,
-            np.full(n, intercept),
-            intercept / scale,
-            fine.factor * dt,
+        _Term(
+            name=offset_name,
+            kind="offset",
+            coefficient=intercept / scale,
+            interval=_scaled(interval0, 1.0 / scale),
+            p_value=p0,
+            significant=offset_significant,
+            term=np.full(n, intercept),
+            mean_shift=intercept / scale,
+            time_scale_s=fine.factor * dt,
         )
     )
     where = _localise(ref, sim, dt, start_s, window_s)
@@ -1931,7 +1968,7 @@ def _effects(
     # full-rate series, and a stacked copy of them would double the memory they take. Each
     # term is its candidate scaled by its coefficient, which spans the same direction, so the
     # shares are those of the candidates.
-    terms = [row[6] for row in raw[: len(chosen)]]
+    terms = [t.term for t in raw[: len(chosen)]]
     k = len(terms) + 1
     gram = np.empty((k, k))
     cross = np.empty(k)
@@ -1943,80 +1980,68 @@ def _effects(
     gram[-1, -1] = float(n)
     cross[-1] = float(np.sum(r))
     total = _dot(r, r)
-    shapley = shapley_shares(gram, cross, total)
     together = explained_sums(gram, cross)
-    names = [name for name, *_ in raw]
-    swaps = _interchangeable(together, names, min_share * total)
-    members = [*(s.members for s in chosen), ()]
-    shares = [float(x) for x in shapley]
+    shares = [float(x) for x in shapley_from_sums(together, total)]
+    swaps = _interchangeable(together, min_share * total)
     # Largest share first, an effect is a finding of its own unless a larger finding can stand
     # in for it: the explanation with the fewest terms is the one named. Where the record cannot
     # tell two measured effects apart, physics can: one measured in the scored signal's own
     # dimension (a load in kW for a power) is taken before one that is not (a temperature
     # that follows the load), as if it explained what the other does.
     in_dimension = [
-        kind not in _GENERIC_KINDS and bool(in_units & {name, *group})
-        for (name, kind, *_), group in zip(raw, members, strict=True)
+        t.kind not in GENERIC_KINDS and bool(in_units & {t.name, *t.members}) for t in raw
     ]
     rank = list(shares)
     for i in range(len(raw)):
         if in_dimension[i]:
             for j in swaps[i]:
-                if raw[j][1] not in _GENERIC_KINDS and not in_dimension[j]:
+                if raw[j].kind not in GENERIC_KINDS and not in_dimension[j]:
                     rank[i] = max(rank[i], shares[j])
     findings: set[int] = set()
     alone_shares = [0.0] * len(raw)
     for i in sorted(range(len(raw)), key=lambda i: (-rank[i], not in_dimension[i], -shares[i])):
-        kind, significant, term = raw[i][1], raw[i][5], raw[i][6]
+        t = raw[i]
         # A term that only helps together with one that compensates it (a throttle term and a
         # gain error of opposite sign, the throttle being nearly proportional to the power)
         # makes the fit worse on its own, and is not an effect to add. Over one record, the
         # mean shift of a gain error and an offset are the same thing, so the gain is taken
         # about its mean here.
-        alone = _removed_share(r, term - float(np.mean(term)) if kind == "gain" else term)
+        alone = _removed_share(r, t.term - float(np.mean(t.term)) if t.kind == "gain" else t.term)
         alone_shares[i] = alone
         if (
-            significant
+            t.significant
             and shares[i] >= min_share
             and alone >= min_share
             and not findings.intersection(swaps[i])
         ):
             findings.add(i)
-    effects: list[Effect] = []
-    for i, (
-        name,
-        kind,
-        coef_out,
-        interval_out,
-        p,
-        significant,
-        term,
-        mean_shift,
-        at_s,
-    ) in enumerate(raw):
-        effects.append(
-            Effect(
-                name=name,
-                kind=kind,
-                coefficient=coef_out,
-                interval=interval_out,
-                p_value=p,
-                share=shares[i],
-                offset_explained=mean_shift,
-                significant=significant,
-                relevant=i in findings,
-                predicted=_lambdas(ref, sim + term, reference_range),
-                hot_share=None if hot is None else _removed_share(r[hot], term[hot]),
-                members=members[i],
-                interchangeable=tuple(names[j] for j in swaps[i]),
-                time_scale_s=at_s,
-                alone_share=alone_shares[i],
-            )
+    effects = [
+        Effect(
+            name=t.name,
+            kind=t.kind,
+            coefficient=t.coefficient,
+            interval=t.interval,
+            p_value=t.p_value,
+            share=shares[i],
+            offset_explained=t.mean_shift,
+            significant=t.significant,
+            relevant=i in findings,
+            predicted=_lambdas(ref, sim + t.term, reference_range),
+            hot_share=None if hot is None else _removed_share(r[hot], t.term[hot]),
+            members=t.members,
+            interchangeable=tuple(raw[j].name for j in swaps[i]),
+            stands_in_for=()
+            if i in findings or not t.significant
+            else tuple(raw[j].name for j in swaps[i] if j in findings),
+            time_scale_s=t.time_scale_s,
+            alone_share=alone_shares[i],
         )
+        for i, t in enumerate(raw)
+    ]
     # The joint coefficients share the residual between correlated terms; fixing only the
     # relevant ones is predicted with their own least-squares fit, so that a minor term that
     # compensated one of them in the joint model does not spoil the prediction.
-    relevant_terms = [raw[i][6] for i in sorted(findings)]
+    relevant_terms = [raw[i].term for i in sorted(findings)]
     predicted = (
         _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
         if relevant_terms
@@ -2026,11 +2051,12 @@ def _effects(
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
 
 
-def _interchangeable(together: FloatArray, names: Sequence[str], floor: float) -> list[list[int]]:
+def _interchangeable(together: FloatArray, floor: float) -> list[list[int]]:
     """For each term, the other terms that can stand in for it on this record: each explains
     at least ``floor`` alone, and what they explain in common is at least
-    :data:`INTERCHANGEABLE_OVERLAP` of what the smaller explains alone."""
-    k = len(names)
+    :data:`INTERCHANGEABLE_OVERLAP` of what the smaller explains alone. ``together`` holds
+    what every subset of the terms explains (:func:`.importance.explained_sums`)."""
+    k = int(together.shape[0]).bit_length() - 1
     found: list[list[int]] = [[] for _ in range(k)]
     for a in range(k):
         for b in range(a + 1, k):

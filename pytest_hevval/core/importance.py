@@ -23,7 +23,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["MAX_TERMS", "explained_sums", "shapley_shares"]
+__all__ = ["MAX_TERMS", "explained_sums", "shapley_from_sums", "shapley_shares"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -68,8 +68,13 @@ def shapley_shares(gram: FloatArray, cross: FloatArray, total: float) -> FloatAr
     target's own sum of squares, that is the R² of the full fit (uncentred unless a column of
     ones is one of the terms). Returns zeros when ``total`` is not positive.
     """
-    values = explained_sums(gram, cross)
-    k = int(np.asarray(cross).shape[0])
+    return shapley_from_sums(explained_sums(gram, cross), total)
+
+
+def shapley_from_sums(values: FloatArray, total: float) -> FloatArray:
+    """:func:`shapley_shares` from the explained sums of every subset, for a caller that needs
+    those sums too (``values`` as :func:`explained_sums` returns them, 2^k of them)."""
+    k = int(values.shape[0]).bit_length() - 1
     shares = np.zeros(k)
     if k == 0 or not total > 0.0:
         return shares
