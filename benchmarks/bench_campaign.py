@@ -113,9 +113,9 @@ def prepare(count: int) -> tuple[list[Path], Path]:
 
 def score(specs: list[Path], *, campaign: bool, intervals: bool = True) -> tuple[float, float]:
     """(wall, CPU) time of loading and scoring ``specs`` (and the verdict, for a campaign)."""
-    from pytest_hevval.campaign import campaign_verdicts
-    from pytest_hevval.engine import Evaluation
-    from pytest_hevval.run import RunOptions, run_specs
+    from pytest_hevval.results.campaign import campaign_verdicts
+    from pytest_hevval.scoring.engine import Evaluation
+    from pytest_hevval.scoring.run import RunOptions, run_specs
     from pytest_hevval.spec.load import load_specs
 
     started, cpu = time.perf_counter(), time.process_time()

@@ -89,8 +89,8 @@ class Trip:
     """One scored trip: the model output, the real residual and the candidates."""
 
     def __init__(self, spec: str) -> None:
-        from pytest_hevval.diagnose import candidates_for
-        from pytest_hevval.run import RunOptions, run_specs
+        from pytest_hevval.scoring.diagnosis import candidates_for
+        from pytest_hevval.scoring.run import RunOptions, run_specs
         from pytest_hevval.spec.load import load_spec
 
         (outcome,) = run_specs([load_spec(spec)], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
@@ -160,7 +160,7 @@ def _matches(first: tuple[str, str, tuple[str, ...]] | None, expected: str) -> b
 
 
 def run(draws: int, controls: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
-    from pytest_hevval.diagnose import diagnose_pair
+    from pytest_hevval.scoring.diagnosis import diagnose_pair
 
     rng = np.random.default_rng(seed)
     tally: dict[str, list[int]] = defaultdict(lambda: [0, 0])
@@ -218,7 +218,7 @@ LOADS = ("Heating Power CAN [kW]", "AirCon Power [kW]")
 
 def coverage(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
     """How often the interval of a real load added with coefficient 1 holds 1."""
-    from pytest_hevval.diagnose import diagnose_pair
+    from pytest_hevval.scoring.diagnosis import diagnose_pair
 
     rng = np.random.default_rng(seed)
     rows: list[dict[str, Any]] = []

@@ -44,8 +44,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pytest_hevval.diagnose import candidates_for, diagnose_origin, diagnose_signal
-from pytest_hevval.run import RunOptions, run_specs
+from pytest_hevval.report.diagnosis import payload
+from pytest_hevval.scoring.diagnosis import candidates_for, diagnose_origin, diagnose_signal
+from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import parse_spec_text
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -107,7 +108,7 @@ def trip_row(path: Path, channel_set: str) -> Row:
     # Taken before the heater column is read: reading it must not change which samples count.
     keep = kept(evaluation)
     heater = evaluation.aligned.column("reference", HEATER_LOG, "linear")[keep]
-    found = diagnose_signal(evaluation, SIGNAL)
+    found = payload(diagnose_signal(evaluation, SIGNAL))
     relevant = [e for e in found["effects"] if e["relevant"]]
     first = first_of(found)
     row.update(
@@ -149,7 +150,7 @@ def camry_rows() -> list[Row]:
     rows: list[Row] = []
     for signal in CAMRY_SIGNALS:
         started = time.perf_counter()
-        found = diagnose_origin(evaluation, signal)
+        found = payload(diagnose_origin(evaluation, signal))
         first = first_of(found)
         spans = (found.get("localisation") or {}).get("spans_s") or []
         hit = first is not None and first["name"] == CAMRY_TRUTH and first["coefficient"] > 0

@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pytest_hevval.core.characteristics import signal_characteristics
 from pytest_hevval.core.local import fixed_windows, region_grid
-from pytest_hevval.localise import Labels, score_local
+from pytest_hevval.scoring.local import Labels, score_local
 
 
 def make_pairs(signals: int, n: int, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -23,7 +23,7 @@ Four parts, each printed with the sizes it ran at:
     channels alone, read from Parquet, on one and on two threads.
 ``dask``
     100 specs of 10 min at 10 Hz with 20 signals each: serial in one process against
-    :func:`pytest_hevval.distributed.evaluate_on_dask` on a ``LocalCluster`` of 2 worker
+    :func:`pytest_hevval.scoring.cluster.evaluate_on_dask` on a ``LocalCluster`` of 2 worker
     processes; cluster start-up is timed apart from the run.
 ``compare``
     One signal pair scored by this package's ``signal_characteristics``, by ISO/TS 18571 as the
@@ -187,7 +187,7 @@ def child_e2e(spec_path: str, intervals: bool = True) -> None:
     """Evaluate one spec as ``hevval run`` does; print measurements as JSON.
 
     ``intervals``: False as ``--hevval-no-intervals`` (no bootstrap intervals)."""
-    from pytest_hevval.engine import DataCache, evaluate_spec
+    from pytest_hevval.scoring.engine import DataCache, evaluate_spec
     from pytest_hevval.spec.load import load_spec
 
     baseline = _rss_kib("VmRSS")
@@ -368,7 +368,7 @@ def part_quality(signals: int, duration_s: float, rate_hz: float, repeat: int = 
     from pytest_hevval.data.quality import QualityLimits, assess
     from pytest_hevval.data.readers import read_record
     from pytest_hevval.data.record import SourceOptions
-    from pytest_hevval.engine import _tune_allocator
+    from pytest_hevval.scoring.engine import _tune_allocator
 
     folder = e2e_data(signals, duration_s, rate_hz)
     n = int(duration_s * rate_hz)
@@ -399,8 +399,8 @@ def _timer(into: dict[str, float], key: str) -> Iterator[None]:
 
 
 def part_dask(count: int, signals: int, duration_s: float, rate_hz: float) -> None:
-    from pytest_hevval.distributed import evaluate_on_dask
-    from pytest_hevval.engine import DataCache, evaluate_spec
+    from pytest_hevval.scoring.cluster import evaluate_on_dask
+    from pytest_hevval.scoring.engine import DataCache, evaluate_spec
     from pytest_hevval.spec.load import load_spec
 
     specs = many_specs_data(count, signals, duration_s, rate_hz)

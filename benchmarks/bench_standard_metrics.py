@@ -126,7 +126,7 @@ def main() -> None:
 def banded_deviation(band: int) -> None:
     """The rating with the warping band narrowed to ±band against the exact one, i3 trips."""
     from pytest_hevval.core.standard import iso18571_rating
-    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.scoring.engine import evaluate_spec
     from pytest_hevval.spec.load import load_spec
 
     example = Path(__file__).resolve().parent.parent / "example_project"

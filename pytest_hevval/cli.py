@@ -1,6 +1,7 @@
 """``hevval``: the same pipeline as ``pytest --hevval``, without pytest.
 
     hevval run SPEC... [--json PATH] [--details] [--report html,json,md] [--report-dir DIR]
+               [--compare [VERSION]] [--compare-fail EXPR] [--ratchet [MARGIN]]
     hevval diagnose SPEC [--signal PATH] [--json PATH]
     hevval compare BEFORE AFTER [--format table|md|json] [--compare-fail EXPR]
     hevval history [--spec S] [--signal PATH] [--plot FILE]
@@ -18,12 +19,15 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from .defaults import SPEC_GLOBS
 from .errors import HevvalError
+
+if TYPE_CHECKING:
+    from .history import Comparison, HistoryRow
 
 __all__ = ["main"]
 
@@ -34,8 +38,9 @@ EXIT_USAGE = 2
 
 def _write_json(path: str, payload: Any) -> None:
     from .files import write_atomic
+    from .results.codec import dumps
 
-    write_atomic(path, json.dumps(payload, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    write_atomic(path, dumps(payload))
 
 
 def _expand(paths: Sequence[str]) -> list[Path]:
@@ -50,23 +55,35 @@ def _expand(paths: Sequence[str]) -> list[Path]:
     return found
 
 
-def _run(args: argparse.Namespace) -> int:
-    from .engine import Evaluation
-    from .run import RunOptions, run_specs
-    from .spec.load import load_specs
-    from .terminal import tree_summary
+# -- hevval run -------------------------------------------------------------------------------
 
+
+def _run(args: argparse.Namespace) -> int:
+    from . import __version__
+    from .publish import Publisher, PublishOptions, diagnosis_panels
+    from .report.diagnosis import target_payload
+    from .report.terminal import run_summary
+    from .results.campaign import campaign_verdicts
+    from .scoring.engine import Evaluation
+    from .scoring.run import RunOptions, relative_to, run_specs
+    from .spec.load import load_specs
+
+    rootdir = Path.cwd()
+    publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
         return EXIT_USAGE
+    notes = publisher.start()
     options = RunOptions(
-        rootdir=Path.cwd(),
-        figures="html" in (args.report or ""),
+        rootdir=rootdir,
+        figures="html" in publisher.formats,
         workers=args.workers,
         dask=args.dask,
         data_hash=args.hash,
         intervals=not args.no_intervals,
+        # Only a report shows diagnoses; without one, scoring keeps no data to diagnose.
+        diagnose=args.diagnose if publisher.formats else "off",
     )
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
     done = [0]
@@ -77,22 +94,22 @@ def _run(args: argparse.Namespace) -> int:
 
     outcomes = run_specs(specs, options, progress=advance)
     progress.close()
-    results = []
+    evaluations = []
     for outcome in outcomes:
         if not isinstance(outcome, Evaluation):
             raise outcome
-        results.append(outcome.result)
-    for line in tree_summary(results, details=args.details):
+        evaluations.append(outcome)
+    results = [evaluation.result for evaluation in evaluations]
+    for line in run_summary(results, details=args.details):
         print(line)
-    from .campaign import campaign_verdicts, verdict_lines
-
     verdicts = campaign_verdicts(results)
-    for found in verdicts:
-        for line in verdict_lines(found):
-            print(line)
-    passed = all(r.passed for r in results) and all(v.passed for v in verdicts)
-    from . import __version__
-
+    regressions = [
+        (result.spec, signal, found)
+        for result in results
+        for signal in [None, *(s.path for s in result.signals)]
+        for found in publisher.regressions_for(result, signal)
+    ]
+    passed = all(r.passed for r in results) and all(v.passed for v in verdicts) and not regressions
     payload = {
         "schema_version": 1,
         "hevval_version": __version__,
@@ -107,32 +124,186 @@ def _run(args: argparse.Namespace) -> int:
         )
     if args.json:
         _write_json(args.json, payload)
-    if not args.no_history:
-        _record_history(args, [r.to_dict() for r in results])
-    if args.report:
-        from .report import parse_formats, write_reports
+    panels = diagnosis_panels(
+        target_payload(evaluation.result.spec, target, found)
+        for evaluation in evaluations
+        for target, found in evaluation.diagnoses.items()
+    )
+    published = publisher.publish(
+        results, {relative_to(rootdir, spec.key): spec for spec in specs}, panels
+    )
+    for line in published.annotations:
+        print(line)
+    for note in [*notes, *published.notes]:
+        print(note)
+    for spec, signal, found in regressions:
+        what = "Φ" if signal is None else signal
+        print(f"regression: {spec}: {what}: {found}")
+    return EXIT_OK if passed and not published.failed else EXIT_FAILED
 
-        written = write_reports(
-            [r.to_dict() for r in results],
-            parse_formats(args.report),
-            Path(args.report_dir),
-            title="hevval validation report",
+
+def _arg(args: argparse.Namespace, name: str) -> Any:
+    """The value of ``--NAME`` (an option of the shared table) as parsed."""
+    return getattr(args, name.replace("-", "_"), None)
+
+
+# -- hevval diagnose --------------------------------------------------------------------------
+
+
+def _diagnose(args: argparse.Namespace) -> int:
+    """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
+    from .errors import SpecError
+    from .report.diagnosis import describe, payload
+    from .scoring.diagnosis import diagnose_signal
+    from .scoring.run import RunOptions, run_specs
+    from .spec.load import load_specs
+
+    specs = load_specs(args.spec)
+    if len(specs) > 1:
+        raise SpecError(
+            f"the spec is a campaign of {len(specs)} recordings; diagnose one at a time",
+            file=args.spec,
+            hint=f"name one: hevval diagnose '{args.spec}::{specs[0].recording}'",
         )
-        for path in written:
-            print(f"report: {path}")
-    return EXIT_OK if passed else EXIT_FAILED
+    (spec,) = specs
+    (outcome,) = run_specs([spec], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
+    if isinstance(outcome, HevvalError):
+        raise outcome
+    evaluation = outcome
+    paths = args.signal or [s.path for s in evaluation.result.signals if s.origin]
+    if not paths:
+        print(f"{spec.name}: every signal passes; pass --signal PATH to diagnose one anyway")
+    findings = [
+        payload(diagnose_signal(evaluation, p, channels=not args.no_channels)) for p in paths
+    ]
+    for found in findings:
+        for line in describe(found):
+            print(line)
+    if args.json:
+        document: dict[str, Any] = {"spec": spec.name, "signals": findings}
+        if len(findings) == 1:
+            # One signal: its fields also sit at the top level, as documented.
+            document.update(findings[0])
+        _write_json(args.json, document)
+    return EXIT_OK
 
 
-def _record_history(args: argparse.Namespace, dicts: list[dict[str, Any]]) -> None:
-    import os
-    from datetime import datetime, timezone
+# -- hevval history and hevval compare --------------------------------------------------------
 
-    from .history import HistoryStore, make_record, resolve_model_version
 
-    version = resolve_model_version(args.model_version, os.environ, Path.cwd())
-    record = make_record(dicts, model_version=version, started_utc=datetime.now(timezone.utc))
-    path = HistoryStore(Path(args.history_dir)).append(record)
-    print(f"history: recorded {version} in {path}")
+def _write(text: str, output: str | None) -> None:
+    from .files import write_atomic
+    from .history import HistoryError
+
+    if output is None or output == "-":
+        sys.stdout.write(text)
+        return
+    try:
+        write_atomic(output, text)
+    except OSError as exc:
+        raise HistoryError(
+            f"cannot write: {exc.strerror or exc}", file=output, hint="choose another --output"
+        ) from None
+
+
+def _history(args: argparse.Namespace) -> int:
+    """``hevval history``: Φ and the characteristics over the recorded model versions."""
+    from .history import (
+        HistoryStore,
+        history_table,
+        plot_history,
+        render_history_table,
+        report_problems,
+    )
+
+    store = HistoryStore(Path(args.history_dir))
+    records = store.records()
+    report_problems(store)
+    rows = history_table(records, spec=args.spec, signal=args.signal)
+    if not rows:
+        what = "no readable records" if not records else "no recorded runs match"
+        print(f"hevval history: {what} in {args.history_dir}", file=sys.stderr)
+        return 1
+    if args.json is not None:
+        document = {"rows": [row.to_dict() for row in rows]}
+        _write(json.dumps(document, indent=2, ensure_ascii=False) + "\n", args.json)
+    if args.json != "-":
+        sys.stdout.write(render_history_table(rows) + "\n")
+        steps = _step_report(rows, args.min_step)
+        if steps:
+            sys.stdout.write("\n" + "\n".join(steps) + "\n")
+    if args.plot is not None:
+        plot_history(rows, Path(args.plot))
+        print(f"wrote {args.plot}", file=sys.stderr)
+    return 0
+
+
+def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
+    from .history import detect_steps
+    from .history.trends import characteristic_names, row_series
+
+    lines = []
+    for (spec, signal), series in row_series(rows).items():
+        fields = ["phi"] if signal is None else ["phi", *characteristic_names(series)]
+        for field in fields:
+            steps = detect_steps(
+                [r.value(field) for r in series],
+                min_size=min_size,
+                intervals=[r.interval(field) for r in series],
+            )
+            for step in steps:
+                if not step.regression:
+                    continue
+                at = series[step.index]
+                label = "Φ" if field == "phi" else field
+                where = spec if signal is None else f"{spec}::{signal}"
+                lines.append(
+                    f"drop: {where} {label} {step.before:.4f} → {step.after:.4f} "
+                    f"from model version {at.model_version} ({at.started_utc[:10]})"
+                )
+    return sorted(set(lines))
+
+
+def _compare(args: argparse.Namespace) -> int:
+    """``hevval compare``: two runs signal by signal, then Φ per spec."""
+    from .history import compare, load_side, parse_compare_fail, regressions
+    from .history.compare import campaign_change_lines
+    from .history.render import render
+
+    rules = (
+        parse_compare_fail(args.compare_fail, option="--compare-fail")
+        if args.compare_fail is not None
+        else None
+    )
+    directory = Path(args.history_dir)
+    before, before_label = load_side(args.before, directory)
+    after, after_label = load_side(args.after, directory)
+    if before_label == after_label:
+        before_label, after_label = f"{before_label} (before)", f"{after_label} (after)"
+    # Two runs named on the command line are meant to be compared, so one spec against one
+    # spec pairs even when the model version lives in the file name (trip-v1 → trip-v2).
+    comparison = compare(
+        after, before, before_label=before_label, after_label=after_label, pair_single=True
+    )
+    found = regressions(comparison, rules) if rules is not None else None
+    text = _with_pairings(render(comparison, args.format, found), comparison, args.format)
+    if args.format != "json":
+        text += "".join(f"\n{line}\n" for line in campaign_change_lines(comparison))
+    _write(text, args.output)
+    return 1 if found else 0
+
+
+def _with_pairings(text: str, comparison: Comparison, fmt: str) -> str:
+    """Say under the title which different specs were compared and whose data changed; JSON
+    carries ``pairings`` and each spec's ``data_changed``."""
+    if fmt == "json" or not comparison.notes:
+        return text
+    title, _, rest = text.partition("\n")
+    if fmt == "md":
+        # A blank line ends the heading; two trailing spaces break lines inside the paragraph.
+        notes = [note.replace("|", "\\|") for note in comparison.notes]
+        return title + "\n\n" + "  \n".join(notes) + "\n" + rest
+    return title + "\n" + "".join(note + "\n" for note in comparison.notes) + rest
 
 
 class _NoProgress:
@@ -180,6 +351,9 @@ def _shared(parser: argparse.ArgumentParser, name: str, **overrides: Any) -> Non
         kwargs["default"] = option.default
     if option.choices:
         kwargs["choices"] = option.choices
+    if option.const is not None:
+        kwargs["nargs"] = "?"
+        kwargs["const"] = option.const
     kwargs.update(overrides)
     parser.add_argument(f"--{name}", **kwargs)
 
@@ -222,6 +396,11 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "workers", type=_workers)
     _shared(run, "hash")
     _shared(run, "no-intervals")
+    _shared(run, "diagnose")
+    _shared(run, "compare", metavar="VERSION")
+    _shared(run, "compare-fail", metavar="EXPR")
+    _shared(run, "create-baseline")
+    _shared(run, "ratchet", metavar="MARGIN")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     diagnose = commands.add_parser(
@@ -333,18 +512,17 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
+_COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "run": _run,
+    "diagnose": _diagnose,
+    "compare": _compare,
+    "history": _history,
+    "kernel": _kernel,
+}
+
+
 def _dispatch(args: argparse.Namespace) -> int:
-    if args.command == "run":
-        return _run(args)
-    if args.command == "diagnose":
-        from .diagnose import run_diagnose
-
-        return run_diagnose(args)
-    if args.command == "kernel":
-        return _kernel(args)
-    from .history.cli import run_compare, run_history
-
-    return run_compare(args) if args.command == "compare" else run_history(args)
+    return _COMMANDS[args.command](args)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,16 +1,19 @@
-"""Defaults shared by the pytest options and the ``hevval`` command line, each defined once."""
+"""Defaults shared by the pytest options and the ``hevval`` command line, each defined once,
+and the one rule every layer reads a spec's key by."""
 
 from __future__ import annotations
 
 __all__ = [
     "HISTORY_DIR",
     "LOCAL_WINDOW_S",
+    "RECORDING_SEPARATOR",
     "REGION_BINS",
     "REGION_MIN_SAMPLES",
     "REPORT_DIR",
     "SPEC_GLOBS",
     "UNCERTAINTY_SIGMA",
     "WITHIN_UNCERTAINTY",
+    "split_key",
 ]
 
 #: Spec files, as pytest's ``python_files`` globs (ini ``hevval_files`` overrides them).
@@ -32,3 +35,12 @@ UNCERTAINTY_SIGMA = 2.0
 #: What a threshold missed by less than the measurement uncertainty does when the spec's
 #: ``measurement.within_uncertainty`` does not say: it still fails.
 WITHIN_UNCERTAINTY = "fail"
+
+#: Between a campaign spec's path and a recording id in a result's key and on the command line.
+RECORDING_SEPARATOR = "::"
+
+
+def split_key(key: str) -> tuple[str, str | None]:
+    """(spec path, recording id or None) of a key such as ``specs/i3.hevval.yaml::TripB03``."""
+    path, separator, recording = key.partition(RECORDING_SEPARATOR)
+    return path, (recording if separator else None)

@@ -11,8 +11,8 @@ from typing import Any, Literal
 
 import pytest
 
+from .data.digest import DEFAULT_HASH, HASH_CHOICES
 from .defaults import HISTORY_DIR, REPORT_DIR, SPEC_GLOBS
-from .digest import DEFAULT_HASH, HASH_CHOICES
 
 __all__ = ["OPTIONS", "Option", "add_options", "get_option", "option_named"]
 

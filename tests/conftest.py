@@ -18,7 +18,8 @@ import os
 import pytest
 from hypothesis import settings
 
-from pytest_hevval import engine, session
+from pytest_hevval.plugin import session
+from pytest_hevval.scoring import engine
 
 # In CI every run draws the same examples, so a pass or a failure can be reproduced; locally
 # hypothesis keeps drawing new ones (and replays the failures it saved in .hypothesis/).
@@ -32,6 +33,14 @@ with contextlib.suppress(ImportError):  # the parquet extra
     # pandas registers its Arrow extension types (pandas.period, pandas.interval) with pyarrow
     # on this module's first import; a second import after an inline run fails.
     _KEPT_LOADED.append(importlib.import_module("pandas.core.arrays.arrow.extension_types"))
+# The importlib_metadata backport (dask imports it on Python < 3.12, canmatrix on any) deletes
+# the standard library's PathFinder.find_distributions on import and puts its own finder on
+# sys.meta_path instead. Imported first inside a test that uses pytester, its finder is taken
+# off sys.meta_path again when pytester restores it, and the process is left with no finder of
+# installed distributions at all: every later inline run loads no pytest11 plugin and rejects
+# --hevval. Imported here, its finder stays for the whole session.
+with contextlib.suppress(ImportError):
+    _KEPT_LOADED.append(importlib.import_module("importlib_metadata"))
 # The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
 # and the next would pay its import again.
 with contextlib.suppress(Exception):

@@ -3,7 +3,8 @@
 A made-up hybrid-vehicle trip: a speed profile, and from it motor torque, battery power,
 current and voltage, state of charge and engine speed. The "simulated" traces are the measured
 ones with typical model faults (lag, gain error, bias, missed spikes, noise). The traces are
-written to files and scored by the real pipeline (:func:`pytest_hevval.run.run_specs`), so every
+written to files and scored by the real pipeline
+(:func:`pytest_hevval.scoring.run.run_specs`), so every
 number on a demo report — λ1–λ7, Φ, the gates, where each error appears — is computed exactly as
 on a real one. Only the history trend and the diagnosis shown beside a signal are made up.
 """
@@ -19,8 +20,8 @@ import numpy.typing as npt
 import pandas as pd
 import yaml
 
-from pytest_hevval.engine import Evaluation
-from pytest_hevval.run import RunOptions, run_specs
+from pytest_hevval.scoring.engine import Evaluation
+from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import load_spec
 
 __all__ = ["demo_results"]

@@ -10,8 +10,8 @@ import pytest
 
 from pytest_hevval.data.align import align_records, nominal_rate
 from pytest_hevval.data.record import Channel, Record
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import DataError
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
 
 

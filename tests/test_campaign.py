@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from pytest_hevval.campaign import CampaignVerdict, Distribution, RecordingOutcome, verdict_lines
 from pytest_hevval.core.uncertainty import Interval
 from pytest_hevval.core.upooling import (
     U_GRID,
@@ -24,6 +23,12 @@ from pytest_hevval.core.upooling import (
     u_values,
 )
 from pytest_hevval.errors import SpecError
+from pytest_hevval.report.terminal import verdict_lines
+from pytest_hevval.results.campaign import (
+    CampaignVerdict,
+    Distribution,
+    RecordingOutcome,
+)
 from pytest_hevval.spec.load import load_specs, parse_spec_text
 
 from .strategies import finite
@@ -449,7 +454,7 @@ def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> 
 
 def test_a_recording_is_scored_alone_as_file_and_id(project: pytest.Pytester) -> None:
     """The form a Dask worker receives a campaign recording in."""
-    from pytest_hevval.distributed import evaluate_spec_file
+    from pytest_hevval.scoring.cluster import evaluate_spec_file
 
     write_campaign(project.path)
     payload = evaluate_spec_file(

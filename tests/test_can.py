@@ -800,7 +800,7 @@ def test_kcd_database_decodes_as_dbc(tmp_path: Path, database: Any, database_fil
 def test_can_signals_are_held_between_frames_unless_the_spec_says_otherwise(
     tmp_path: Path, database: Any
 ) -> None:
-    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.scoring.engine import evaluate_spec
     from pytest_hevval.spec.load import parse_spec_text
 
     messages = _frames(database)

@@ -10,8 +10,8 @@ import pytest
 
 from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import SourceOptions
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import DataError
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
 
 START = pd.Timestamp("2024-06-01T08:00:00Z")

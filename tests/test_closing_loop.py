@@ -16,7 +16,8 @@ from typing import Any
 
 import pytest
 
-from pytest_hevval.history import compare, compare_main
+from pytest_hevval.cli import main as cli_main
+from pytest_hevval.history import compare
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "example_project"
 B03_V1 = "specs/i3-B03-winter-v1.hevval.yaml"
@@ -175,10 +176,10 @@ def test_b03_v2_halves_the_energy_error_and_compare_pairs_the_runs(
     loop: dict[str, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
     before, after = str(loop["b03-v1"]), str(loop["b03-v2"])
-    assert compare_main([before, after]) == 0
+    assert cli_main(["compare", before, after]) == 0
     table = capsys.readouterr().out
     assert f"comparing {B03_V1} (before) with {B03_V2} (after)" in table.splitlines()[1]
-    assert compare_main([before, after, "--format", "json"]) == 0
+    assert cli_main(["compare", before, after, "--format", "json"]) == 0
     comparison = json.loads(capsys.readouterr().out)["comparison"]
     (spec,) = comparison["specs"]
     assert (spec["before_spec"], spec["spec"], spec["matched_by"]) == (B03_V1, B03_V2, "single")
@@ -286,7 +287,7 @@ def test_markdown_names_both_specs_under_the_title(
         run = {"schema_version": 1, "specs": [_spec(path, f"x {side}", phi)]}
         (tmp_path / f"{side}.json").write_text(json.dumps(run), encoding="utf-8")
     argv = [str(tmp_path / "before.json"), str(tmp_path / "after.json"), "--format", "md"]
-    assert compare_main(argv) == 0
+    assert cli_main(["compare", *argv]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == "## hevval compare `before.json` → `after.json`"
     assert lines[1:3] == [

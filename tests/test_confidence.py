@@ -13,7 +13,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval import cli
-from pytest_hevval.confidence import _phi_replicates, resampled_blocks
 from pytest_hevval.core.registry import FUSED_CHARACTERISTICS
 from pytest_hevval.core.tree import (
     TreeNode,
@@ -23,11 +22,12 @@ from pytest_hevval.core.tree import (
     score_tree,
 )
 from pytest_hevval.core.uncertainty import SHARED_BLOCK_FACTOR, block_sums, signal_intervals
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import SpecError
 from pytest_hevval.history.compare import compare, parse_compare_fail, regressions
 from pytest_hevval.history.trends import detect_steps
-from pytest_hevval.result import SpecResult
+from pytest_hevval.results.spec_result import SpecResult
+from pytest_hevval.scoring.confidence import _phi_replicates, resampled_blocks
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
 from tests.strategies import signal_trees
 from tests.test_plugin import TREE_SPEC, write_data

@@ -32,8 +32,11 @@ import json, re, sys
 from pathlib import Path
 import numpy as np
 from pytest_hevval.core.diagnosis import diagnose_residual
-from pytest_hevval.diagnose import candidates_for, diagnose_signal
-from pytest_hevval.run import RunOptions, run_specs
+from pytest_hevval.scoring.diagnosis import candidates_for, diagnose_signal
+from pytest_hevval.report.diagnosis import payload, summary
+from pytest_hevval.results.codec import plain_json
+from dataclasses import asdict
+from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import parse_spec_text
 
 POWER = "E_batt/P_batt"
@@ -62,12 +65,14 @@ out = {}
 bus = {"bus_voltage_v": "`Battery Voltage [V]`"}
 summer = "specs/i3-A02-motorway-v2.hevval.yaml"
 # U_batt and SoC are not scored, so the voltage and the state of charge are candidates.
-out["echo"] = diagnose_signal(evaluate(summer, drop=("U_batt", "SoC"), candidates=bus), POWER)
-out["echo_as_cause"] = diagnose_signal(
+out["echo"] = payload(
+    diagnose_signal(evaluate(summer, drop=("U_batt", "SoC"), candidates=bus), POWER)
+)
+out["echo_as_cause"] = payload(diagnose_signal(
     evaluate(summer, drop=("U_batt", "SoC"), candidates=bus,
              diagnosis={"causes": ["bus_voltage_v"]}),
     POWER,
-)
+))
 
 # The heater and air-conditioning load of the winter trip, missing from model v2's output: the
 # measured reference is model v2 plus that load plus the real residual of v2, shifted in time
@@ -83,12 +88,12 @@ reference = simulated + load + noise
 lacking = diagnose_residual(
     reference, simulated, dt=winter.aligned.grid.dt, candidates=candidates_for(winter)
 )
-out["heater"] = lacking.as_dict()
+out["heater"] = {**plain_json(asdict(lacking)), "summary": summary(lacking)}
 out["heater_mean_kw"] = float(np.mean(load))
 
 v1 = "specs/i3-B03-winter-v1.hevval.yaml"
-out["minor"] = diagnose_signal(evaluate(v1), POWER)
-out["minor_all"] = diagnose_signal(evaluate(v1, diagnosis={"min_share": 0.0}), POWER)
+out["minor"] = payload(diagnose_signal(evaluate(v1), POWER))
+out["minor_all"] = payload(diagnose_signal(evaluate(v1, diagnosis={"min_share": 0.0}), POWER))
 print(json.dumps(out))
 """
 

@@ -10,6 +10,7 @@ from scipy import signal as sps
 
 from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
 from pytest_hevval.errors import SpecError
+from pytest_hevval.report.diagnosis import summary
 from pytest_hevval.spec.load import parse_spec_text
 from pytest_hevval.spec.model import DiagnosisSpec
 
@@ -147,7 +148,7 @@ def test_min_share_moves_an_effect_between_relevant_and_minor() -> None:
     )
     assert [e.name for e in above.minor] == ["load"]
     assert above.relevant == ()
-    assert "minor: load" in above.summary
+    assert "minor: load" in summary(above)
     assert MIN_SHARE == 0.05
     with pytest.raises(SpecError):
         diagnose_residual(ref, sim, dt=DT, min_share=1.0)
@@ -174,8 +175,8 @@ def test_channels_that_measure_one_effect_are_one_finding() -> None:
     assert set(first.members) == {"Heater Current [A]", "Heating Power LIN [W]"}
     assert first.coefficient > 0.0
     assert first.interval[0] < 1.0 < first.interval[1]
-    assert first.name in found.summary
-    assert "one effect with" in found.summary
+    assert first.name in summary(found)
+    assert "one effect with" in summary(found)
     assert sum(e.share for e in found.effects) <= found.explained_fraction + 1.0
 
 

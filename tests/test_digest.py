@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from pytest_hevval import digest
+from pytest_hevval.data import digest
+from pytest_hevval.results.codec import data_identity
 
 
 def _file(tmp_path: Path, size: int, seed: int = 0) -> Path:
@@ -63,4 +64,4 @@ def test_unknown_algorithm_is_refused(tmp_path: Path) -> None:
 def test_identity_reads_old_and_new_records(
     entry: dict[str, str], expected: tuple[str, str] | None
 ) -> None:
-    assert digest.identity(entry) == expected
+    assert data_identity(entry) == expected

@@ -15,15 +15,15 @@ import pytest
 from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import SourceOptions
 from pytest_hevval.data.remote import is_url, local_copy, parquet_source
-from pytest_hevval.distributed import (
+from pytest_hevval.errors import DataError, HevvalError, SpecError
+from pytest_hevval.scoring.cluster import (
     FREE_PORT,
     error_from_payload,
     error_payload,
     evaluate_on_dask,
     is_error_payload,
 )
-from pytest_hevval.engine import evaluate_spec
-from pytest_hevval.errors import DataError, HevvalError, SpecError
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec
 
 distributed = pytest.importorskip("distributed")

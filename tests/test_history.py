@@ -19,9 +19,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pytest_hevval import history as h
+from pytest_hevval.cli import main as cli_main
 from pytest_hevval.errors import SpecError
-from pytest_hevval.history._base import json_safe
-from pytest_hevval.result import SpecResult
+from pytest_hevval.results.codec import plain_json
+from pytest_hevval.results.spec_result import SpecResult
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
 LAMBDAS = [0.99, 0.95, 0.93, 0.92, 0.97, 0.91, 0.94]
@@ -276,12 +277,12 @@ def test_a_record_file_holds_one_spec_per_line(tmp_path: Path) -> None:
 
 def test_numpy_numbers_are_stored_and_a_bad_value_is_named_by_its_key() -> None:
     data = {"a": [np.float64(0.5), np.int64(3), float("nan")], "b": {"c": (1.0, True)}}
-    assert json_safe(data) == {"a": [0.5, 3, None], "b": {"c": [1.0, True]}}
+    assert plain_json(data, strict=True) == {"a": [0.5, 3, None], "b": {"c": [1.0, True]}}
     with pytest.raises(h.HistoryError, match="cannot store a value of type set") as bad:
-        json_safe({"specs": [{"signals": [{"x": {1, 2}}]}]})
+        plain_json({"specs": [{"signals": [{"x": {1, 2}}]}]}, strict=True, error=h.HistoryError)
     assert bad.value.key == "specs[0].signals[0].x"
     with pytest.raises(h.HistoryError, match="keys must be strings") as bad_key:
-        json_safe({"specs": [{1: 2.0}]})
+        plain_json({"specs": [{1: 2.0}]}, strict=True, error=h.HistoryError)
     assert bad_key.value.key == "specs[0]"
 
 
@@ -839,7 +840,7 @@ def test_history_main_table_steps_json_and_plot(
     out_json = tmp_path / "rows.json"
     plot = tmp_path / "p.png"
     argv = ["--history-dir", str(history_dir), "--signal", "E_batt/P_batt", "--json", str(out_json)]
-    assert h.history_main([*argv, "--plot", str(plot)]) == 0
+    assert cli_main(["history", *argv, "--plot", str(plot)]) == 0
     out = capsys.readouterr().out
     assert "v1" in out
     assert "v3" in out
@@ -852,7 +853,7 @@ def test_history_main_reports_drops(tmp_path: Path, capsys: pytest.CaptureFixtur
     store = h.HistoryStore(tmp_path)
     for i, phi in enumerate([0.95, 0.95, 0.95, 0.90, 0.90, 0.90]):
         store.append(record(f"v{i}", T0 + timedelta(days=i), [spec(phi=phi)]))
-    assert h.history_main(["--history-dir", str(tmp_path)]) == 0
+    assert cli_main(["history", "--history-dir", str(tmp_path)]) == 0
     assert "drop: specs/trip_a01.hevval.yaml Φ 0.9500 → 0.9000 from model version v3" in (
         capsys.readouterr().out
     )
@@ -861,9 +862,9 @@ def test_history_main_reports_drops(tmp_path: Path, capsys: pytest.CaptureFixtur
 def test_history_main_empty_and_bad_args(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.history_main(["--history-dir", str(tmp_path)]) == 1
+    assert cli_main(["history", "--history-dir", str(tmp_path)]) == 1
     assert "no readable records" in capsys.readouterr().err
-    assert h.history_main(["--bogus"]) == 2
+    assert cli_main(["history", "--bogus"]) == 2
     assert "unrecognized arguments" in capsys.readouterr().err
 
 
@@ -873,7 +874,7 @@ def test_compare_main_formats(
     run = tmp_path / "run.json"
     run.write_text(json.dumps({"specs": [spec(phi=0.97)]}))
     base = ["history:v1", str(run), "--history-dir", str(history_dir)]
-    assert h.compare_main(base) == 0
+    assert cli_main(["compare", *base]) == 0
     table = capsys.readouterr().out
     assert "v1 → run.json" in table
     assert "λ3 mae" in table
@@ -883,13 +884,13 @@ def test_compare_main_formats(
     assert "+0.0200" in table
     assert table.index("λ1") < table.rindex("Φ")
 
-    assert h.compare_main([*base, "--format", "md"]) == 0
+    assert cli_main(["compare", *base, "--format", "md"]) == 0
     md = capsys.readouterr().out
     assert "| λ3 mae | 0.9300 | 0.9300 | 0 |" in md
     assert "### Φ" in md
 
     out = tmp_path / "cmp.json"
-    assert h.compare_main([*base, "--format", "json", "--output", str(out)]) == 0
+    assert cli_main(["compare", *base, "--format", "json", "--output", str(out)]) == 0
     document = json.loads(out.read_text())
     assert document["comparison"]["specs"][0]["phi"]["delta"] == pytest.approx(0.02)
 
@@ -898,9 +899,9 @@ def test_compare_main_fail_rules_and_latest(
     history_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["history:v1", "history:latest", "--history-dir", str(history_dir)]
-    assert h.compare_main([*argv, "--compare-fail", "phi:0.1"]) == 0
+    assert cli_main(["compare", *argv, "--compare-fail", "phi:0.1"]) == 0
     assert "no regressions" in capsys.readouterr().out
-    assert h.compare_main([*argv, "--compare-fail", "phi:0.01,mae:0.1"]) == 1
+    assert cli_main(["compare", *argv, "--compare-fail", "phi:0.01,mae:0.1"]) == 1
     out = capsys.readouterr().out
     assert "2 regression(s)" in out
     assert "mae dropped 0.93 → 0.5" in out
@@ -910,13 +911,18 @@ def test_compare_main_previous(
     history_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert (
-        h.compare_main(["history:previous", "history:latest", "--history-dir", str(history_dir)])
+        cli_main(
+            ["compare", "history:previous", "history:latest", "--history-dir", str(history_dir)]
+        )
         == 0
     )
     assert "compare v2 → v3" in capsys.readouterr().out
     single = tmp_path / "single"
     h.HistoryStore(single).append(record("v1", T0))
-    assert h.compare_main(["history:previous", "history:latest", "--history-dir", str(single)]) == 2
+    assert (
+        cli_main(["compare", "history:previous", "history:latest", "--history-dir", str(single)])
+        == 2
+    )
     assert "only one readable record" in capsys.readouterr().err
 
 
@@ -924,7 +930,7 @@ def test_compare_main_reads_record_files(
     history_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     files = sorted(history_dir.glob("*.json"))
-    assert h.compare_main([str(files[0]), str(files[1]), "--format", "json"]) == 0
+    assert cli_main(["compare", str(files[0]), str(files[1]), "--format", "json"]) == 0
     document = json.loads(capsys.readouterr().out)
     assert (document["comparison"]["before"], document["comparison"]["after"]) == ("v1", "v2")
 
@@ -941,7 +947,7 @@ def test_compare_main_reads_record_files(
 def test_compare_main_errors(
     history_dir: Path, argv: list[str], fragments: list[str], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert h.compare_main([*argv, "--history-dir", str(history_dir)]) == 2
+    assert cli_main(["compare", *argv, "--history-dir", str(history_dir)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("hevval compare: error: ")
     for fragment in fragments:
@@ -955,9 +961,9 @@ def test_compare_main_rejects_foreign_json(
     bad.write_text("[1")
     other = tmp_path / "other.json"
     other.write_text('{"x": 1}')
-    assert h.compare_main([str(bad), str(other)]) == 2
+    assert cli_main(["compare", str(bad), str(other)]) == 2
     assert "bad.json: not valid JSON" in capsys.readouterr().err
-    assert h.compare_main([str(other), str(other)]) == 2
+    assert cli_main(["compare", str(other), str(other)]) == 2
     assert "neither a history record nor a run result" in capsys.readouterr().err
 
 

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
-from pytest_hevval.core.local import labelled_table
+from pytest_hevval.core.local import LOCAL_CHARACTERISTICS, labelled_table
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
 from tests.conftest import _kernel_unavailable, needs_kernel
 from tests.strategies import signal_pairs
@@ -39,8 +39,11 @@ def _assert_agree(a: SignalCharacteristics, b: SignalCharacteristics, lag: bool 
         assert a.lag_s == b.lag_s
         assert a.peak_correlation == pytest.approx(b.peak_correlation, rel=1e-12, abs=1e-300)
     assert a.n_samples == b.n_samples
-    for x, y in zip(a.lambdas, b.lambdas, strict=True):
-        assert x == pytest.approx(y, rel=1e-12, abs=1e-12)
+    # λ5 = 1 − ΔE/R, and ΔE is held to 1e-12 of the RMS error below: so λ5 to 1e-12 of RMS/R.
+    anomaly_scale = max(1.0, a.rms / a.reference_range)
+    for name, x, y in zip(LOCAL_CHARACTERISTICS, a.lambdas, b.lambdas, strict=True):
+        tolerance = 1e-12 * (anomaly_scale if name == "anomaly" else 1.0)
+        assert x == pytest.approx(y, rel=1e-12, abs=tolerance), name
     for name in ("mae", "rms", "error_std", "reference_range"):
         assert getattr(a, name) == pytest.approx(getattr(b, name), rel=1e-12, abs=1e-300), name
     assert a.delta_e == pytest.approx(b.delta_e, rel=1e-12, abs=1e-12 * a.rms)

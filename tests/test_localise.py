@@ -15,8 +15,8 @@ from pytest_hevval.core.local import (
     labelled_table,
     segment_sums,
 )
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import SpecError
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
 from tests.strategies import signal_pairs
 
@@ -146,7 +146,7 @@ def test_phases_and_conditions_are_tabled(tmp_path: Path) -> None:
 
 
 def test_the_json_result_round_trips(tmp_path: Path) -> None:
-    from pytest_hevval.result import SpecResult
+    from pytest_hevval.results.spec_result import SpecResult
 
     write_trip(tmp_path, stretch=True, fast=True)
     result = _evaluate(tmp_path).result  # type: ignore[attr-defined]

@@ -10,18 +10,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pytest_hevval.core.measurement import MeasurementUncertainty, error_limit
 from pytest_hevval.defaults import UNCERTAINTY_SIGMA, WITHIN_UNCERTAINTY
 from pytest_hevval.errors import SpecError
-from pytest_hevval.measurement import (
-    ErrorCheck,
-    MeasurementUncertainty,
-    check_error,
-    error_limit,
-    failure_sentence,
-)
 from pytest_hevval.report import model as report_model
+from pytest_hevval.report.sentences import failure_sentence, within_uncertainty_lines
 from pytest_hevval.report.text import render_markdown
-from pytest_hevval.result import Failure, SignalResult
+from pytest_hevval.results.measurement import ErrorCheck, check_error
+from pytest_hevval.results.spec_result import Failure, SignalResult
 from pytest_hevval.spec.load import parse_spec_text
 
 pytest_plugins = ["pytester"]
@@ -264,7 +260,7 @@ def test_signal_result_keeps_the_note_through_json() -> None:
     back = SignalResult.from_dict(data)
     assert back.passed
     assert back.within_uncertainty == signal.within_uncertainty
-    assert back.within_uncertainty_lines() == signal.within_uncertainty_lines()
+    assert within_uncertainty_lines(back) == within_uncertainty_lines(signal)
     del data["within_uncertainty"]
     assert SignalResult.from_dict(data).within_uncertainty == []
 

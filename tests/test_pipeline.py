@@ -156,3 +156,109 @@ def test_ratchet_sidecar_is_created_with_the_usual_mode(project: pytest.Pytester
     sidecar = project.path / "pack.hevval.thresholds.yaml"
     assert sidecar.exists()
     assert stat.S_IMODE(sidecar.stat().st_mode) == 0o666 & ~_umask()
+
+
+def _report_json(folder: Path) -> dict:
+    document = json.loads((folder / "report.json").read_text("utf-8"))
+    document.pop("generated_utc", None)
+    return document
+
+
+def _without_run_time(html: str) -> str:
+    """The report's HTML without the one line that names when it was written."""
+    import re
+
+    return re.sub(r"\d{4}-\d\d-\d\d[T ]\d\d:\d\d:\d\d(\.\d+)?(Z|\+00:00| UTC)?", "<time>", html)
+
+
+def test_cli_and_pytest_publish_the_same(project: pytest.Pytester) -> None:
+    """A failing spec with a baseline and every output on: `hevval run` writes the same JSON
+    and HTML reports (diagnosis and trend panels included), the same history record and the
+    same comparison as `pytest --hevval`, and fails on the same regression."""
+    for side in ("from-pytest", "from-cli"):
+        assert (
+            cli.main(
+                [
+                    "run",
+                    "pack.hevval.yaml",
+                    "--model-version=v0",
+                    f"--history-dir={side}",
+                    "--quiet",
+                ]
+            )
+            == 0
+        )
+    write_data(project.path, fault="middle")
+    shared = ["--model-version=v1", "--report=json,html", "--compare", "--compare-fail=phi:0.01"]
+    result = project.runpytest(
+        "--hevval",
+        *(f"--hevval-{option.removeprefix('--')}" for option in shared),
+        "--hevval-history-dir=from-pytest",
+        "--hevval-report-dir=report-pytest",
+    )
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    code = cli.main(
+        ["run", "pack.hevval.yaml", *shared, "--history-dir=from-cli", "--report-dir=report-cli"]
+    )
+    assert code == 1
+    from_pytest = _report_json(project.path / "report-pytest")
+    from_cli = _report_json(project.path / "report-cli")
+    assert from_cli == from_pytest
+    signals = {s["path"]: s for s in from_cli["specs"][0]["signals"]}
+    assert "diagnosis" in signals["E/P"], "the failing signal's diagnosis panel"
+    assert len(signals["E/P"]["history"]) == 2, "the trend over v0 and v1"
+    html_pytest = (project.path / "report-pytest" / "report.html").read_text("utf-8")
+    html_cli = (project.path / "report-cli" / "report.html").read_text("utf-8")
+    assert _without_run_time(html_cli) == _without_run_time(html_pytest)
+    records = {
+        side: [json.loads(p.read_text()) for p in sorted((project.path / side).glob("*.json"))]
+        for side in ("from-pytest", "from-cli")
+    }
+    for record in (*records["from-pytest"], *records["from-cli"]):
+        for key in RUN_METADATA:
+            record.pop(key)
+    assert records["from-cli"] == records["from-pytest"]
+    assert [r["model_version"] for r in records["from-cli"]] == ["v0", "v1"]
+
+
+def test_cli_compares_and_ratchets_as_pytest_does(
+    project: pytest.Pytester, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`hevval run --compare --ratchet` prints the comparison table pytest prints and writes
+    the same threshold sidecar."""
+    assert cli.main(["run", "pack.hevval.yaml", "--model-version=v0", "--quiet"]) == 0
+    capsys.readouterr()
+    result = project.runpytest(
+        "--hevval",
+        "--hevval-model-version=v1",
+        "--hevval-compare",
+        "--hevval-ratchet",
+        "-p",
+        "no:cacheprovider",
+        "--hevval-no-history",
+    )
+    result.assert_outcomes(passed=6)
+    sidecar = next(project.path.glob("pack.hevval.thresholds.yaml"))
+    from_pytest = sidecar.read_text("utf-8")
+    sidecar.unlink()
+    code = cli.main(
+        [
+            "run",
+            "pack.hevval.yaml",
+            "--model-version=v1",
+            "--compare",
+            "--ratchet",
+            "--quiet",
+            "--no-history",
+        ]
+    )
+    assert code == 0
+    out = capsys.readouterr().out
+    from_cli = sidecar.read_text("utf-8")
+    strip = _without_run_time
+    assert strip(from_cli) == strip(from_pytest)
+    table = [line for line in out.splitlines() if "v0 → v1" in line or "Φ" in line]
+    assert table, out
+    pytest_lines = result.outlines
+    for line in table:
+        assert line in pytest_lines, line

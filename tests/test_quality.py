@@ -11,8 +11,8 @@ import pytest
 from pytest_hevval.data.quality import QualityLimits, assess
 from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import Channel, Record, SourceOptions
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import DataError, SpecError
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
 
 DATA = Path(__file__).parent / "data" / "i3"

@@ -28,7 +28,7 @@ from pytest_hevval.core.registry import (
     restore_registry,
 )
 from pytest_hevval.history import migrate_record
-from pytest_hevval.result import SpecResult
+from pytest_hevval.results.spec_result import SpecResult
 from tests.test_plugin import write_data
 
 pytest_plugins = ["pytester"]
@@ -267,7 +267,7 @@ OFF_BY_DEFAULT = Characteristic(
 
 
 def test_disabled_characteristic_is_scored_only_when_named_in_metrics(tmp_path: Path) -> None:
-    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.scoring.engine import evaluate_spec
     from pytest_hevval.spec.load import parse_spec_text
 
     register_characteristic(OFF_BY_DEFAULT)

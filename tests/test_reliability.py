@@ -28,15 +28,15 @@ import pytest
 import yaml
 
 import pytest_hevval
-from pytest_hevval import engine
 from pytest_hevval.core.characteristics import (
     CHARACTERISTICS,
     SignalCharacteristics,
     signal_characteristics,
 )
-from pytest_hevval.engine import evaluate_spec
 from pytest_hevval.errors import DataError, DegenerateSignalError, HevvalError, SpecError
 from pytest_hevval.history import HistoryError, HistoryStore, make_record
+from pytest_hevval.scoring import engine
+from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
 from pytest_hevval.spec.yaml_lines import load_yaml_with_lines
 

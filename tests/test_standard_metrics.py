@@ -31,6 +31,7 @@ from pytest_hevval.core.standard import (
     theil_u,
 )
 from pytest_hevval.errors import DegenerateSignalError
+from pytest_hevval.report.sentences import failure_lines
 from tests.strategies import signal_pairs
 from tests.test_plugin import write_data
 
@@ -71,7 +72,7 @@ def _iso_pairs() -> dict[str, tuple[np.ndarray, np.ndarray]]:
 @pytest.fixture(scope="module")
 def i3_pairs() -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Measured and modelled signals of the i3 motorway trip, as the example scores them."""
-    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.scoring.engine import evaluate_spec
     from pytest_hevval.spec.load import load_spec
 
     spec = load_spec(EXAMPLE / "specs" / "i3-A02-motorway-v2.hevval.yaml")
@@ -410,7 +411,7 @@ def test_spec_with_standard_metrics_end_to_end(pytester: pytest.Pytester, xdist:
 
 
 def test_a_standard_metric_below_its_threshold_fails_the_signal(tmp_path: Path) -> None:
-    from pytest_hevval.engine import evaluate_spec
+    from pytest_hevval.scoring.engine import evaluate_spec
     from pytest_hevval.spec.load import parse_spec_text
 
     write_data(tmp_path, fault="leaf")
@@ -419,4 +420,4 @@ def test_a_standard_metric_below_its_threshold_fails_the_signal(tmp_path: Path) 
     current = result.signal("P/I")
     assert [f.characteristic for f in current.failures] == ["theil"]
     assert current.components["theil"]["U_M"] > 0.5  # the injected fault is mostly an offset
-    assert "1−U Theil's U = " in "\n".join(current.failure_lines())
+    assert "1−U Theil's U = " in "\n".join(failure_lines(current))

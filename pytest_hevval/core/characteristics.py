@@ -25,6 +25,7 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
 from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
+from .sums import _coefficient, lambdas_from_sums, normalised_error, zero_lag_correlation
 
 __all__ = [
     "CHARACTERISTICS",
@@ -495,20 +496,6 @@ def _first_non_finite(arr: FloatArray) -> int:
     return int(bad[0]) if bad.size else -1
 
 
-def normalised_error(error: float, reference_range: float) -> float:
-    """λ = 1 − E / R clipped to [0, 1] (eqs. 8, 9, 10 and 12 of the paper).
-
-    ``error`` is E_MAE, E_RMS, ΔE or σ in the signal's units and ``reference_range`` is
-    R = y_ref,max − y_ref,min (or a declared range).
-    """
-    if not reference_range > 0:
-        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
-    return float(min(1.0, max(0.0, 1.0 - error / reference_range)))
-
-
-_normalised = normalised_error
-
-
 def signal_characteristics(
     reference: npt.ArrayLike,
     simulated: npt.ArrayLike,
@@ -615,16 +602,24 @@ def signal_characteristics(
             hint="declare a normalising range (reference_range) for this signal",
         )
 
-    mae = sums.abs_error / n / scale
-    rms = math.sqrt(sums.sq_error / n) / scale
-    # RMS ≥ MAE holds mathematically; rounding can break it by an ulp.
-    rms = max(rms, mae)
-    delta_e = rms - mae
-    error_std = math.sqrt(sums.error_m2 / (n - 1)) / scale
+    # λ1–λ6 and the errors, with the formulas every grouping shares (core.sums), on Python
+    # numbers; the errors come back in the signal's units.
+    found = lambdas_from_sums(
+        n=n,
+        abs_error=sums.abs_error,
+        sq_error=sums.sq_error,
+        error_m2=sums.error_m2,
+        ref_sq=sums.ref_sq,
+        sim_sq=sums.sim_sq,
+        cross=sums.cross,
+        sign_matches=sums.sign_matches,
+        reference_range=span,
+        correlation=correlation,
+        ref_sum=sums.ref_sum,
+        sim_sum=sums.sim_sum,
+        scale=scale,
+    )
     mean_error = sums.error_mean / scale
-
-    lag_correlation = _zero_lag_correlation(sums, correlation)
-    derivative_match = sums.sign_matches / n
 
     if max_lag_s is None:
         max_lag = max(1, n // 10)
@@ -664,22 +659,15 @@ def signal_characteristics(
             lag_ref, lag_sim, search.lag, sums, correlation, lag_scale, centred_peak, r_mean, s_mean
         )
 
-    lambdas = (
-        lag_correlation,
-        derivative_match,
-        _normalised(mae, span),
-        _normalised(rms, span),
-        _normalised(delta_e, span),
-        _normalised(error_std, span),
-    )
+    lambdas = tuple(found.lambdas[name] for name in FUSED_CHARACTERISTICS)
     return SignalCharacteristics(
-        lambdas=lambdas,
+        lambdas=lambdas,  # type: ignore[arg-type]
         lag_s=search.lag * float(dt),
         peak_correlation=peak_correlation,
-        mae=mae,
-        rms=rms,
-        delta_e=delta_e,
-        error_std=error_std,
+        mae=found.mae,
+        rms=found.rms,
+        delta_e=found.delta_e,
+        error_std=found.error_std,
         mean_error=mean_error,
         reference_range=span,
         n_samples=n,
@@ -690,30 +678,10 @@ def signal_characteristics(
 
 
 def _zero_lag_correlation(sums: _Sums, kind: CorrelationKind) -> float:
-    if kind == "pearson":
-        n = sums.n
-        cov = sums.cross - sums.ref_sum * sums.sim_sum / n
-        var_r = sums.ref_sq - sums.ref_sum**2 / n
-        var_s = sums.sim_sq - sums.sim_sum**2 / n
-        return _coefficient(cov, var_r, var_s)
-    return _coefficient(sums.cross, sums.ref_sq, sums.sim_sq)
-
-
-def _coefficient(cross: float, power_a: float, power_b: float) -> float:
-    """cross / √(power_a·power_b) clipped to [0, 1], with the degenerate cases defined.
-
-    Two signals with no power (all zero, or constant for Pearson) are the same shape: 1.
-    One with power against one without share nothing: 0.
-    """
-    tiny = 1e-300
-    a_empty = power_a <= tiny
-    b_empty = power_b <= tiny
-    if a_empty and b_empty:
-        return 1.0
-    if a_empty or b_empty:
-        return 0.0
-    value = cross / math.sqrt(power_a) / math.sqrt(power_b)
-    return float(min(1.0, max(0.0, value)))
+    """λ1 of the whole record (the peak correlation when the lag found is 0)."""
+    return zero_lag_correlation(
+        sums.n, sums.cross, sums.ref_sq, sums.sim_sq, sums.ref_sum, sums.sim_sum, kind
+    )
 
 
 def _correlation_at(
@@ -732,7 +700,7 @@ def _correlation_at(
     # Sums below are in the same (possibly rescaled) units as ``sums``.
     cross = dot_overlap(r, s, scale)
     if kind == "pearson":
-        m = r.shape[0]
+        m: int = r.shape[0]
         r_sum = float(np.sum(r, dtype=np.float64)) * scale
         s_sum = float(np.sum(s, dtype=np.float64)) * scale
         cov = cross - r_sum * s_sum / m
@@ -769,7 +737,7 @@ def _correlation_from_centred(
     s_off = sim[n - k :] if lag > 0 else sim[:k]
     r_edge = np.asarray(r_off, dtype=np.float64) * scale
     s_edge = np.asarray(s_off, dtype=np.float64) * scale
-    m = n - k
+    m: int = n - k
     mu_r = r_mean * scale
     mu_s = s_mean * scale
     r_sum = sums.ref_sum - float(r_edge.sum())

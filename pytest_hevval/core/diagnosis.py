@@ -21,20 +21,34 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy import fft as sfft
 from scipy import linalg as sla
-from scipy import signal as sps
 from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
 from .importance import MAX_TERMS, explained_sums, shapley_from_sums
 from .lag import search_lag
 from .local import concentration, fixed_windows, group_lambdas, segment_sums
+from .stats import (
+    RCOND,
+    HacFit,
+    Screen,
+    Whiteness,
+    ar_order,
+    block_means,
+    dominant_frequencies,
+    dot,
+    effective_samples,
+    hac_fit,
+    ljung_box,
+    orthonormal,
+    project_out,
+    screen,
+)
 
 __all__ = [
     "Candidate",
@@ -95,16 +109,9 @@ PREDICTED_CHARACTERISTICS: tuple[str, ...] = ("mae", "rms")
 #: Ljung-Box lags, in samples of the (possibly decimated) regression grid.
 LJUNG_BOX_LAGS: tuple[int, ...] = (10, 20)
 
-# Highest AR order tried by the pre-whitening filter (chosen by BIC).
-_MAX_AR_ORDER = 10
-# Andrews & Monahan (1992) bound the AR(1) coefficient of the scores so that the plug-in
-# bandwidth stays finite when pre-whitening leaves a near-unit root.
-_RHO_CAP = 0.97
 # A standardised candidate whose variance left after projecting out the ones already kept is
 # below this fraction is a linear combination of them (|multiple correlation| > 0.999 999 5).
 _COLLINEAR = 1e-6
-# Relative singular-value cut-off when orthonormalising design matrices.
-_RCOND = 1e-10
 _DEFAULT_MAX_LAG_S = 10.0
 _KINDS: tuple[str, ...] = ("declared", "channel", "derivative", "lag", "gain", "offset")
 #: The generic terms, which describe the simulated signal itself rather than name a cause.
@@ -116,7 +123,6 @@ _NAMING_TOLERANCE = 0.05
 # A member in the scored signal's own dimension names its group when it explains at least this
 # fraction of what the best member does.
 _DIMENSION_NAMING_SHARE = 0.5
-_N_PEAKS = 3
 
 
 @dataclass(frozen=True)
@@ -183,28 +189,6 @@ class CandidateFinding:
     significant: bool
     selected: bool
     rank: int
-
-
-@dataclass(frozen=True)
-class Whiteness:
-    """Ljung-Box portmanteau test of the remaining residual.
-
-    Attributes
-    ----------
-    lags:
-        The lags h at which Q(h) was evaluated, in samples of the regression grid.
-    statistic:
-        Q(h) at the lag giving the smallest p-value.
-    p_value:
-        That smallest p-value, Bonferroni-adjusted over ``lags``.
-    white:
-        ``p_value >= alpha``: no autocorrelation detected.
-    """
-
-    lags: tuple[int, ...]
-    statistic: float
-    p_value: float
-    white: bool
 
 
 @dataclass(frozen=True)
@@ -344,7 +328,6 @@ class Diagnosis:
     remaining: Whiteness
     dominant_frequencies_hz: tuple[float, ...]
     effective_samples: float
-    summary: str
     notes: tuple[str, ...] = ()
     effects: tuple[Effect, ...] = ()
     responses: tuple[Response, ...] = ()
@@ -352,6 +335,8 @@ class Diagnosis:
     lambdas: Mapping[str, float] = field(default_factory=dict)
     predicted: Mapping[str, float] = field(default_factory=dict)
     localisation: Localisation | None = None
+    #: The residual is zero: nothing to diagnose.
+    exact_match: bool = False
 
     @property
     def relevant(self) -> tuple[Effect, ...]:
@@ -368,400 +353,6 @@ class Diagnosis:
     def stand_ins(self) -> tuple[Effect, ...]:
         """Significant effects that a finding can stand in for on this record."""
         return tuple(e for e in self.effects if e.stands_in_for)
-
-    def as_dict(self) -> dict[str, Any]:
-        """JSON-safe mapping: tuples become lists, non-finite floats become ``None``."""
-        result = _json_safe(asdict(self))
-        assert isinstance(result, dict)
-        return result
-
-
-def _json_safe(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        number = float(value)
-        return number if math.isfinite(number) else None
-    return value
-
-
-# ---------------------------------------------------------------------------------------------
-# Statistics on the regression grid
-# ---------------------------------------------------------------------------------------------
-
-
-# Thread-parallel BLAS gains nothing on these memory-bound, thin products and, on a machine
-# whose cores are already busy, its spinning threads slow them down by an order of magnitude;
-# numpy's own einsum loops are single-threaded.
-
-
-def _dot(a: FloatArray, b: FloatArray) -> float:
-    return float(np.einsum("t,t->", a, b))
-
-
-def _project_out(rows: FloatArray, q: FloatArray) -> FloatArray:
-    """Each row minus its projection on the orthonormal columns of q."""
-    coef = np.einsum("jt,tk->jk", rows, q)
-    return np.asarray(rows - np.einsum("jk,tk->jt", coef, q), dtype=np.float64)
-
-
-def _block_means(x: FloatArray, factor: int) -> FloatArray:
-    if factor == 1:
-        return x
-    blocks = x.shape[0] // factor
-    means = x[: blocks * factor].reshape(blocks, factor).mean(axis=1)
-    return np.asarray(means, dtype=np.float64)
-
-
-def _lag_matrix(u: FloatArray, order: int) -> FloatArray:
-    """Columns u[t−1], …, u[t−order] for t = order … n−1."""
-    n = u.shape[0]
-    return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
-
-
-def _ar_order(u: FloatArray) -> int:
-    """AR order by BIC (Schwarz 1978), all orders fitted on the same sample.
-
-    One factorisation of the lag matrix gives every order's residual sum of squares, because
-    the AR(p) regressors are the first p lag columns.
-    """
-    n = u.shape[0]
-    top = min(_MAX_AR_ORDER, max(0, n // 10 - 1))
-    if top == 0:
-        return 0
-    y = u[top:]
-    lagged = _lag_matrix(u, top)
-    total = _dot(y, y)
-    if total <= 0.0:
-        return 0
-    # Cholesky of the lag Gram matrix is the R of a QR of the lag matrix: the forward solve
-    # gives the projections of y on the nested AR(1) … AR(top) regressor spaces.
-    gram = np.einsum("ti,tj->ij", lagged, lagged)
-    try:
-        chol = np.linalg.cholesky(gram + np.eye(top) * 1e-12 * np.trace(gram))
-    except np.linalg.LinAlgError:
-        return 0
-    proj = sla.solve_triangular(chol, np.einsum("ti,t->i", lagged, y), lower=True) ** 2
-    ssr = np.maximum(total - np.concatenate(([0.0], np.cumsum(proj))), total * 1e-15)
-    m = y.shape[0]
-    bic = m * np.log(ssr / m) + np.arange(top + 1) * math.log(m)
-    return int(np.argmin(bic))
-
-
-def _ar_fit(u: FloatArray, order: int) -> FloatArray:
-    """Least-squares AR(order) coefficients φ of u (no intercept: u has mean zero).
-
-    The persistence Σφ is biased low by about (1 + 3Σφ)/n (Kendall 1954, for AR(1)); that bias
-    makes tests anti-conservative near a unit root, so it is added back to φ₁, keeping
-    Σφ ≤ 1 − 1/n.
-    """
-    if order == 0 or u.shape[0] <= 2 * order + 2:
-        return np.zeros(0)
-    y = u[order:]
-    if _dot(y, y) == 0.0:
-        return np.zeros(0)
-    lagged = _lag_matrix(u, order)
-    gram = np.einsum("ti,tj->ij", lagged, lagged)
-    fitted, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", lagged, y), rcond=_RCOND)
-    phi = np.array(fitted, dtype=np.float64)
-    persistence = float(np.sum(phi))
-    if persistence > 0.0:
-        # Σφ = 1 would null the constant column of the whitened design; 1 − 1/n keeps the
-        # offset identified, with the huge variance a unit root implies.
-        m = y.shape[0]
-        corrected = min(persistence + (1.0 + 3.0 * persistence) / m, 1.0 - 1.0 / m)
-        phi[0] += corrected - persistence
-    return phi
-
-
-def _lag1(x: FloatArray) -> FloatArray:
-    """Lag-one autocorrelation of each column about its mean; 1 for a constant column."""
-    centred = x - x.mean(axis=0)
-    num = np.einsum("ij,ij->j", centred[1:], centred[:-1])
-    den = np.einsum("ij,ij->j", centred, centred)
-    scale = np.einsum("ij,ij->j", x, x)
-    constant = den <= 1e-24 * np.maximum(scale, 1e-300)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rho = np.where(constant, 1.0, num / np.where(constant, 1.0, den))
-    return np.asarray(np.clip(rho, -1.0, 1.0), dtype=np.float64)
-
-
-def _effective_df(n: int, k: int, phi: FloatArray, rho: FloatArray) -> npt.NDArray[np.int64]:
-    """Degrees of freedom n (1 − φρ)/(1 + φρ) − k per regressor (Bretherton et al. 1999).
-
-    φ is the persistence of the noise (Σφ of its AR model) and ρ the lag-one autocorrelation
-    of the regressor: a slowly varying regressor in persistent noise offers few independent
-    comparisons however many samples there are, and the estimated filter is least accurate
-    exactly there.
-    """
-    persistence = float(np.clip(np.sum(phi), 0.0, 1.0)) if phi.shape[0] else 0.0
-    prod = np.clip(persistence * rho, 0.0, 1.0)
-    eff = n * (1.0 - prod) / (1.0 + prod) - k
-    return np.asarray(np.clip(np.floor(eff), 1, max(n - k, 1)), dtype=np.int64)
-
-
-def _whiten(x: FloatArray, phi: FloatArray) -> FloatArray:
-    """x_t − Σ φ_i x_{t−i} for t = p … n−1, on a vector or on every column of a matrix."""
-    p = phi.shape[0]
-    if p == 0:
-        return x
-    n = x.shape[0]
-    out = np.array(x[p:], dtype=np.float64, copy=True)
-    for i in range(1, p + 1):
-        out -= phi[i - 1] * x[p - i : n - i]
-    return out
-
-
-def _orthonormal(x: FloatArray) -> FloatArray:
-    """Orthonormal basis of the column space of x, dropping numerically null directions."""
-    if x.shape[1] == 0:
-        return x
-    u, s, _ = np.linalg.svd(x, full_matrices=False)
-    keep = s > _RCOND * max(float(s[0]), 1e-300)
-    return np.asarray(u[:, keep], dtype=np.float64)
-
-
-def _autocovariances(scores: FloatArray, max_lag: int) -> FloatArray:
-    """Σ_t s_t s_{t−l} for l = 0 … max_lag, per column, by FFT."""
-    n = scores.shape[0]
-    size = sfft.next_fast_len(2 * n)
-    spectrum = np.fft.rfft(scores, n=size, axis=0)
-    acov = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)
-    return np.asarray(acov[: max_lag + 1], dtype=np.float64)
-
-
-def _andrews_bandwidth(scores: FloatArray) -> float:
-    """Andrews (1991) AR(1) plug-in bandwidth S_T for the Bartlett kernel.
-
-    α(1) = Σ_a 4ρ_a²σ_a⁴ / ((1−ρ_a)⁶(1+ρ_a)²) / Σ_a σ_a⁴ / (1−ρ_a)⁴ and
-    S_T = 1.1447 (α(1) T)^{1/3}, with ρ_a, σ_a² the AR(1) coefficient and innovation variance
-    of score column a.
-    """
-    n = scores.shape[0]
-    lagged = scores[:-1]
-    lead = scores[1:]
-    denom = np.einsum("ij,ij->j", lagged, lagged)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rho = np.einsum("ij,ij->j", lagged, lead) / denom
-    rho = np.clip(np.nan_to_num(rho, nan=0.0), -_RHO_CAP, _RHO_CAP)
-    innovations = lead - lagged * rho
-    sigma2 = np.einsum("ij,ij->j", innovations, innovations) / max(n - 1, 1)
-    num = float(np.sum(4 * rho**2 * sigma2**2 / ((1 - rho) ** 6 * (1 + rho) ** 2)))
-    den = float(np.sum(sigma2**2 / (1 - rho) ** 4))
-    if den <= 0.0:
-        return 1.0
-    return float(1.1447 * (num / den * n) ** (1.0 / 3.0))
-
-
-def _bartlett_weights(bandwidth: float, max_lag: int) -> FloatArray:
-    lags = np.arange(max_lag + 1, dtype=np.float64)
-    return np.asarray(np.clip(1.0 - lags / max(bandwidth, 1.0), 0.0, None), dtype=np.float64)
-
-
-def _long_run_sums(scores: FloatArray) -> FloatArray:
-    """Newey-West long-run variance Σ_t s_t² + 2 Σ_l w_l Σ_t s_t s_{t−l}, per column.
-
-    Each column gets its own Andrews bandwidth.
-    """
-    n = scores.shape[0]
-    bandwidths = np.array(
-        [_andrews_bandwidth(scores[:, [j]]) for j in range(scores.shape[1])], dtype=np.float64
-    )
-    max_lag = int(min(n - 1, math.ceil(float(np.max(bandwidths, initial=1.0)))))
-    if max_lag <= 32:
-        acov = np.stack(
-            [np.einsum("ij,ij->j", scores[lag:], scores[: n - lag]) for lag in range(max_lag + 1)]
-        )
-    else:
-        acov = _autocovariances(scores, max_lag)
-    lags = np.arange(max_lag + 1, dtype=np.float64)[:, None]
-    weights = np.clip(1.0 - lags / np.maximum(bandwidths, 1.0)[None, :], 0.0, None)
-    weights[0] = 0.5
-    return np.asarray(np.maximum(2.0 * np.sum(weights * acov, axis=0), 0.0), dtype=np.float64)
-
-
-@dataclass(frozen=True)
-class _Fit:
-    """Pre-whitened OLS with a HAC covariance."""
-
-    beta: FloatArray
-    cov: FloatArray
-    df: npt.NDArray[np.int64]
-    phi: FloatArray
-
-
-def _hac_fit(y: FloatArray, x: FloatArray, order: int) -> _Fit:
-    """Feasible GLS: OLS, AR(order) of its residual, filter y and X, OLS, Newey-West sandwich.
-
-    cov(β) = (X*ᵀX*)⁺ S (X*ᵀX*)⁺ · n/(n−k), S = Γ₀ + Σ_l w_l (Γ_l + Γ_lᵀ), Γ_l = Σ_t g_t g_{t−l}ᵀ,
-    g_t = x*_t e*_t.
-    """
-    beta0, *_ = np.linalg.lstsq(x, y, rcond=None)
-    phi = _ar_fit(y - np.einsum("tk,k->t", x, beta0), order)
-    ys = _whiten(y, phi)
-    xs = _whiten(x, phi)
-    beta, *_ = np.linalg.lstsq(xs, ys, rcond=_RCOND)
-    e = ys - np.einsum("tk,k->t", xs, beta)
-    g = xs * e[:, None]
-    n, k = xs.shape
-    bandwidth = _andrews_bandwidth(g)
-    max_lag = int(min(n - 1, math.ceil(bandwidth)))
-    weights = _bartlett_weights(bandwidth, max_lag)
-    s = np.einsum("ti,tj->ij", g, g)
-    for lag in range(1, max_lag + 1):
-        if weights[lag] <= 0.0:
-            break
-        gamma = np.einsum("ti,tj->ij", g[lag:], g[:-lag])
-        s += weights[lag] * (gamma + gamma.T)
-    bread = np.linalg.pinv(np.einsum("ti,tj->ij", xs, xs), rcond=_RCOND)
-    cov = bread @ s @ bread * (n / max(n - k, 1))
-    return _Fit(
-        beta=np.asarray(beta, dtype=np.float64),
-        cov=np.asarray(cov, dtype=np.float64),
-        df=_effective_df(y.shape[0], k, phi, _lag1(x)),
-        phi=phi,
-    )
-
-
-@dataclass(frozen=True)
-class _Screen:
-    """Per-candidate coefficient, standard error and p-value when added to a base model."""
-
-    beta: FloatArray
-    se: FloatArray
-    p: FloatArray
-    df: npt.NDArray[np.int64]
-
-
-def _residualise(v: FloatArray, x: FloatArray) -> FloatArray:
-    """v minus its least-squares projection on the few columns of x (normal equations).
-
-    The design here is a constant and at most a handful of standardised candidates, so the
-    k × k system is well conditioned and far cheaper than a factorisation of the n × k matrix.
-    """
-    gram = np.einsum("ti,tj->ij", x, x)
-    coef, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", x, v), rcond=_RCOND)
-    return np.asarray(v - np.einsum("ti,i->t", x, coef), dtype=np.float64)
-
-
-def _screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> _Screen:
-    """Test every row of z_rows (one candidate each), one at a time, added to the base design.
-
-    For candidate j: the OLS residual of y on [base, z_j] gives the AR(order) filter φ_j
-    (Cochrane-Orcutt), y, base and z_j are whitened with it and, by Frisch-Waugh-Lovell, the
-    coefficient is β_j = z̃ᵀỹ / z̃ᵀz̃ with ỹ, z̃ the whitened series with the whitened base
-    projected out; its HAC variance is LRV(z̃ e) / (z̃ᵀz̃)².
-    """
-    m, n = z_rows.shape
-    k = base.shape[1] + 1
-    q0 = _orthonormal(base)
-    y_perp = _project_out(y[None, :], q0)[0]
-    z_perp = _project_out(z_rows, q0)
-    zz0 = np.einsum("ji,ji->j", z_perp, z_perp)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        b0 = np.where(zz0 > 0, np.einsum("jt,t->j", z_perp, y_perp) / zz0, 0.0)
-    beta = np.zeros(m)
-    se = np.full(m, np.inf)
-    df = np.ones(m, dtype=np.int64)
-    rho = _lag1(z_rows.T)
-    for j in range(m):
-        if zz0[j] <= 0.0:
-            continue
-        phi = _ar_fit(y_perp - b0[j] * z_perp[j], order)
-        ys = _whiten(y, phi)
-        zs = _whiten(z_rows[j], phi)
-        y_t = _residualise(ys, _whiten(base, phi))
-        z_t = _residualise(zs, _whiten(base, phi))
-        zz = _dot(z_t, z_t)
-        if zz <= 0.0:
-            continue
-        beta[j] = _dot(z_t, y_t) / zz
-        e = y_t - beta[j] * z_t
-        nw = ys.shape[0]
-        lrv = float(_long_run_sums((z_t * e)[:, None])[0])
-        se[j] = math.sqrt(lrv * nw / max(nw - k, 1)) / zz
-        df[j] = int(_effective_df(n, k, phi, rho[j : j + 1])[0])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.abs(beta) / se
-    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
-    p = np.where(np.isfinite(se), p, 1.0)
-    return _Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
-
-
-def _effective_samples(u: FloatArray, order: int) -> float:
-    """Samples of white noise that would estimate the mean of u as precisely.
-
-    The AR(p) long-run variance gives n γ₀ (1 − Σφ)² / σ²; for a nearly deterministic u (a
-    drift, a slow wave) both (1 − Σφ) and σ² vanish and the ratio means nothing, so the
-    AR(1) value n (1 − ρ₁)/(1 + ρ₁) (Bartlett 1935) bounds it from above.
-    """
-    n = u.shape[0]
-    centred = u - float(np.mean(u))
-    gamma0 = _dot(centred, centred)
-    if gamma0 <= 0.0:
-        return float(n)
-    rho1 = min(max(_dot(centred[1:], centred[:-1]) / gamma0, -0.999999), 0.999999)
-    eff = n * (1.0 - rho1) / (1.0 + rho1)
-    phi = _ar_fit(centred, order)
-    if phi.shape[0]:
-        residual = _whiten(centred, phi)
-        sigma2 = _dot(residual, residual) / residual.shape[0]
-        if sigma2 > 0.0:
-            eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
-    return float(min(max(eff, 1.0), n))
-
-
-def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> Whiteness:
-    """Ljung-Box (1978) portmanteau test of no autocorrelation up to each lag h.
-
-    Notes
-    -----
-    Q(h) = n (n + 2) Σ_{k=1}^{h} ρ̂_k² / (n − k), which is χ²(h) under white noise. The reported
-    statistic is the Q(h) with the smallest p-value; that p-value is multiplied by the number
-    of lags (Bonferroni), so that testing several lags does not inflate the error rate.
-    """
-    u = np.asarray(x, dtype=np.float64)
-    n = u.shape[0]
-    use = tuple(sorted({int(h) for h in lags if 1 <= int(h) < n}))
-    if not use:
-        return Whiteness(lags=(), statistic=0.0, p_value=1.0, white=True)
-    centred = u - float(np.mean(u))
-    acov = _autocovariances(centred[:, None], max(use))[:, 0]
-    if acov[0] <= 0.0:
-        return Whiteness(lags=use, statistic=0.0, p_value=1.0, white=True)
-    rho = acov[1:] / acov[0]
-    terms = rho**2 / (n - np.arange(1, max(use) + 1))
-    best_q, best_p = 0.0, 1.0
-    for h in use:
-        q = float(n * (n + 2) * np.sum(terms[:h]))
-        p = float(stats.chi2.sf(q, h))
-        if p < best_p or h == use[0]:
-            best_q, best_p = q, p
-    adjusted = min(1.0, best_p * len(use))
-    return Whiteness(lags=use, statistic=best_q, p_value=adjusted, white=adjusted >= alpha)
-
-
-def _dominant_frequencies(u: FloatArray, dt: float) -> tuple[float, ...]:
-    """The largest local maxima (DC excluded) of the Welch (1967) spectrum, in Hz."""
-    n = u.shape[0]
-    if n < 8 or not np.any(u != u[0]):
-        return ()
-    freqs, power = sps.welch(u, fs=1.0 / dt, nperseg=min(n, 4096))
-    if power.shape[0] < 3 or float(np.max(power)) <= 0.0:
-        return ()
-    padded = np.concatenate(([-np.inf], power[1:], [-np.inf]))
-    peaks, _ = sps.find_peaks(padded)
-    peaks = peaks[(peaks >= 1) & (peaks < power.shape[0])]
-    if peaks.shape[0] == 0:
-        return ()
-    top = peaks[np.argsort(power[peaks])[::-1][:_N_PEAKS]]
-    return tuple(float(freqs[i]) for i in top)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -799,10 +390,6 @@ class _Series:
     members: tuple[str, ...] = ()
 
 
-def _format_pct(fraction: float) -> str:
-    return f"{100.0 * fraction:.0f} %"
-
-
 def _interval(beta: float, se: float, df: int, alpha: float) -> tuple[float, float]:
     half = float(stats.t.ppf(1.0 - alpha / 2.0, df)) * se
     return (beta - half, beta + half)
@@ -813,7 +400,7 @@ def _full_rate_r2(r: FloatArray, columns: Sequence[FloatArray]) -> float:
     if not columns:
         return 0.0
     rc = r - float(np.mean(r))
-    total = _dot(rc, rc)
+    total = dot(rc, rc)
     if total <= 0.0:
         return 0.0
     centred = [c - float(np.mean(c)) for c in columns]
@@ -821,10 +408,10 @@ def _full_rate_r2(r: FloatArray, columns: Sequence[FloatArray]) -> float:
     gram = np.empty((k, k))
     cross = np.empty(k)
     for i in range(k):
-        cross[i] = _dot(centred[i], rc)
+        cross[i] = dot(centred[i], rc)
         for j in range(i, k):
-            gram[i, j] = gram[j, i] = _dot(centred[i], centred[j])
-    coef = np.linalg.pinv(gram, rcond=_RCOND) @ cross
+            gram[i, j] = gram[j, i] = dot(centred[i], centred[j])
+    coef = np.linalg.pinv(gram, rcond=RCOND) @ cross
     return float(min(max(float(coef @ cross) / total, 0.0), 1.0))
 
 
@@ -843,7 +430,7 @@ def _exact_match(n: int) -> Diagnosis:
         remaining=Whiteness(lags=(), statistic=0.0, p_value=1.0, white=True),
         dominant_frequencies_hz=(),
         effective_samples=float(n),
-        summary="the model matches the reference exactly: the residual is zero",
+        exact_match=True,
     )
 
 
@@ -969,8 +556,8 @@ def diagnose_residual(
     r = (ref - sim)[window]
     n_w = r.shape[0]
     factor = max(1, math.ceil(n_w / max_samples))
-    r_g = _block_means(r, factor)
-    order = _ar_order(r_g - float(np.mean(r_g)))
+    r_g = block_means(r, factor)
+    order = ar_order(r_g - float(np.mean(r_g)))
 
     head = _gain_and_offset(ref, sim, lag, order, alpha, max_samples, sim_varies)
     if not sim_varies:
@@ -987,7 +574,7 @@ def diagnose_residual(
     m = len(kept)
     # Alone: every candidate with an intercept.
     ones = np.ones((r_g.shape[0], 1))
-    alone = _screen(r_g, ones, z_rows, order) if m else None
+    alone = screen(r_g, ones, z_rows, order) if m else None
     scales = [_Scale(factor, r_g, z_rows, order)]
     slow = _slow_scale(r, kept, dt, factor) if m else None
     if slow is not None:
@@ -1002,7 +589,7 @@ def diagnose_residual(
         r, r_g, kept, selected, holm_levels, base, order, alpha
     )
     findings.extend(_alone_findings(r, kept, selected, alone, alpha, weights))
-    mean_sq = _dot(r, r) / n_w
+    mean_sq = dot(r, r) / n_w
     offset_finding = CandidateFinding(
         name=_free_name("offset", names),
         kind="offset",
@@ -1018,8 +605,8 @@ def diagnose_residual(
     ordered = _rank([*findings, offset_finding])
 
     remaining = ljung_box(remaining_grid, LJUNG_BOX_LAGS, alpha=alpha)
-    frequencies = _dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
-    effective = _effective_samples(r_g, order)
+    frequencies = dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
+    effective = effective_samples(r_g, order)
     if factor > 1:
         notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
 
@@ -1055,9 +642,6 @@ def diagnose_residual(
         for f in ordered
     ]
     timing_significant = _timing_significant(ordered, lag, dt)
-    summary = _summary(
-        effects, echoes, lag_s=lag_s, timing_significant=timing_significant, remaining=remaining
-    )
     return Diagnosis(
         lag_s=lag_s,
         gain=head.gain,
@@ -1072,7 +656,6 @@ def diagnose_residual(
         remaining=remaining,
         dominant_frequencies_hz=frequencies,
         effective_samples=effective,
-        summary=summary,
         notes=tuple(notes),
         effects=effects,
         responses=echoes,
@@ -1194,15 +777,15 @@ def _gain_and_offset(
     else:
         ref_a, sim_a = ref[: n + lag], sim[-lag:]
     factor_a = max(1, math.ceil(ref_a.shape[0] / max_samples))
-    ref_g = _block_means(ref_a, factor_a)
-    sim_g = _block_means(sim_a, factor_a)
+    ref_g = block_means(ref_a, factor_a)
+    sim_g = block_means(sim_a, factor_a)
     ref_range = float(np.ptp(ref)) or float(np.max(np.abs(ref))) or 1.0
     design = (
         np.column_stack([np.ones_like(sim_g), sim_g])
         if sim_varies
         else np.ones((sim_g.shape[0], 1))
     )
-    head = _hac_fit(ref_g if sim_varies else ref_g - sim_g, design, order)
+    head = hac_fit(ref_g if sim_varies else ref_g - sim_g, design, order)
     head_se = np.sqrt(np.maximum(np.diag(head.cov), 0.0))
     offset = float(head.beta[0])
     offset_interval = _interval(offset, float(head_se[0]), int(head.df[0]), alpha)
@@ -1252,7 +835,7 @@ def _candidate_series(
         auto.append((_free_name("gain", names), "gain", sim[window]))
     series: list[_Series] = []
     for label, kind, values in [*auto, *((a, b, v[window]) for a, b, v in user)]:
-        grid = _block_means(values, factor)
+        grid = block_means(values, factor)
         unit = units.get(label, 1.0)
         series.append(
             _Series(label, kind, values, grid, float(np.mean(grid)), float(np.std(grid)), unit)
@@ -1333,7 +916,7 @@ def _grouped(
     ng = r_g.shape[0]
     rows = np.stack([(series[i].grid - series[i].mean) / series[i].std for i in pool])
     rc = r_g - float(np.mean(r_g))
-    sst = _dot(rc, rc)
+    sst = dot(rc, rc)
     score = (rows @ rc) ** 2 / (ng * sst) if sst > 0.0 else np.zeros(len(pool))
     corr = np.abs(rows @ rows.T) / ng
     order = [int(a) for a in np.argsort(-score, kind="stable")]
@@ -1396,13 +979,13 @@ def _slow_scale(r: FloatArray, kept: Sequence[_Series], dt: float, factor: int) 
     slow = max(1, round(SLOW_SCALE_S / dt))
     if slow <= factor or r.shape[0] // slow < MIN_SLOW_BLOCKS:
         return None
-    r_s = _block_means(r, slow)
+    r_s = block_means(r, slow)
     rows = np.empty((len(kept), r_s.shape[0]))
     for i, s in enumerate(kept):
-        block = _block_means(s.full, slow)
+        block = block_means(s.full, slow)
         spread = float(np.std(block))
         rows[i] = (block - float(np.mean(block))) / spread if spread > 0.0 else 0.0
-    return _Scale(slow, r_s, rows, _ar_order(r_s - float(np.mean(r_s))))
+    return _Scale(slow, r_s, rows, ar_order(r_s - float(np.mean(r_s))))
 
 
 def _holm_weights(kinds: Sequence[str]) -> FloatArray:
@@ -1432,17 +1015,17 @@ def _forward_selection(
     ng = r_g.shape[0]
     m = fine.z_rows.shape[0]
     rc_g = r_g - float(np.mean(r_g))
-    sst_g = _dot(rc_g, rc_g)
+    sst_g = dot(rc_g, rc_g)
     selected: list[int] = []
     holm_levels: list[float] = []
     remaining_idx = list(range(m))
     bases = [np.ones((sc.r.shape[0], 1)) for sc in scales]
     while remaining_idx and len(selected) < max_selected and sst_g > 0.0:
         levels = alpha * weights / float(np.sum(weights[remaining_idx]))
-        q = _orthonormal(bases[0])
-        resid = _project_out(r_g[None, :], q)[0]
+        q = orthonormal(bases[0])
+        resid = project_out(r_g[None, :], q)[0]
         z_rem = fine.z_rows[remaining_idx]
-        z_perp = _project_out(z_rem, q)
+        z_perp = project_out(z_rem, q)
         zz = np.einsum("jt,jt->j", z_perp, z_perp)
         with np.errstate(invalid="ignore", divide="ignore"):
             gain_r2 = np.where(
@@ -1455,7 +1038,7 @@ def _forward_selection(
         chosen_rows = [remaining_idx[int(j)] for j in material]
         p = np.min(
             [
-                _screen(sc.r, base, sc.z_rows[chosen_rows], sc.order).p
+                screen(sc.r, base, sc.z_rows[chosen_rows], sc.order).p
                 for sc, base in zip(scales, bases, strict=True)
             ],
             axis=0,
@@ -1497,7 +1080,7 @@ def _joint_model(
     if not selected:
         return findings, explained, remaining_full, remaining_grid
     # Intervals of selected candidates use the noise model of the final joint model.
-    joint = _hac_fit(r_g, base, order)
+    joint = hac_fit(r_g, base, order)
     se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
     for pos, idx in enumerate(selected):
         s = kept[idx]
@@ -1529,7 +1112,7 @@ def _alone_findings(
     r: FloatArray,
     kept: list[_Series],
     selected: list[int],
-    alone: _Screen | None,
+    alone: Screen | None,
     alpha: float,
     weights: FloatArray,
 ) -> list[CandidateFinding]:
@@ -1636,80 +1219,8 @@ def _p_value(beta: float, se: float, df: int) -> float:
     return float(2.0 * stats.t.sf(abs(beta) / se, df))
 
 
-#: The summary names at most this many effects or channels per list; the full output and the
-#: JSON hold the rest.
-SUMMARY_NAMES = 3
-
-
-def _names_text(names: Sequence[str]) -> str:
-    """At most :data:`SUMMARY_NAMES` names, the rest counted; trailing spaces shown as such,
-    so that two logged columns that differ only by one stay apart."""
-    shown = [repr(n) if n != n.strip() else n for n in names[:SUMMARY_NAMES]]
-    rest = len(names) - len(shown)
-    return ", ".join(shown) + (f" and {rest} more" if rest > 0 else "")
-
-
 def _is_minor(e: Effect) -> bool:
     return e.significant and not e.relevant and not e.stands_in_for
-
-
-def _effect_phrase(e: Effect) -> str:
-    """One effect, with the numbers every output shows for it: its share of the residual and
-    its coefficient with its interval."""
-    share = f"explains {_format_pct(e.share)} of the residual"
-    low, high = e.interval
-    if e.kind == "gain":
-        return (
-            f"gain error {100.0 * e.coefficient:+.1f} % [{100.0 * low:+.1f}, {100.0 * high:+.1f}]"
-            f" {share}"
-        )
-    if e.kind == "offset":
-        return f"offset {e.coefficient:+.3g} [{low:.3g}, {high:.3g}] {share}"
-    if e.kind == "lag":
-        direction = "lags" if e.coefficient > 0 else "leads"
-        # The interval of the delay in the direction named: "leads by 0.9 s [0.69, 1.1]".
-        if e.coefficient < 0:
-            low, high = -high, -low
-        return (
-            f"the simulation {direction} the reference by {abs(e.coefficient):.2g} s "
-            f"[{low:.3g}, {high:.3g}], which {share}"
-        )
-    group = f" (one effect with {_names_text(e.members)})" if e.members else ""
-    return f"{e.name}{group} {share} (coef {e.coefficient:+.3g} [{low:.3g}, {high:.3g}])"
-
-
-def _summary(
-    effects: Sequence[Effect],
-    echoes: Sequence[Response],
-    *,
-    lag_s: float,
-    timing_significant: bool,
-    remaining: Whiteness,
-) -> str:
-    parts = [_effect_phrase(e) for e in effects if e.relevant]
-    if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
-        direction = "lags" if lag_s < 0 else "leads"
-        parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
-    stand_ins = [e for e in effects if e.stands_in_for]
-    minor = [e.name for e in effects if _is_minor(e)]
-    if not parts:
-        text = "no significant effect found: the residual is indistinguishable from noise"
-        if minor or stand_ins:
-            text = "no relevant effect found"
-        elif not remaining.white:
-            text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
-        parts.append(text)
-    elif not remaining.white:
-        parts.append("the remaining residual is still autocorrelated")
-    for e in stand_ins:
-        parts.append(f"{e.name} could stand in for {_names_text(e.stands_in_for)} on this record")
-    if minor:
-        parts.append("minor: " + _names_text(minor))
-    # Only the echoes that would have been offered as an effect are worth a word here.
-    loud = [e.name for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
-    if loud:
-        parts.append(f"moves with the measured signal, probably a consequence: {_names_text(loud)}")
-    return "; ".join(parts)
 
 
 # -- causes, responses and effects ----------------------------------------------------------------
@@ -1748,9 +1259,7 @@ def _split_responses(
         measured = _full_rate_r2(values, [ref, running])
         added = _full_rate_r2(values, [ref, running, residual]) - measured
         # The direction of the peak |correlation|: a voltage falls as the power rises.
-        sign = (
-            1.0 if _dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
-        )
+        sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
         lead = search_lag(ref, sign * values, lead_window).lag if ref_varies else 0
         declared = name in declared_responses
         follows = (
@@ -1787,11 +1296,11 @@ def _lambdas(ref: FloatArray, sim: FloatArray, reference_range: float) -> dict[s
 
 def _removed_share(r: FloatArray, term: FloatArray) -> float:
     """Share of Σr² removed by subtracting ``term``: 1 − Σ(r − term)² / Σr²."""
-    total = _dot(r, r)
+    total = dot(r, r)
     if total <= 0.0:
         return 0.0
     left = r - term
-    return 1.0 - _dot(left, left) / total
+    return 1.0 - dot(left, left) / total
 
 
 def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]:
@@ -1806,7 +1315,7 @@ def _credited_centres(r_g: FloatArray, chosen: Sequence[_Series]) -> list[float]
     """
     columns = [(s.grid - s.mean) / s.std for s in chosen]
     design = np.column_stack([np.ones_like(r_g), *columns])
-    beta, *_ = np.linalg.lstsq(design, r_g, rcond=_RCOND)
+    beta, *_ = np.linalg.lstsq(design, r_g, rcond=RCOND)
     left = float(np.mean(r_g))
     centres: list[float] = []
     for pos, s in enumerate(chosen, start=1):
@@ -1825,7 +1334,7 @@ def _least_squares_fit(r: FloatArray, columns: Sequence[FloatArray]) -> FloatArr
     """The least-squares combination of ``columns`` closest to r (no intercept of its own)."""
     design = np.column_stack(columns)
     gram = np.einsum("ti,tj->ij", design, design)
-    coef = np.linalg.pinv(gram, rcond=_RCOND) @ np.einsum("ti,t->i", design, r)
+    coef = np.linalg.pinv(gram, rcond=RCOND) @ np.einsum("ti,t->i", design, r)
     return np.asarray(design @ coef, dtype=np.float64)
 
 
@@ -1904,16 +1413,16 @@ def _effects(
     chosen = [kept[i] for i in selected]
     fine = scales[0]
     centres = _credited_centres(fine.r, chosen)
-    fits: list[_Fit] = []
+    fits: list[HacFit] = []
     for sc in scales:
         columns = [
-            (s.grid if sc is fine else _block_means(s.full, sc.factor)) - c
+            (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
             for s, c in zip(chosen, centres, strict=True)
         ]
         design = np.column_stack(
             [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
         )
-        fits.append(_hac_fit(sc.r, design, sc.order))
+        fits.append(hac_fit(sc.r, design, sc.order))
     errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
     raw: list[_Term] = []
     for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
@@ -1974,12 +1483,12 @@ def _effects(
     cross = np.empty(k)
     for a, term in enumerate(terms):
         for b in range(a, len(terms)):
-            gram[a, b] = gram[b, a] = _dot(term, terms[b])
+            gram[a, b] = gram[b, a] = dot(term, terms[b])
         gram[a, -1] = gram[-1, a] = float(np.sum(term))
-        cross[a] = _dot(term, r)
+        cross[a] = dot(term, r)
     gram[-1, -1] = float(n)
     cross[-1] = float(np.sum(r))
-    total = _dot(r, r)
+    total = dot(r, r)
     together = explained_sums(gram, cross)
     shares = [float(x) for x in shapley_from_sums(together, total)]
     swaps = _interchangeable(together, min_share * total)

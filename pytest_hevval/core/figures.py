@@ -98,7 +98,7 @@ def figure_data(
     The derivative match uses the same convention as λ2: sign(y[i+1] − y[i−1]) with the first
     and last derivative set to 0, so the count-weighted mean of ``derivative.match`` is λ2.
     """
-    from ..core.lag import correlation_curve
+    from .lag import correlation_curve
 
     ref = np.asarray(reference, dtype=np.float64)
     sim = np.asarray(simulated, dtype=np.float64)

@@ -32,6 +32,7 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .characteristics import power_of_two_scale
 from .registry import FUSED_CHARACTERISTICS
+from .sums import MIN_GROUP_SAMPLES, from_shifted_sums, lambdas_from_sums
 
 __all__ = [
     "HOT_FACTOR",
@@ -60,8 +61,6 @@ IntArray = npt.NDArray[np.int64]
 
 #: The characteristics that have a meaning over part of a record: λ1–λ6, in paper order.
 LOCAL_CHARACTERISTICS: tuple[str, ...] = FUSED_CHARACTERISTICS
-#: Fewer samples than this in a window or cell: its characteristics are NaN (not judged).
-MIN_GROUP_SAMPLES = 3
 #: A window whose mean squared error exceeds this many times the record's is "hot": the
 #: error concentrates there.
 HOT_FACTOR = 2.0
@@ -149,54 +148,25 @@ def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> 
     )
 
 
-def _coefficient(cross: FloatArray, power_a: FloatArray, power_b: FloatArray) -> FloatArray:
-    """The core's λ1 coefficient, elementwise: 1 for two powerless groups, 0 for one."""
-    tiny = 1e-300
-    a_empty = power_a <= tiny
-    b_empty = power_b <= tiny
-    with np.errstate(invalid="ignore", divide="ignore"):
-        value = (
-            cross
-            / np.sqrt(np.where(a_empty, 1.0, power_a))
-            / np.sqrt(np.where(b_empty, 1.0, power_b))
-        )
-    value = np.clip(value, 0.0, 1.0)
-    value = np.where(a_empty | b_empty, 0.0, value)
-    return np.where(a_empty & b_empty, 1.0, value)
-
-
 def group_lambdas(
     sums: GroupSums, reference_range: float, correlation: CorrelationKind = "xcorr"
 ) -> dict[str, FloatArray]:
-    """λ1–λ6 per group, keyed by characteristic name; NaN for groups too small to judge."""
-    if not (math.isfinite(reference_range) and reference_range > 0):
-        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
-    n = sums.n.astype(np.float64)
-    small = sums.n < MIN_GROUP_SAMPLES
-    safe_n = np.where(small, 1.0, n)
-    mae = sums.abs_error / safe_n
-    rms = np.maximum(np.sqrt(sums.sq_error / safe_n), mae)
-    error_std = np.sqrt(sums.error_m2 / np.where(small, 1.0, n - 1.0))
-    if correlation == "pearson":
-        cov = sums.cross - sums.ref_sum * sums.sim_sum / safe_n
-        var_r = sums.ref_sq - sums.ref_sum**2 / safe_n
-        var_s = sums.sim_sq - sums.sim_sum**2 / safe_n
-        lag_correlation = _coefficient(cov, var_r, var_s)
-    else:
-        lag_correlation = _coefficient(sums.cross, sums.ref_sq, sums.sim_sq)
-
-    def normalised(error: FloatArray) -> FloatArray:
-        return np.clip(1.0 - error / reference_range, 0.0, 1.0)
-
-    values = {
-        "lag_correlation": lag_correlation,
-        "derivative_match": sums.sign_matches / safe_n,
-        "mae": normalised(mae),
-        "rms": normalised(rms),
-        "anomaly": normalised(rms - mae),
-        "error_std": normalised(error_std),
-    }
-    return {name: np.where(small, np.nan, value) for name, value in values.items()}
+    """λ1–λ6 per group, keyed by characteristic name; NaN for groups too small to judge
+    (fewer than :data:`MIN_GROUP_SAMPLES` samples)."""
+    return lambdas_from_sums(
+        n=sums.n,
+        abs_error=sums.abs_error,
+        sq_error=sums.sq_error,
+        error_m2=sums.error_m2,
+        ref_sq=sums.ref_sq,
+        sim_sq=sums.sim_sq,
+        cross=sums.cross,
+        sign_matches=sums.sign_matches,
+        reference_range=reference_range,
+        correlation=correlation,
+        ref_sum=sums.ref_sum,
+        sim_sum=sums.sim_sum,
+    ).lambdas
 
 
 # -- how a record is cut into groups -------------------------------------------------------
@@ -272,16 +242,6 @@ class Concentration:
     spans_s: tuple[tuple[float, float], ...]
     #: Number of hot windows.
     windows: int
-
-    def sentence(self) -> str:
-        if not self.windows:
-            return f"the error is spread out: no window above {HOT_FACTOR:g}× the mean square"
-        spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in self.spans_s[:3])
-        more = f" (+{len(self.spans_s) - 3} more)" if len(self.spans_s) > 3 else ""
-        return (
-            f"{self.error_share:.0%} of the squared error lies in {self.time_share:.0%} of the "
-            f"time, in {self.windows} window{'s' if self.windows != 1 else ''}: {spans}{more}"
-        )
 
 
 def concentration(
@@ -424,17 +384,14 @@ class SumTable:
     def sums(self) -> GroupSums:
         table = self.values
         n = np.rint(table[:, 0]).astype(np.int64)
-        nf = n.astype(np.float64)
         shifted_sum, shifted_sq = table[:, 1], table[:, 2]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)
-        k = self.shift
+        sq_error, error_m2 = from_shifted_sums(n, shifted_sum, shifted_sq, self.shift)
         return GroupSums(
             n=n,
-            error_sum=shifted_sum + nf * k,
+            error_sum=shifted_sum + n.astype(np.float64) * self.shift,
             abs_error=table[:, 3],
-            sq_error=np.maximum(shifted_sq + 2.0 * k * shifted_sum + nf * k * k, 0.0),
-            error_m2=np.maximum(error_m2, 0.0),
+            sq_error=sq_error,
+            error_m2=error_m2,
             ref_sum=table[:, 4],
             sim_sum=table[:, 5],
             ref_sq=table[:, 6],

@@ -17,7 +17,7 @@ import importlib
 import math
 import re
 import threading
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
@@ -38,7 +38,6 @@ __all__ = [
     "describe",
     "get_characteristic",
     "is_registered",
-    "keyed_lambdas",
     "load_entry_points",
     "order_names",
     "register_characteristic",
@@ -423,29 +422,6 @@ def compute_characteristic(
             "normalise it, and return a finite value for every signal",
         )
     return CharacteristicValue(number, components)
-
-
-def keyed_lambdas(raw: Any) -> dict[str, float | None]:
-    """λ values keyed by name from plain data: a mapping, or a list in paper order (old files)."""
-    if isinstance(raw, Mapping):
-        return {str(k): _optional(v) for k, v in raw.items()}
-    if isinstance(raw, Sequence) and not isinstance(raw, str):
-        if len(raw) > len(PAPER_CHARACTERISTICS):
-            raise ValueError(
-                f"expected at most {len(PAPER_CHARACTERISTICS)} values (got {len(raw)})"
-            )
-        return {name: _optional(v) for name, v in zip(PAPER_CHARACTERISTICS, raw, strict=False)}
-    return {}
-
-
-def _optional(value: Any) -> float | None:
-    if value is None or isinstance(value, bool):
-        return None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return None
-    return number if math.isfinite(number) else None
 
 
 def load_entry_points() -> None:

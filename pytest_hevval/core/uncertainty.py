@@ -45,14 +45,8 @@ import numpy.typing as npt
 from ..errors import DegenerateSignalError
 from . import kernel
 from .characteristics import power_of_two_scale
-from .local import (
-    MIN_GROUP_SAMPLES,
-    SHIFT_SAMPLES,
-    SUM_COLUMNS,
-    SumTable,
-    _coefficient,
-    labelled_table,
-)
+from .local import SHIFT_SAMPLES, SUM_COLUMNS, SumTable, labelled_table
+from .sums import from_shifted_sums, lambdas_from_sums
 
 __all__ = [
     "CONFIDENCE",
@@ -472,52 +466,32 @@ def sums_lambdas(
     correlation: str = "xcorr",
 ) -> dict[str, FloatArray]:
     """λ1–λ6 from columns of additive sums, elementwise: :meth:`SumTable.sums` and
-    :func:`~pytest_hevval.core.local.group_lambdas` in one, for many signals at once.
+    :func:`~pytest_hevval.core.local.group_lambdas` in one, for many signals at once (both
+    through :func:`~pytest_hevval.core.sums.from_shifted_sums` and
+    :func:`~pytest_hevval.core.sums.lambdas_from_sums`).
 
     ``columns`` maps the names of ``SUM_COLUMNS`` to arrays of one shape (``ref_sum`` and
     ``sim_sum`` only for ``pearson``), e.g. (replicates, signals); ``shift`` and
-    ``reference_range`` broadcast against them (one per signal). The same operations in the
-    same order as those two, so the values are theirs.
+    ``reference_range`` broadcast against them (one per signal). The same functions as those
+    two, so the values are theirs.
     """
-    ranges = np.asarray(reference_range, dtype=np.float64)
-    if not bool(np.all(np.isfinite(ranges) & (ranges > 0))):
-        raise DegenerateSignalError(f"the normalising range must be > 0 (got {reference_range!r})")
-    k = shift
     n = np.rint(columns["n"]).astype(np.int64)
-    nf = n.astype(np.float64)
-    shifted_sum, shifted_sq = columns["shifted_sum"], columns["shifted_sq"]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)
-    error_m2 = np.maximum(error_m2, 0.0)
-    sq_error = np.maximum(shifted_sq + 2.0 * k * shifted_sum + nf * k * k, 0.0)
-    small = n < MIN_GROUP_SAMPLES
-    safe_n = np.where(small, 1.0, nf)
-    mae = columns["abs_error"] / safe_n
-    rms = np.maximum(np.sqrt(sq_error / safe_n), mae)
-    error_std = np.sqrt(error_m2 / np.where(small, 1.0, nf - 1.0))
-    if correlation == "pearson":
-        ref_sum, sim_sum = columns["ref_sum"], columns["sim_sum"]
-        cov = columns["cross"] - ref_sum * sim_sum / safe_n
-        var_r = columns["ref_sq"] - ref_sum**2 / safe_n
-        var_s = columns["sim_sq"] - sim_sum**2 / safe_n
-        lag_correlation = _coefficient(cov, var_r, var_s)
-    else:
-        lag_correlation = _coefficient(columns["cross"], columns["ref_sq"], columns["sim_sq"])
-
-    def normalised(error: FloatArray) -> FloatArray:
-        return np.clip(1.0 - error / ranges, 0.0, 1.0)
-
-    values = {
-        "lag_correlation": lag_correlation,
-        "derivative_match": np.rint(columns["sign_matches"]).astype(np.int64) / safe_n,
-        "mae": normalised(mae),
-        "rms": normalised(rms),
-        "anomaly": normalised(rms - mae),
-        "error_std": normalised(error_std),
-    }
-    if not small.any():
-        return values
-    return {name: np.where(small, np.nan, value) for name, value in values.items()}
+    sq_error, error_m2 = from_shifted_sums(n, columns["shifted_sum"], columns["shifted_sq"], shift)
+    pearson = correlation == "pearson"
+    return lambdas_from_sums(
+        n=n,
+        abs_error=columns["abs_error"],
+        sq_error=sq_error,
+        error_m2=error_m2,
+        ref_sq=columns["ref_sq"],
+        sim_sq=columns["sim_sq"],
+        cross=columns["cross"],
+        sign_matches=np.rint(columns["sign_matches"]).astype(np.int64),
+        reference_range=reference_range,
+        correlation=correlation,
+        ref_sum=columns["ref_sum"] if pearson else None,
+        sim_sum=columns["sim_sum"] if pearson else None,
+    ).lambdas
 
 
 def _needed_columns(correlation: str) -> tuple[int, ...]:

@@ -6,7 +6,6 @@ time. See ``docs/history.md`` for the record format and the option names.
 """
 
 from ._base import ERROR_FIELDS, HistoryError
-from .cli import compare_main, history_main, load_side
 from .compare import (
     RULE_FIELDS,
     BaselineDecision,
@@ -23,6 +22,7 @@ from .compare import (
     regressions,
     specs_of,
 )
+from .load import load_side, report_problems
 from .ratchet import (
     DEFAULT_MARGIN,
     RatchetOutcome,
@@ -82,14 +82,12 @@ __all__ = [
     "StoredRecord",
     "Thresholds",
     "compare",
-    "compare_main",
     "comparison_json",
     "comparison_markdown",
     "comparison_table",
     "default_tool_versions",
     "detect_steps",
     "format_utc",
-    "history_main",
     "history_table",
     "is_ci",
     "load_side",
@@ -108,6 +106,7 @@ __all__ = [
     "regressions",
     "render_history_table",
     "render_sidecar",
+    "report_problems",
     "resolve_model_version",
     "sidecar_path",
     "slugify",

@@ -30,13 +30,11 @@ from ..core.registry import (
     PAPER_CHARACTERISTICS,
     describe,
     is_registered,
-    keyed_lambdas,
     order_names,
 )
-from ..defaults import REGION_MIN_SAMPLES
-from ..digest import identity
+from ..defaults import REGION_MIN_SAMPLES, split_key
 from ..errors import did_you_mean
-from ..spec.model import split_key
+from ..results.codec import data_identity, json_number, keyed_lambdas
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
@@ -271,7 +269,7 @@ def local_changes(
             if label not in old_rows:
                 continue
             n_old, rms_old = old_rows[label]
-            a, b = _number(rms), _number(rms_old)
+            a, b = json_number(rms), json_number(rms_old)
             if a is None or b is None or min(int(n), int(n_old)) < LOCAL_MIN_SAMPLES:
                 continue
             change = GroupChange(grouping, str(label), b, a)
@@ -590,13 +588,6 @@ def _unique_names(specs: Mapping[str, Mapping[str, Any]], keys: Sequence[str]) -
     return {name: key for name, key in found.items() if name not in shared}
 
 
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    number = float(value)
-    return number if math.isfinite(number) else None
-
-
 def _flag(value: Any) -> bool | None:
     return value if isinstance(value, bool) else None
 
@@ -643,7 +634,7 @@ def _bounds(raw: Any) -> tuple[float, float] | None:
     """(low, high) of a recorded interval, or None where it is missing or not numeric."""
     if not isinstance(raw, Mapping):
         return None
-    low, high = _number(raw.get("low")), _number(raw.get("high"))
+    low, high = json_number(raw.get("low")), json_number(raw.get("high"))
     return None if low is None or high is None else (low, high)
 
 
@@ -679,7 +670,9 @@ def _compare_spec(
                     _intervals_of(sig_after),
                 ),
                 errors=tuple(
-                    FieldDelta(name, _number(sig_before.get(name)), _number(sig_after.get(name)))
+                    FieldDelta(
+                        name, json_number(sig_before.get(name)), json_number(sig_after.get(name))
+                    )
                     for name in ERROR_FIELDS
                 ),
                 passed_before=_flag(sig_before.get("passed")),
@@ -693,8 +686,8 @@ def _compare_spec(
         name=str(after.get("name", key)),
         phi=FieldDelta(
             "phi",
-            _number(before.get("phi")),
-            _number(after.get("phi")),
+            json_number(before.get("phi")),
+            json_number(after.get("phi")),
             _bounds(before.get("phi_interval")),
             _bounds(after.get("phi_interval")),
         ),
@@ -721,8 +714,8 @@ def _data_changed(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[
         new = sides_after.get(side)
         if not isinstance(old, Mapping) or not isinstance(new, Mapping):
             continue
-        old_id = identity(old)
-        new_id = identity(new)
+        old_id = data_identity(old)
+        new_id = data_identity(new)
         same_hash = old_id is not None and new_id is not None and old_id[0] == new_id[0]
         if same_hash and old_id != new_id:
             changed.append(side)

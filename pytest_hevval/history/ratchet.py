@@ -23,8 +23,9 @@ from typing import Any
 
 import yaml
 
-from ..core.registry import keyed_lambdas, order_names
+from ..core.registry import order_names
 from ..files import write_atomic
+from ..results.codec import json_number, keyed_lambdas
 from ..spec.sidecar import Thresholds, load_sidecar, sidecar_path
 from ._base import HistoryError
 from .records import format_utc
@@ -247,12 +248,6 @@ def _effective(
         if isinstance(sig, Mapping) and sig.get("path") == path:
             own = sig.get("thresholds")
             if isinstance(own, Mapping):
-                values.append(_number(own.get(name)))
+                values.append(json_number(own.get(name)))
     present = [v for v in values if v is not None]
     return max(present) if present else None
-
-
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None

@@ -23,9 +23,9 @@ from pathlib import Path
 from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
-from ..localise import compact_local
-from ..result import ERROR_KEYS
-from ._base import HistoryError, json_safe, optional_float
+from ..results.codec import checked_number, plain_json
+from ..results.spec_result import ERROR_KEYS
+from ._base import HistoryError
 
 __all__ = [
     "MODEL_VERSION_ENV",
@@ -382,11 +382,15 @@ def _normalise_spec(spec: Any, where: str, file: str | None) -> dict[str, Any]:
         )
     out: dict[str, Any] = {key: spec[key] for key in _SPEC_KEYS if key in spec}
     out["name"] = name
-    out["phi"] = optional_float(spec.get("phi"), where=f"{where}.phi", file=file)
+    out["phi"] = checked_number(
+        spec.get("phi"), where=f"{where}.phi", file=file, error=HistoryError
+    )
     if "weights" in spec:
         out["weights"] = _lambda_mapping(spec["weights"], f"{where}.weights", file)
     if "min_phi" in spec:
-        out["min_phi"] = optional_float(spec["min_phi"], where=f"{where}.min_phi", file=file)
+        out["min_phi"] = checked_number(
+            spec["min_phi"], where=f"{where}.min_phi", file=file, error=HistoryError
+        )
     signals = spec.get("signals", [])
     if not isinstance(signals, list):
         raise HistoryError(
@@ -398,7 +402,7 @@ def _normalise_spec(spec: Any, where: str, file: str | None) -> dict[str, Any]:
     out["signals"] = [
         _normalise_signal(sig, f"{where}.signals[{j}]", file) for j, sig in enumerate(signals)
     ]
-    normalised: dict[str, Any] = json_safe(out, where=where)
+    normalised: dict[str, Any] = plain_json(out, strict=True, where=where, error=HistoryError)
     return normalised
 
 
@@ -413,12 +417,14 @@ def _normalise_signal(signal: Any, where: str, file: str | None) -> dict[str, An
     out: dict[str, Any] = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
     out["lambdas"] = _lambda_mapping(signal.get("lambdas"), f"{where}.lambdas", file)
     if isinstance(signal.get("local"), Mapping):
-        out["local"] = compact_local(signal["local"])
+        out["local"] = _compact_local(signal["local"])
     if isinstance(signal.get("local_failures"), list):
         out["local_failures"] = list(signal["local_failures"])
     for key in ("lag_s", "peak_correlation", "mae", "rms", "delta_e", "error_std", "mean_error"):
         if key in signal:
-            out[key] = optional_float(signal[key], where=f"{where}.{key}", file=file)
+            out[key] = checked_number(
+                signal[key], where=f"{where}.{key}", file=file, error=HistoryError
+            )
     return out
 
 
@@ -433,4 +439,23 @@ def _lambda_mapping(raw: Any, where: str, file: str | None) -> dict[str, float |
             key=where,
             hint=_HINT_CORRUPT if file else "pass the engine's spec result dicts",
         )
-    return {name: optional_float(raw[name], where=f"{where}.{name}", file=file) for name in raw}
+    return {
+        name: checked_number(raw[name], where=f"{where}.{name}", file=file, error=HistoryError)
+        for name in raw
+    }
+
+
+def _compact_local(local: Mapping[str, Any]) -> dict[str, Any]:
+    """A signal's ``local`` as history keeps it: every table, but windows without their λ.
+
+    Per-window λ of every signal of every run would make a record as large as the report;
+    the windows' samples, RMS and mean error are enough to say which stretches a model change
+    improved or broke.
+    """
+    out = {key: value for key, value in local.items() if key != "windows"}
+    windows = local.get("windows")
+    if isinstance(windows, Mapping):
+        out["windows"] = {
+            key: windows[key] for key in ("labels", "n", "rms", "mean_error") if key in windows
+        }
+    return out

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..core.registry import describe, keyed_lambdas, order_names
+from ..core.registry import describe, order_names
+from ..results.codec import json_number, keyed_lambdas
 from ._base import HistoryError, spec_key
 
 __all__ = [
@@ -77,12 +78,6 @@ class HistoryRow:
         }
 
 
-def _number(value: Any) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    return float(value) if math.isfinite(value) else None
-
-
 def _matches_spec(spec: Mapping[str, Any], pattern: str | None) -> bool:
     if pattern is None:
         return True
@@ -119,7 +114,7 @@ def history_table(
                 spec=spec_key(spec_result),
                 spec_name=str(spec_result.get("name", spec_key(spec_result))),
                 signal=None,
-                phi=_number(spec_result.get("phi")),
+                phi=json_number(spec_result.get("phi")),
                 lambdas={},
                 lag_s=None,
                 passed=passed if isinstance(passed, bool) else None,
@@ -137,8 +132,8 @@ def history_table(
                     replace(
                         spec_row,
                         signal=str(sig["path"]),
-                        lambdas={k: _number(v) for k, v in keyed_lambdas(lambdas).items()},
-                        lag_s=_number(sig.get("lag_s")),
+                        lambdas={k: json_number(v) for k, v in keyed_lambdas(lambdas).items()},
+                        lag_s=json_number(sig.get("lag_s")),
                         passed=passed if isinstance(passed, bool) else None,
                         intervals={
                             **spec_row.intervals,
@@ -153,7 +148,7 @@ def _recorded_intervals(raw: Any) -> dict[str, tuple[float, float]]:
     out: dict[str, tuple[float, float]] = {}
     for name, bounds in (raw or {}).items() if isinstance(raw, Mapping) else ():
         if isinstance(bounds, Mapping):
-            low, high = _number(bounds.get("low")), _number(bounds.get("high"))
+            low, high = json_number(bounds.get("low")), json_number(bounds.get("high"))
             if low is not None and high is not None:
                 out[str(name)] = (low, high)
     return out

@@ -17,8 +17,9 @@ from typing import Any
 from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
-from ..localise import LocalFailure
+from ..results.local import LocalFailure
 from . import local_svg, model, plots, svg
+from .sentences import local_failure_text
 from .text import campaigns_of
 
 __all__ = ["render_html"]
@@ -113,7 +114,7 @@ def _local_view(signal: Mapping[str, Any]) -> dict[str, Any]:
 
 def _local_failure_sentence(failure: Mapping[str, Any]) -> str:
     parsed = LocalFailure.from_dict(failure)
-    return parsed.sentence(describe(parsed.characteristic).title)
+    return local_failure_text(parsed, describe(parsed.characteristic).title)
 
 
 def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:

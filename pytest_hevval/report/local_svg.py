@@ -11,17 +11,12 @@ from html import escape
 from typing import Any
 
 from ..core.registry import describe, order_names
+from ..results.codec import number_or_nan
 
 __all__ = ["coverage_svg", "heatmap_svg", "timeline_svg"]
 
 _LOW, _MID, _HIGH = (215, 48, 31), (254, 224, 139), (26, 152, 80)
 _UNJUDGED = "#e5e5e5"
-
-
-def _number(value: object) -> float:
-    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-        return float(value)
-    return math.nan
 
 
 def _mix(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> str:
@@ -70,7 +65,7 @@ def timeline_svg(signal: Mapping[str, Any]) -> str | None:
     ]
     labels = windows.get("labels", [])
     for i, name in enumerate(names):
-        values = [_number(v) for v in lambdas[name]]
+        values = [number_or_nan(v) for v in lambdas[name]]
         low = _low(values, thresholds.get(name))
         y = top + i * row
         title = escape(describe(name).title)
@@ -141,7 +136,7 @@ def _grid_svg(
         for k, edge in enumerate(xs):
             parts.append(
                 f'<text x="{left + k * cell_w - 1}" y="{top + rows * cell_h + 12}" '
-                f'text-anchor="middle" class="hv-note">{_number(edge):.4g}</text>'
+                f'text-anchor="middle" class="hv-note">{number_or_nan(edge):.4g}</text>'
             )
         parts.append(
             f'<text x="{left + columns * cell_w / 2}" y="{top + rows * cell_h + 30}" '
@@ -151,7 +146,7 @@ def _grid_svg(
         for k, edge in enumerate(edges[1]):
             parts.append(
                 f'<text x="{left - 4}" y="{top + (rows - k) * cell_h + 3}" text-anchor="end" '
-                f'class="hv-note">{_number(edge):.4g}</text>'
+                f'class="hv-note">{number_or_nan(edge):.4g}</text>'
             )
         parts.append(
             f'<text x="12" y="{top + rows * cell_h / 2}" '
@@ -173,7 +168,7 @@ def heatmap_svg(
     counts = [int(c) for c in region.get("counts", [])]
     labels = [str(v) for v in region.get("labels", [])]
     minimum = int(region.get("min_samples", 1))
-    numbers = [_number(v) for v in values]
+    numbers = [number_or_nan(v) for v in values]
     if len(numbers) != len(counts):
         return None
     judged = [v if c >= minimum else math.nan for v, c in zip(numbers, counts, strict=True)]

@@ -8,14 +8,15 @@ Pure Python on plain dicts: no numpy, no I/O.
 from __future__ import annotations
 
 import math
-import numbers
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, TypeGuard, cast
+from typing import Any, Literal, cast
 
 from ..core.characteristics import CHARACTERISTICS
-from ..core.registry import describe, keyed_lambdas, order_names, registered_characteristics
-from ..measurement import ErrorCheck, failure_sentence
+from ..core.registry import describe, order_names, registered_characteristics
+from ..results.codec import is_finite_number, keyed_lambdas
+from ..results.measurement import ErrorCheck
+from .sentences import failure_sentence
 
 __all__ = [
     "CHARACTERISTICS",
@@ -79,17 +80,6 @@ def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
 
 #: "within": missed within the measurement uncertainty, and passing by the spec's choice.
 Status = Literal["pass", "fail", "ungated", "within"]
-
-
-def is_finite_number(value: object) -> TypeGuard[float]:
-    """A real, finite number (numpy scalars included, booleans not)."""
-    if isinstance(value, float):
-        return math.isfinite(value)
-    return (
-        isinstance(value, numbers.Real)
-        and not isinstance(value, bool)
-        and math.isfinite(float(value))
-    )
 
 
 def items(value: object) -> list[Any]:

@@ -7,19 +7,18 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path, PurePath
 from typing import Any
 
 from .. import __version__
-from ..spec.model import split_key
+from ..defaults import split_key
+from ..results.codec import plain_json
 from . import model
 
 __all__ = [
     "REPORT_SCHEMA_VERSION",
     "github_annotations",
-    "json_safe",
     "render_json",
     "render_markdown",
 ]
@@ -29,25 +28,6 @@ REPORT_SCHEMA_VERSION = 1
 
 # A step summary or PR comment should stay readable; the full list is in the HTML/JSON.
 _MARKDOWN_SIGNALS = 15
-
-
-def json_safe(value: Any) -> Any:
-    """``value`` as plain JSON data: NaN/inf become ``null``, numpy scalars Python numbers."""
-    if isinstance(value, Mapping):
-        return {str(k): json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(v) for v in value]
-    if value is None or isinstance(value, (bool, str, int)):
-        return value
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, PurePath):
-        return value.as_posix()
-    # numpy arrays and scalars: tolist() gives plain Python numbers (or nested lists).
-    tolist = getattr(value, "tolist", None)
-    if callable(tolist):
-        return json_safe(tolist())
-    return str(value)
 
 
 def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -94,7 +74,7 @@ def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
         # need the hook. Walking tens of MB of figure data in Python would take many seconds.
         text = json.dumps(payload, default=_json_default, **options)
     except ValueError:  # NaN or inf somewhere: clean the whole tree
-        text = json.dumps(json_safe(payload), **options)
+        text = json.dumps(plain_json(payload), **options)
     return text + "\n"
 
 
@@ -102,7 +82,7 @@ def campaigns_of(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, An
     """The campaign verdicts, when any result is one recording of a campaign."""
     if not any(spec.get("recording") for spec in spec_results):
         return []
-    from ..campaign import campaign_payloads
+    from ..results.campaign import campaign_payloads
 
     return campaign_payloads(spec_results)
 
@@ -154,7 +134,7 @@ def _percent(value: object) -> str:
 
 
 def _json_default(value: Any) -> Any:
-    cleaned = json_safe(value)
+    cleaned = plain_json(value)
     if isinstance(cleaned, str) and not isinstance(value, (str, PurePath)):
         raise TypeError(f"not JSON serialisable: {type(value).__name__}")
     return cleaned

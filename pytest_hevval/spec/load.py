@@ -17,6 +17,7 @@ from typing import Any, TypeVar, cast
 
 import yaml
 
+from ..core.measurement import MeasurementUncertainty
 from ..core.registry import (
     LAMBDA_ALIASES,
     is_registered,
@@ -34,7 +35,6 @@ from ..defaults import (
     WITHIN_UNCERTAINTY,
 )
 from ..errors import ExpressionError, SpecError, did_you_mean
-from ..measurement import MeasurementUncertainty
 from .expressions import Expression, parse_signal
 from .model import (
     ROLES,

@@ -7,11 +7,11 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from ..core.measurement import MeasurementUncertainty, WithinUncertainty
 from ..core.registry import Characteristic, is_registered, select_characteristics
 from ..data.quality import QualityLimits
 from ..data.record import SourceOptions
-from ..defaults import WITHIN_UNCERTAINTY
-from ..measurement import MeasurementUncertainty, WithinUncertainty
+from ..defaults import RECORDING_SEPARATOR, WITHIN_UNCERTAINTY, split_key
 from .expressions import Expression
 
 __all__ = [
@@ -40,14 +40,6 @@ NanPolicy = Literal["raise", "omit"]
 #: Calibration recordings fitted the model, so they never count toward a campaign's gate.
 Role = Literal["calibration", "validation"]
 ROLES: tuple[Role, ...] = ("validation", "calibration")
-#: Between a campaign spec's path and a recording id in a result's key and on the command line.
-RECORDING_SEPARATOR = "::"
-
-
-def split_key(key: str) -> tuple[str, str | None]:
-    """(spec path, recording id or None) of a key such as ``specs/i3.hevval.yaml::TripB03``."""
-    path, separator, recording = key.partition(RECORDING_SEPARATOR)
-    return path, (recording if separator else None)
 
 
 @dataclass(frozen=True)

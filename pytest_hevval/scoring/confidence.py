@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.tree import ScoredNode, emergent_replicates, global_metric_arrays, iter_nodes
-from .core.uncertainty import (
+from ..core.tree import ScoredNode, emergent_replicates, global_metric_arrays, iter_nodes
+from ..core.uncertainty import (
     SHARED_BLOCK_FACTOR,
     BlockSums,
     Interval,

@@ -15,10 +15,9 @@ from __future__ import annotations
 import hashlib
 import importlib
 import os
-from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["DEFAULT_HASH", "HASH_CHOICES", "file_digest", "identity"]
+__all__ = ["DEFAULT_HASH", "HASH_CHOICES", "file_digest"]
 
 #: What ``--hevval-hash`` accepts: ``fast`` (xxh3_128, else sampled) or ``sha256``.
 HASH_CHOICES = ("fast", "sha256")
@@ -73,15 +72,3 @@ def file_digest(path: str, algorithm: str = DEFAULT_HASH) -> dict[str, str]:
     if xxhash is not None:
         return {"hash": "xxh3_128", "digest": _whole(path, xxhash.xxh3_128())}
     return {"hash": "sampled-blake2b", "digest": _sampled(path)}
-
-
-def identity(entry: Mapping[str, Any]) -> tuple[str, str] | None:
-    """(algorithm, digest) of a record's data entry, old (``sha256`` only) or new; None when
-    the entry has no digest (a callable model, or an unreadable file)."""
-    digest = entry.get("digest")
-    if isinstance(digest, str) and digest:
-        return str(entry.get("hash", "sha256")), digest
-    old = entry.get("sha256")
-    if isinstance(old, str) and old:
-        return "sha256", old
-    return None

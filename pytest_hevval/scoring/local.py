@@ -18,27 +18,21 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .core.local import (
+from ..core.local import (
     LOCAL_CHARACTERISTICS,
-    MIN_GROUP_SAMPLES,
     PHASES,
-    CorrelationKind,
-    GroupSums,
     concentration,
     driving_phases,
-    group_lambdas,
     labelled_table,
     region_grid,
 )
-from .core.tree import global_metric_arrays
-from .spec.model import LocalGate, SignalSpec, Spec
+from ..core.tree import global_metric_arrays
+from ..results.codec import json_number
+from ..results.local import GroupTable, LocalFailure, LocalResult, concentration_sentence
+from ..spec.model import LocalGate, SignalSpec, Spec
 
 __all__ = [
-    "GroupTable",
     "Labels",
-    "LocalFailure",
-    "LocalResult",
-    "compact_local",
     "label_samples",
     "local_failures",
     "local_phi",
@@ -53,184 +47,6 @@ BoolArray = npt.NDArray[np.bool_]
 #: A gated window takes a condition's thresholds when the condition holds for more than this
 #: share of its samples.
 CONDITION_MAJORITY = 0.5
-#: The failure message names at most this many windows or cells, worst first.
-NAMED_GROUPS = 3
-
-
-def _json_float(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
-
-
-def _float(value: float | None) -> float:
-    return math.nan if value is None else float(value)
-
-
-@dataclass(frozen=True)
-class GroupTable:
-    """λ1–λ6 and the physical error of a set of groups (windows, phases, conditions, cells)."""
-
-    labels: tuple[str, ...]
-    n: tuple[int, ...]
-    lambdas: Mapping[str, tuple[float, ...]]
-    #: Share of the record's squared error that lies in each group.
-    error_share: tuple[float, ...]
-    #: RMS and mean error (reference − simulated) per group, in the signal's unit.
-    rms: tuple[float, ...]
-    mean_error: tuple[float, ...]
-
-    @classmethod
-    def from_sums(
-        cls,
-        labels: Sequence[str],
-        sums: GroupSums,
-        reference_range: float,
-        correlation: str,
-        total_sq: float,
-        scale: float = 1.0,
-    ) -> GroupTable:
-        """``sums`` of samples times ``scale`` (see :class:`~pytest_hevval.core.local.SumTable`);
-        ``reference_range`` and the errors kept are in the signal's unit."""
-        kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
-        lambdas = group_lambdas(sums, reference_range * scale, kind)
-        n = sums.n.astype(np.float64)
-        judged = sums.n >= MIN_GROUP_SAMPLES
-        safe = np.maximum(n, 1.0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            rms = np.where(judged, np.sqrt(sums.sq_error / safe) / scale, np.nan)
-            mean = np.where(judged, sums.error_sum / safe / scale, np.nan)
-        share = sums.sq_error / total_sq if total_sq > 0 else np.zeros_like(n)
-        return cls(
-            labels=tuple(labels),
-            n=tuple(int(v) for v in sums.n),
-            lambdas={name: tuple(float(v) for v in lambdas[name]) for name in lambdas},
-            error_share=tuple(float(v) for v in share),
-            rms=tuple(float(v) for v in rms),
-            mean_error=tuple(float(v) for v in mean),
-        )
-
-    def judged(self, index: int, min_samples: int = MIN_GROUP_SAMPLES) -> bool:
-        return self.n[index] >= max(min_samples, MIN_GROUP_SAMPLES)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "labels": list(self.labels),
-            "n": list(self.n),
-            "lambdas": {k: [_json_float(v) for v in vs] for k, vs in self.lambdas.items()},
-            "error_share": [_json_float(v) for v in self.error_share],
-            "rms": [_json_float(v) for v in self.rms],
-            "mean_error": [_json_float(v) for v in self.mean_error],
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> GroupTable:
-        return cls(
-            labels=tuple(data["labels"]),
-            n=tuple(int(v) for v in data["n"]),
-            lambdas={k: tuple(_float(v) for v in vs) for k, vs in data["lambdas"].items()},
-            error_share=tuple(_float(v) for v in data["error_share"]),
-            rms=tuple(_float(v) for v in data["rms"]),
-            mean_error=tuple(_float(v) for v in data["mean_error"]),
-        )
-
-
-@dataclass(frozen=True)
-class LocalResult:
-    """One signal over windows, phases, conditions and region cells."""
-
-    windows: GroupTable
-    #: (start, stop) of every window in seconds on the record's clock.
-    spans_s: tuple[tuple[float, float], ...]
-    concentration: Mapping[str, Any]
-    phases: GroupTable | None = None
-    #: Per condition: the groups "holds" and "rest".
-    conditions: Mapping[str, GroupTable] = field(default_factory=dict)
-    regions: GroupTable | None = None
-
-    def worst_windows(self, count: int = NAMED_GROUPS) -> list[int]:
-        """Indices of the windows holding the most squared error, worst first."""
-        order = sorted(range(len(self.windows.n)), key=lambda k: -self.windows.error_share[k])
-        return [k for k in order[:count] if self.windows.error_share[k] > 0]
-
-    def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {
-            "windows": {**self.windows.to_dict(), "spans_s": [list(s) for s in self.spans_s]},
-            "concentration": dict(self.concentration),
-        }
-        if self.phases is not None:
-            out["phases"] = self.phases.to_dict()
-        if self.conditions:
-            out["conditions"] = {k: v.to_dict() for k, v in self.conditions.items()}
-        if self.regions is not None:
-            out["regions"] = self.regions.to_dict()
-        return out
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> LocalResult:
-        windows = data["windows"]
-        return cls(
-            windows=GroupTable.from_dict(windows),
-            spans_s=tuple((float(a), float(b)) for a, b in windows["spans_s"]),
-            concentration=dict(data.get("concentration", {})),
-            phases=GroupTable.from_dict(data["phases"]) if data.get("phases") else None,
-            conditions={
-                k: GroupTable.from_dict(v) for k, v in dict(data.get("conditions") or {}).items()
-            },
-            regions=GroupTable.from_dict(data["regions"]) if data.get("regions") else None,
-        )
-
-
-@dataclass(frozen=True)
-class LocalFailure:
-    """A window or cell gate missed: which characteristic, where, and by how much."""
-
-    scope: str  # "windows" or "regions"
-    characteristic: str
-    #: The worst value among the groups that missed, and its threshold.
-    value: float
-    threshold: float
-    #: Labels of the groups that missed, worst first.
-    where: tuple[str, ...]
-    passed: int
-    judged: int
-    required_share: float
-
-    def sentence(self, title: str) -> str:
-        noun = "windows" if self.scope == "windows" else "cells"
-        named = ", ".join(self.where[:NAMED_GROUPS])
-        more = (
-            f" (+{len(self.where) - NAMED_GROUPS} more)" if len(self.where) > NAMED_GROUPS else ""
-        )
-        need = "every one" if self.required_share >= 1.0 else f"{self.required_share:.0%} needed"
-        return (
-            f"{title} ≥ {self.threshold:.4g} missed in {len(self.where)} of {self.judged} "
-            f"{noun} ({self.passed}/{self.judged} pass, {need}): worst {self.value:.4f}; "
-            f"{named}{more}"
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "scope": self.scope,
-            "characteristic": self.characteristic,
-            "value": self.value,
-            "threshold": self.threshold,
-            "where": list(self.where),
-            "passed": self.passed,
-            "judged": self.judged,
-            "required_share": self.required_share,
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> LocalFailure:
-        return cls(
-            scope=str(data["scope"]),
-            characteristic=str(data["characteristic"]),
-            value=float(data["value"]),
-            threshold=float(data["threshold"]),
-            where=tuple(data.get("where", ())),
-            passed=int(data["passed"]),
-            judged=int(data["judged"]),
-            required_share=float(data["required_share"]),
-        )
 
 
 # -- labelling the samples, once per spec ----------------------------------------------------
@@ -437,7 +253,7 @@ def score_local(
         windows=windows,
         spans_s=labels.spans_s,
         concentration={
-            "sentence": hot.sentence(),
+            "sentence": concentration_sentence(hot),
             "error_share": hot.error_share,
             "time_share": hot.time_share,
             "windows": hot.windows,
@@ -544,7 +360,7 @@ def local_phi(
         phi = global_metric_arrays(arrays, beta)
     except ValueError:
         return []
-    return [_json_float(float(v)) for v in np.atleast_1d(phi)]
+    return [json_number(float(v)) for v in np.atleast_1d(phi)]
 
 
 def spec_local_summary(
@@ -569,21 +385,5 @@ def spec_local_summary(
             "phi": local_phi(
                 [(a, r.regions.lambdas) for a, r in signals if r.regions is not None], weights
             ),
-        }
-    return out
-
-
-def compact_local(local: Mapping[str, Any]) -> dict[str, Any]:
-    """A signal's ``local`` as history keeps it: every table, but windows without their λ.
-
-    Per-window λ of every signal of every run would make a record as large as the report;
-    the windows' samples, RMS and mean error are enough to say which stretches a model change
-    improved or broke.
-    """
-    out = {key: value for key, value in local.items() if key != "windows"}
-    windows = local.get("windows")
-    if isinstance(windows, Mapping):
-        out["windows"] = {
-            key: windows[key] for key in ("labels", "n", "rms", "mean_error") if key in windows
         }
     return out

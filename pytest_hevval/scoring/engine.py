@@ -18,35 +18,35 @@ from typing import Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from .confidence import spec_confidence
-from .core.characteristics import SignalCharacteristics, signal_characteristics
-from .core.registry import compute_characteristic
-from .core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
-from .core.uncertainty import BlockSums, block_sums_many
-from .core.upooling import u_distribution_of
-from .data.align import AlignedData, align_records
-from .data.quality import assess, fail_on, mask_on_grid
-from .data.record import Record, SourceOptions
-from .digest import DEFAULT_HASH, file_digest
-from .errors import (
+from ..core.characteristics import SignalCharacteristics, signal_characteristics
+from ..core.registry import compute_characteristic
+from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
+from ..core.uncertainty import BlockSums, block_sums_many
+from ..core.upooling import u_distribution_of
+from ..data.align import AlignedData, align_records
+from ..data.digest import DEFAULT_HASH, file_digest
+from ..data.quality import assess, fail_on, mask_on_grid
+from ..data.record import Record, SourceOptions
+from ..errors import (
     CharacteristicError,
     DataError,
     DegenerateSignalError,
     ExpressionError,
     HevvalError,
 )
-from .localise import (
+from ..results.diagnosis import SignalDiagnosis
+from ..results.local import LocalFailure, LocalResult
+from ..results.spec_result import Failure, SignalResult, SpecResult
+from ..spec.expressions import Expression
+from ..spec.model import SignalSpec, SourceSpec, Spec
+from .confidence import spec_confidence
+from .local import (
     Labels,
-    LocalFailure,
-    LocalResult,
     label_samples,
     local_failures,
     score_local,
     spec_local_summary,
 )
-from .result import Failure, SignalResult, SpecResult
-from .spec.expressions import Expression
-from .spec.model import SignalSpec, SourceSpec, Spec
 
 __all__ = ["DataCache", "Evaluation", "evaluate_spec", "file_digest"]
 
@@ -56,7 +56,7 @@ R = TypeVar("R")
 
 
 def _reader() -> Callable[[str, Iterable[str] | None, SourceOptions], Record]:
-    from .data.readers import read_record
+    from ..data.readers import read_record
 
     return read_record
 
@@ -106,7 +106,7 @@ class DataCache:
 
     def __init__(self, data_hash: str = DEFAULT_HASH) -> None:
         _tune_allocator()
-        #: How data files are identified in results (see :mod:`pytest_hevval.digest`).
+        #: How data files are identified in results (see :mod:`pytest_hevval.data.digest`).
         self.data_hash = data_hash
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
@@ -182,6 +182,9 @@ class Evaluation:
     aligned: AlignedData | None
     arrays: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     characteristics: dict[str, SignalCharacteristics] = field(default_factory=dict)
+    #: Diagnoses of the failing signals, by the signal diagnosed for them
+    #: (:func:`pytest_hevval.scoring.diagnosis.diagnose_failures`), or why one failed.
+    diagnoses: dict[str, SignalDiagnosis | HevvalError] = field(default_factory=dict)
 
 
 def _load_model(
@@ -192,7 +195,7 @@ def _load_model(
         record = cache.read(model, spec.model_columns())
         return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "file"}
     if model.kind == "callable":
-        from .data.models import run_callable
+        from ..data.models import run_callable
 
         inputs = list(model.inputs) or sorted(spec.reference_columns())
         record = run_callable(
@@ -210,7 +213,7 @@ def _load_model(
             "params": dict(model.params),
             "kind": "callable",
         }
-    from .data.fmu import run_fmu
+    from ..data.fmu import run_fmu
 
     times = [c.time for c in reference.channels.values() if c.time.shape[0]]
     if not times:
@@ -268,7 +271,7 @@ def _convert_units(
     try:
         import pint
     except ImportError:
-        from .errors import MissingExtraError
+        from ..errors import MissingExtraError
 
         raise MissingExtraError.for_extra("unit conversion", "units", "pint") from None
     registry = _unit_registry()
@@ -716,7 +719,8 @@ def _measurement_checks(
     Rewrites ``failures`` in place. With ``measurement.within_uncertainty: pass`` a miss within
     the uncertainty leaves ``failures`` and is returned instead, by signal path.
     """
-    from .measurement import ERROR_CHARACTERISTICS, check_error
+    from ..core.measurement import ERROR_CHARACTERISTICS
+    from ..results.measurement import check_error
 
     passing = spec.measurement.within_uncertainty == "pass"
     within: dict[str, list[Failure]] = {}
@@ -756,7 +760,7 @@ def _measurement_checks(
 def _figures(
     ref: FloatArray, sim: FloatArray, chars: SignalCharacteristics, aligned: AlignedData
 ) -> dict[str, Any]:
-    from .core.figures import figure_data
+    from ..core.figures import figure_data
 
     return figure_data(
         ref,

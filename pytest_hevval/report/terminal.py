@@ -1,21 +1,30 @@
 """Text for people: failure reports of items and the signal-tree summary.
 
-Pure functions over :mod:`pytest_hevval.result` objects; no pytest, no I/O.
+Pure functions over :mod:`pytest_hevval.results.spec_result` objects; no pytest, no I/O.
 """
 
 from __future__ import annotations
 
 import shlex
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
-from .core.registry import describe
-from .result import SignalResult, SpecResult
+from ..core.registry import describe
+from ..results.campaign import CampaignVerdict, campaign_verdicts
+from ..results.spec_result import SignalResult, SpecResult
+from .sentences import failure_lines, failure_text, where_lines, within_uncertainty_lines
 
-__all__ = ["measurement_notes", "phi_report", "signal_failure_report", "tree_summary"]
+__all__ = [
+    "measurement_notes",
+    "phi_report",
+    "run_summary",
+    "signal_failure_report",
+    "tree_summary",
+    "verdict_lines",
+]
 
 
 def _location(spec: str, line: int) -> str:
-    from .spec.model import split_key
+    from ..defaults import split_key
 
     file, recording = split_key(spec)
     return f"{file}:{line}" + (f" (recording {recording})" if recording else "")
@@ -33,12 +42,12 @@ def signal_failure_report(
         f"  set {signal.set}, level {signal.level}, position {signal.position}, "
         f"α = {signal.alpha:g}",
     ]
-    lines.extend(f"  {text}" for text in signal.failure_lines())
+    lines.extend(f"  {text}" for text in failure_lines(signal))
     lines.append(
         f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
         f"(λ1 at zero lag {signal.lambdas['lag_correlation']:.4f})"
     )
-    lines.extend(f"  {text}" for text in signal.where_lines())
+    lines.extend(f"  {text}" for text in where_lines(signal))
     by_path = {s.path: s for s in result.signals}
     if signal.origins == [signal.path]:
         if signal.children:
@@ -146,11 +155,11 @@ def measurement_notes(signal: SignalResult) -> list[str]:
     """Each miss of a signal that declares its measurement uncertainty, against it: the
     failing ones, then those that pass within the uncertainty (the note kept)."""
     lines = [
-        str(f.sentence(signal.unit))
+        str(failure_text(f, signal.unit))
         for f in signal.failures
         if f.check is not None and f.check.uncertainty is not None
     ]
-    return lines + [f"note: {text}" for text in signal.within_uncertainty_lines()]
+    return lines + [f"note: {text}" for text in within_uncertainty_lines(signal)]
 
 
 def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:
@@ -181,4 +190,64 @@ def quality_lines(result: SpecResult) -> list[str]:
             f"    {found['channel']}: {found['kind']} at {found['start_s']:.6g}–"
             f"{found['stop_s']:.6g} s ({found['detail']})"
         )
+    return lines
+
+
+def run_summary(results: Sequence[SpecResult], *, details: bool = False) -> list[str]:
+    """The run's summary: every spec's tree, then each campaign's verdict."""
+    lines = tree_summary(results, details=details)
+    for found in campaign_verdicts(results):
+        lines.extend(verdict_lines(found))
+    return lines
+
+
+def verdict_lines(found: CampaignVerdict) -> list[str]:
+    """The campaign section of the terminal summary and of ``hevval run``."""
+    counted = found.counted
+    lines = [
+        f"campaign {found.spec} ({found.name}): "
+        + ("PASS" if found.passed else "FAIL")
+        + (
+            f" ({len(found.recordings)} of {len(found.recordings) + len(found.missing)} "
+            "recordings scored)"
+            if found.missing
+            else ""
+        )
+        + f", {sum(r.passed for r in counted)} of {len(counted)} validation recordings pass"
+        + (f" (min_pass_rate {found.min_pass_rate:.0%})" if found.min_pass_rate is not None else "")
+    ]
+    if found.excluded:
+        lines.append("  excluded from the gate (calibration): " + ", ".join(found.excluded))
+    phi = found.phi
+    lines.append(
+        f"  Φ over recordings: min {phi.minimum:.4f}, "
+        + ", ".join(f"q{round(q * 100):02d} {v:.4f}" for q, v in phi.quantiles.items())
+        + f", max {phi.maximum:.4f}"
+    )
+    for name, spread in found.lambdas.items():
+        lines.append(
+            f"  {describe(name).symbol} {name}: min {spread.minimum:.4f}, "
+            f"median {spread.quantiles[0.5]:.4f}, max {spread.maximum:.4f}"
+        )
+    if found.worst:
+        lines.append(
+            "  worst recordings: "
+            + ", ".join(
+                f"{r.id} Φ {r.phi_text}" + ("" if r.passed else " FAIL") for r in found.worst
+            )
+        )
+    if found.within_noise:
+        lines.append(
+            "  Φ within noise of min_phi (the 95 % interval holds it): "
+            + ", ".join(f"{r.id} Φ {r.phi_text}" for r in found.within_noise)
+        )
+    lines.append("  signal pass rate (u-pooling area, 0 best, 0.5 worst):")
+    width = max(len(p) for p in found.signal_pass_rates) if found.signal_pass_rates else 0
+    for path, rate in found.signal_pass_rates.items():
+        area = found.pooled_area.get(path)
+        lines.append(
+            f"    {path:<{width}}  {rate:5.0%}"
+            + (f"  (area {area:.3f})" if area is not None else "")
+        )
+    lines.extend(f"  gate: {failure}" for failure in found.failures)
     return lines

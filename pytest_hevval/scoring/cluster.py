@@ -29,8 +29,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .digest import DEFAULT_HASH
-from .errors import (
+from ..data.digest import DEFAULT_HASH
+from ..errors import (
     DataError,
     DegenerateSignalError,
     ExpressionError,
@@ -109,15 +109,16 @@ def evaluate_spec_file(
     figures: bool = False,
     threads_per_spec: int | None = None,
     data_hash: str = DEFAULT_HASH,
+    intervals: bool = True,
 ) -> dict[str, Any]:
     """Load and evaluate one spec file here; the Dask task body (also usable on its own).
 
     Returns ``SpecResult.to_dict()`` or, for an error the user can fix, :func:`error_payload`.
     Anything else (a bug) propagates, so that the client shows its traceback.
     """
-    from .core.registry import load_entry_points
-    from .run import RunOptions, evaluate_here
-    from .spec.load import load_specs
+    from ..core.registry import load_entry_points
+    from ..spec.load import load_specs
+    from .engine import DataCache, evaluate_spec
 
     try:
         # A Dask worker is its own process: it learns registered characteristics here.
@@ -125,15 +126,17 @@ def evaluate_spec_file(
         with _PARSE_LOCK:
             # A campaign's recording travels as ``file::recording``.
             (spec,) = load_specs(spec_path)
+        evaluation = evaluate_spec(
+            spec,
+            cache=DataCache(data_hash),
+            rootdir=Path(rootdir),
+            figures=figures,
+            workers=threads_per_spec,
+            intervals=intervals,
+        )
     except HevvalError as exc:
         return error_payload(spec_path, exc)
-    options = RunOptions(
-        rootdir=Path(rootdir), figures=figures, workers=threads_per_spec, data_hash=data_hash
-    )
-    outcome = evaluate_here(spec, options)
-    if isinstance(outcome, HevvalError):
-        return error_payload(spec_path, outcome)
-    return outcome.result.to_dict()
+    return evaluation.result.to_dict()
 
 
 def _distributed() -> Any:
@@ -153,6 +156,7 @@ def evaluate_on_dask(
     progress: Progress | None = None,
     threads_per_spec: int | None = None,
     data_hash: str = DEFAULT_HASH,
+    intervals: bool = True,
 ) -> list[dict[str, Any]]:
     """Evaluate every spec on the Dask cluster at ``address``; one result per spec, in order.
 
@@ -176,6 +180,8 @@ def evaluate_on_dask(
         (up to two), which also keeps results bit-identical to a local run.
     data_hash
         How data files are identified in the results: ``"fast"`` or ``"sha256"``.
+    intervals
+        Give every λ and Φ its bootstrap interval (``False``: ``--no-intervals``).
 
     Returns
     -------
@@ -197,6 +203,8 @@ def evaluate_on_dask(
     if not paths:
         return []
     distributed = _distributed()
+    # evaluate_spec_file's arguments after the spec's path, the same for every task.
+    task_arguments = (str(rootdir), figures, threads_per_spec, data_hash, intervals)
     if address == LOCAL:
         # Worker processes, one thread each: YAML parsing and CSV reading hold the GIL, and
         # the engine adds its own threads for the numpy work. The scheduler's web server takes
@@ -211,9 +219,7 @@ def evaluate_on_dask(
             ) as cluster,
             distributed.Client(cluster) as client,
         ):
-            return _run(
-                client, distributed, paths, rootdir, figures, progress, threads_per_spec, data_hash
-            )
+            return _run(client, distributed, paths, task_arguments, progress)
     connect: dict[str, Any] = (
         {"scheduler_file": address}
         if address.endswith(".json") and os.path.isfile(address)
@@ -230,30 +236,22 @@ def evaluate_on_dask(
             "or use 'local'",
         ) from None
     with client:
-        return _run(
-            client, distributed, paths, rootdir, figures, progress, threads_per_spec, data_hash
-        )
+        return _run(client, distributed, paths, task_arguments, progress)
 
 
 def _run(
     client: Any,
     distributed: Any,
     paths: list[str],
-    rootdir: Path,
-    figures: bool,
+    task_arguments: tuple[Any, ...],
     progress: Progress | None,
-    threads_per_spec: int | None,
-    data_hash: str,
 ) -> list[dict[str, Any]]:
     futures = [
         # pure=False: the same path may hold a changed spec or data by the next call.
         client.submit(
             evaluate_spec_file,
             path,
-            str(rootdir),
-            figures,
-            threads_per_spec,
-            data_hash,
+            *task_arguments,
             pure=False,
             key=f"hevval-spec-{index}-{os.path.basename(path)}-{os.urandom(4).hex()}",
         )

@@ -15,8 +15,8 @@ from typing import Any
 
 import pytest
 
-from .errors import HevvalError
-from .options import add_options, get_option
+from ..errors import HevvalError
+from ..options import add_options, get_option
 from .stash import session_key, state_of
 
 
@@ -32,7 +32,7 @@ def pytest_configure(config: pytest.Config) -> None:
     state = HevvalSession(config)
     config.stash[session_key] = state
     state.validate_options()
-    from .core.registry import load_entry_points
+    from ..core.registry import load_entry_points
 
     try:
         load_entry_points()
@@ -48,7 +48,7 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> pytest.Col
         return None
     patterns = state.option("files")
     if any(fnmatch.fnmatch(file_path.name, pattern) for pattern in patterns):
-        from .nodes import SpecFile
+        from .items import SpecFile
 
         return SpecFile.from_parent(parent, path=file_path)
     return None

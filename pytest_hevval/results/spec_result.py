@@ -12,11 +12,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from .core.characteristics import SignalCharacteristics
-from .core.registry import FUSED_CHARACTERISTICS, describe, keyed_lambdas, order_names
-from .core.uncertainty import Interval, value_text
-from .localise import LocalFailure, LocalResult
-from .measurement import ErrorCheck, failure_sentence
+from ..core.characteristics import SignalCharacteristics
+from ..core.registry import FUSED_CHARACTERISTICS, describe, order_names
+from ..core.uncertainty import Interval, value_text
+from .codec import json_number, keyed_lambdas
+from .local import LocalFailure, LocalResult
+from .measurement import ErrorCheck
 
 __all__ = [
     "RESULT_SCHEMA_VERSION",
@@ -42,10 +43,6 @@ ERROR_KEYS = (
     "dt",
     "correlation",
 )
-
-
-def _clean(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
 
 
 @dataclass(frozen=True)
@@ -81,19 +78,6 @@ class Failure:
             value=float(data["value"]),
             threshold=float(data["threshold"]),
             check=ErrorCheck.from_dict(check) if check else None,
-        )
-
-    def sentence(self, unit: str | None) -> str | None:
-        """The miss in the signal's unit and against the measurement uncertainty, if known."""
-        if self.check is None:
-            return None
-        return failure_sentence(
-            describe(self.characteristic).title,
-            self.characteristic,
-            self.value,
-            self.threshold,
-            self.check,
-            unit,
         )
 
 
@@ -217,7 +201,7 @@ class SignalResult:
             out["u_distribution"] = list(self.u_distribution)
         if self.intervals:
             out["intervals"] = {
-                name: {"low": _clean(i.low), "high": _clean(i.high)}
+                name: {"low": json_number(i.low), "high": json_number(i.high)}
                 for name, i in self.intervals.items()
             }
             out["block_samples"] = self.block_samples
@@ -263,53 +247,6 @@ class SignalResult:
             block_samples=data.get("block_samples"),
             within_uncertainty=[Failure.from_dict(f) for f in data.get("within_uncertainty") or []],
         )
-
-    def failure_lines(self) -> list[str]:
-        """Each characteristic below its threshold, with the physical error behind it."""
-        errors = self.characteristics.as_dict()
-        lines = []
-        for failure in self.failures:
-            measured = failure.sentence(self.unit)
-            if measured is not None and failure.check and failure.check.uncertainty is not None:
-                lines.append(measured)
-                continue
-            characteristic = describe(failure.characteristic)
-            meaning = characteristic.explain(errors, self.unit)
-            parts = self.components.get(failure.characteristic)
-            if not meaning and parts:
-                meaning = ", ".join(f"{k} {v:.4g}" for k, v in parts.items())
-            value = value_text(failure.value, self.intervals.get(failure.characteristic))
-            lines.append(
-                f"{characteristic.title} = {value} < {failure.threshold:.4g}"
-                + (f" ({meaning})" if meaning else "")
-            )
-        for local in self.local_failures:
-            lines.append(local.sentence(describe(local.characteristic).title))
-        return lines
-
-    def within_uncertainty_lines(self) -> list[str]:
-        """Thresholds missed within the measurement uncertainty that pass by the spec's choice."""
-        return [
-            f"{f.sentence(self.unit) or describe(f.characteristic).title}; passes by "
-            "measurement.within_uncertainty: pass"
-            for f in self.within_uncertainty
-        ]
-
-    def where_lines(self) -> list[str]:
-        """Where and when the error lies: its concentration and the worst windows."""
-        if self.local is None:
-            return []
-        lines = [f"where: {self.local.concentration.get('sentence', '')}"]
-        worst = self.local.worst_windows()
-        if worst:
-            windows = self.local.windows
-            lines.append(
-                "worst windows: "
-                + ", ".join(
-                    f"{windows.labels[k]} ({windows.error_share[k]:.0%} of Σe²)" for k in worst
-                )
-            )
-        return lines
 
 
 @dataclass

@@ -10,22 +10,22 @@ a FAILURE.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import pytest
 from _pytest._code.code import TerminalRepr
 
-from .core.registry import describe
-from .engine import Evaluation
-from .errors import HevvalError
-from .result import SignalResult, SpecResult
+from ..core.registry import describe
+from ..errors import HevvalError
+from ..report.terminal import phi_report, signal_failure_report
+from ..results.spec_result import SignalResult, SpecResult
+from ..scoring.engine import Evaluation
+from ..spec.load import load_spec
+from ..spec.model import Spec
 from .session import HevvalSession
-from .spec.load import load_spec
-from .spec.model import Spec
 from .stash import session_key
-from .terminal import phi_report, signal_failure_report
 
 __all__ = ["CampaignItem", "PhiItem", "Recording", "SignalItem", "SpecFile"]
 
@@ -95,7 +95,7 @@ class _SpecItem(pytest.Item):
         self.line = line
         self.evaluation: Evaluation | None = None
         self.hevval_payload: dict[str, Any] | None = None
-        self.hevval_diagnosis: dict[str, Any] | None = None
+        self.hevval_diagnosis: Mapping[str, Any] | None = None
 
     @property
     def state(self) -> HevvalSession:
@@ -152,7 +152,7 @@ class SignalItem(_SpecItem):
             )
         diagnosis = self.state.diagnosis_for(self.evaluation, signal)
         if diagnosis is not None:
-            self.hevval_diagnosis = {"spec": result.spec, **diagnosis}
+            self.hevval_diagnosis = self.state.keep_diagnosis(diagnosis)
         if not signal.passed:
             line = diagnosis.get("summary") if diagnosis else None
             target = diagnosis.get("diagnosed") if diagnosis else None
@@ -195,7 +195,8 @@ class CampaignItem(_SpecItem):
                 self.outcomes[str(recording.recording)] = exc
 
     def runtest(self) -> None:
-        from .campaign import verdict, verdict_lines
+        from ..report.terminal import verdict_lines
+        from ..results.campaign import verdict
 
         results = [o.result for o in self.outcomes.values() if isinstance(o, Evaluation)]
         if not results:

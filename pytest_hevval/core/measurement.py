@@ -6,7 +6,8 @@ For every missed threshold of an error characteristic (λ3 MAE, λ4 RMS, λ5 RMS
 whether that margin lies within the expanded measurement uncertainty (docs/uncertainty.md,
 "Measurement uncertainty").
 
-Pure Python: no numpy, no files, no pytest.
+Pure Python: no numpy, no files, no pytest. The check of one missed threshold, as a result,
+is :class:`pytest_hevval.results.measurement.ErrorCheck`.
 
 Notes
 -----
@@ -35,20 +36,16 @@ u_num and u_input of V&V 20 are not declared in a spec, so U_val ≥ U_D.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
-from .defaults import UNCERTAINTY_SIGMA
+from ..defaults import UNCERTAINTY_SIGMA
 
 __all__ = [
     "ERROR_CHARACTERISTICS",
-    "ErrorCheck",
     "MeasurementUncertainty",
     "WithinUncertainty",
-    "check_error",
     "error_limit",
-    "failure_sentence",
 ]
 
 #: What a threshold miss within the measurement uncertainty does: fail the item, or pass it
@@ -86,108 +83,6 @@ class MeasurementUncertainty:
         return math.hypot(self.abs, self.rel * abs(reference_rms))
 
 
-@dataclass(frozen=True)
-class ErrorCheck:
-    """One missed error threshold against the measurement uncertainty (signal's unit)."""
-
-    #: The error E (MAE, RMS, RMS−MAE or σ).
-    error: float
-    #: E_lim = (1 − threshold)·R: the largest error the threshold accepts.
-    limit: float
-    #: E − E_lim: by how much the error exceeds its limit.
-    margin: float
-    #: U_D at coverage ``sigma``; None when the signal declares no uncertainty.
-    uncertainty: float | None = None
-    #: u_D, the standard uncertainty (U_D / sigma).
-    standard_uncertainty: float | None = None
-    sigma: float | None = None
-
-    @property
-    def within(self) -> bool | None:
-        """Whether the margin lies within U_D (None: no uncertainty declared)."""
-        if self.uncertainty is None:
-            return None
-        return self.margin <= self.uncertainty
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "error": self.error,
-            "limit": self.limit,
-            "margin": self.margin,
-            "uncertainty": self.uncertainty,
-            "standard_uncertainty": self.standard_uncertainty,
-            "sigma": self.sigma,
-            "within": self.within,
-        }
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> ErrorCheck:
-        def optional(key: str) -> float | None:
-            value = data.get(key)
-            return None if value is None else float(value)
-
-        return cls(
-            error=float(data["error"]),
-            limit=float(data["limit"]),
-            margin=float(data["margin"]),
-            uncertainty=optional("uncertainty"),
-            standard_uncertainty=optional("standard_uncertainty"),
-            sigma=optional("sigma"),
-        )
-
-
 def error_limit(threshold: float, reference_range: float) -> float:
     """E_lim = (1 − threshold)·R: the error at which λ = 1 − E/R meets ``threshold``."""
     return (1.0 - threshold) * reference_range
-
-
-def check_error(
-    error: float,
-    threshold: float,
-    reference_range: float,
-    uncertainty: MeasurementUncertainty | None = None,
-    reference_rms: float = 0.0,
-) -> ErrorCheck:
-    """The limit and margin of ``error`` and, with a declared uncertainty, U_D beside them."""
-    limit = error_limit(threshold, reference_range)
-    if uncertainty is None:
-        return ErrorCheck(error=error, limit=limit, margin=error - limit)
-    return ErrorCheck(
-        error=error,
-        limit=limit,
-        margin=error - limit,
-        uncertainty=uncertainty.expanded(reference_rms),
-        standard_uncertainty=uncertainty.standard(reference_rms),
-        sigma=uncertainty.sigma,
-    )
-
-
-def _quantity(value: float, unit: str | None) -> str:
-    return f"{value:.3g}" + (f" {unit}" if unit else "")
-
-
-def failure_sentence(
-    title: str,
-    characteristic: str,
-    value: float,
-    threshold: float,
-    check: ErrorCheck,
-    unit: str | None,
-) -> str:
-    """``λ4 RMS = 0.9412 < 0.95: RMS 1.23 kW is 0.21 kW over its limit 1.02 kW; …``.
-
-    ``title`` is the characteristic's heading (``λ4 RMS``), ``characteristic`` its name.
-    """
-    _, label = ERROR_CHARACTERISTICS.get(characteristic, ("", "error"))
-    text = (
-        f"{title} = {value:.4f} < {threshold:.4g}: {label} {_quantity(check.error, unit)} is "
-        f"{_quantity(check.margin, unit)} over its limit {_quantity(check.limit, unit)}"
-    )
-    if check.uncertainty is None:
-        return text
-    sigma = check.sigma if check.sigma is not None else UNCERTAINTY_SIGMA
-    verdict = "within" if check.within else "beyond"
-    return (
-        f"{text}; measurement uncertainty ±{_quantity(check.uncertainty, unit)} ({sigma:g}σ): "
-        f"{verdict} measurement uncertainty"
-    )

@@ -13,12 +13,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from .data.remote import is_url
-from .digest import DEFAULT_HASH
+from ..data.digest import DEFAULT_HASH
+from ..data.remote import is_url
+from ..errors import HevvalError
+from ..results.spec_result import SpecResult
+from ..spec.model import Spec
+from .cluster import error_from_payload, evaluate_on_dask, is_error_payload
+from .diagnosis import diagnose_failures
 from .engine import DataCache, Evaluation, evaluate_spec
-from .errors import HevvalError
-from .result import SpecResult
-from .spec.model import Spec
 
 __all__ = ["RunOptions", "relative_to", "run_specs"]
 
@@ -43,6 +45,9 @@ class RunOptions:
     data_hash: str = DEFAULT_HASH
     #: Give every λ and Φ its bootstrap interval (core/uncertainty.py).
     intervals: bool = True
+    #: Diagnose the failing signals ("failed"), every signal ("all") or none ("off"), right
+    #: after each spec is scored; the aligned data is then let go unless ``keep_arrays``.
+    diagnose: str = "off"
 
 
 def relative_to(rootdir: Path, path: str) -> str:
@@ -85,13 +90,27 @@ def run_specs(
             shared.declare(spec.model, spec.model_columns())
         outcomes = []
         for done, spec in enumerate(specs, start=1):
-            outcomes.append(_evaluate(spec, options, shared))
+            outcome = _evaluate(spec, options, shared)
+            if isinstance(outcome, Evaluation):
+                _relative_result(outcome.result, options.rootdir)
+                _diagnose(outcome, options)
+            outcomes.append(outcome)
             if progress is not None:
                 progress(done)
+        return outcomes
     for outcome in outcomes:
         if isinstance(outcome, Evaluation):
             _relative_result(outcome.result, options.rootdir)
     return outcomes
+
+
+def _diagnose(evaluation: Evaluation, options: RunOptions) -> None:
+    if options.diagnose != "off":
+        evaluation.diagnoses = diagnose_failures(evaluation, options.diagnose)
+    if not options.keep_arrays:
+        # Nothing reads the aligned data after this: free it before the next spec is read.
+        evaluation.arrays = {}
+        evaluation.aligned = None
 
 
 def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
@@ -101,7 +120,7 @@ def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
             cache=cache,
             rootdir=options.rootdir,
             figures=options.figures,
-            keep_arrays=options.keep_arrays,
+            keep_arrays=options.keep_arrays or options.diagnose != "off",
             workers=options.workers,
             intervals=options.intervals,
         )
@@ -109,16 +128,9 @@ def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
         return exc
 
 
-def evaluate_here(spec: Spec, options: RunOptions) -> Outcome:
-    """Score one spec in this process with a cache of its own (the Dask task body)."""
-    return _evaluate(spec, options, DataCache(options.data_hash))
-
-
 def _on_dask(
     specs: Sequence[Spec], options: RunOptions, progress: Callable[[int], None] | None
 ) -> list[Outcome]:
-    from .distributed import error_from_payload, evaluate_on_dask, is_error_payload
-
     assert options.dask is not None
     payloads = evaluate_on_dask(
         [Path(s.key) for s in specs],
@@ -128,6 +140,7 @@ def _on_dask(
         progress=progress,
         threads_per_spec=options.workers,
         data_hash=options.data_hash,
+        intervals=options.intervals,
     )
     return [
         error_from_payload(payload)

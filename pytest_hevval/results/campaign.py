@@ -1,7 +1,8 @@
 """The verdict over a campaign: one spec scored on many recordings.
 
-Pure aggregation of the recordings' :class:`~pytest_hevval.result.SpecResult` objects, so the
-pytest item, the terminal summary and the reports give the same verdict from the same data.
+Pure aggregation of the recordings' :class:`~pytest_hevval.results.spec_result.SpecResult`
+objects, so the pytest item, the terminal summary and the reports
+give the same verdict from the same data.
 Calibration recordings (the ones the model was fitted on) are shown but never count toward the
 gate: a model always matches the data it was fitted to.
 """
@@ -15,12 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from .core.registry import describe
-from .core.uncertainty import Interval, value_text
-from .core.upooling import area_to_uniform, pool
-from .digest import identity
-from .result import SpecResult
-from .spec.model import split_key
+from ..core.uncertainty import Interval, value_text
+from ..core.upooling import area_to_uniform, pool
+from ..defaults import split_key
+from .codec import data_identity, json_number
+from .spec_result import SpecResult
 
 __all__ = [
     "WORST_SHOWN",
@@ -32,7 +32,6 @@ __all__ = [
     "campaign_verdicts",
     "phi_quantile",
     "verdict",
-    "verdict_lines",
     "verdicts_from_dicts",
 ]
 
@@ -74,9 +73,9 @@ class Distribution:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "min": _clean(self.minimum),
-            **{f"q{round(q * 100):02d}": _clean(v) for q, v in self.quantiles.items()},
-            "max": _clean(self.maximum),
+            "min": json_number(self.minimum),
+            **{f"q{round(q * 100):02d}": json_number(v) for q, v in self.quantiles.items()},
+            "max": json_number(self.maximum),
         }
 
 
@@ -160,7 +159,7 @@ class CampaignVerdict:
             "name": self.name,
             "passed": self.passed,
             "failures": list(self.failures),
-            "pass_rate": _clean(self.pass_rate),
+            "pass_rate": json_number(self.pass_rate),
             "min_pass_rate": self.min_pass_rate,
             "phi_quantile": list(self.phi_quantile) if self.phi_quantile else None,
             "excluded": self.excluded,
@@ -170,12 +169,12 @@ class CampaignVerdict:
             "phi": self.phi.to_dict(),
             "lambdas": {name: d.to_dict() for name, d in self.lambdas.items()},
             "signal_pass_rates": dict(self.signal_pass_rates),
-            "pooled_area": {k: _clean(v) for k, v in self.pooled_area.items()},
+            "pooled_area": {k: json_number(v) for k, v in self.pooled_area.items()},
             "recordings": [
                 {
                     "id": r.id,
                     "role": r.role,
-                    "phi": _clean(r.phi),
+                    "phi": json_number(r.phi),
                     **(
                         {"phi_interval": {"low": r.phi_interval.low, "high": r.phi_interval.high}}
                         if r.phi_interval is not None
@@ -192,13 +191,9 @@ class CampaignVerdict:
         }
 
 
-def _clean(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
-
-
 def _identity(result: SpecResult) -> tuple[str, str]:
     """(hash, digest) of a recording's measured data file; empty when it was not hashed."""
-    return identity(result.data.get("reference") or {}) or ("", "")
+    return data_identity(result.data.get("reference") or {}) or ("", "")
 
 
 def _mean_lambda(result: SpecResult, name: str) -> float:
@@ -311,58 +306,6 @@ def campaign_verdicts(results: Iterable[SpecResult]) -> list[CampaignVerdict]:
         if result.recording is not None:
             groups.setdefault(campaign_of(result.spec), []).append(result)
     return [verdict(groups[key]) for key in sorted(groups)]
-
-
-def verdict_lines(found: CampaignVerdict) -> list[str]:
-    """The campaign section of the terminal summary and of ``hevval run``."""
-    counted = found.counted
-    lines = [
-        f"campaign {found.spec} ({found.name}): "
-        + ("PASS" if found.passed else "FAIL")
-        + (
-            f" ({len(found.recordings)} of {len(found.recordings) + len(found.missing)} "
-            "recordings scored)"
-            if found.missing
-            else ""
-        )
-        + f", {sum(r.passed for r in counted)} of {len(counted)} validation recordings pass"
-        + (f" (min_pass_rate {found.min_pass_rate:.0%})" if found.min_pass_rate is not None else "")
-    ]
-    if found.excluded:
-        lines.append("  excluded from the gate (calibration): " + ", ".join(found.excluded))
-    phi = found.phi
-    lines.append(
-        f"  Φ over recordings: min {phi.minimum:.4f}, "
-        + ", ".join(f"q{round(q * 100):02d} {v:.4f}" for q, v in phi.quantiles.items())
-        + f", max {phi.maximum:.4f}"
-    )
-    for name, spread in found.lambdas.items():
-        lines.append(
-            f"  {describe(name).symbol} {name}: min {spread.minimum:.4f}, "
-            f"median {spread.quantiles[0.5]:.4f}, max {spread.maximum:.4f}"
-        )
-    if found.worst:
-        lines.append(
-            "  worst recordings: "
-            + ", ".join(
-                f"{r.id} Φ {r.phi_text}" + ("" if r.passed else " FAIL") for r in found.worst
-            )
-        )
-    if found.within_noise:
-        lines.append(
-            "  Φ within noise of min_phi (the 95 % interval holds it): "
-            + ", ".join(f"{r.id} Φ {r.phi_text}" for r in found.within_noise)
-        )
-    lines.append("  signal pass rate (u-pooling area, 0 best, 0.5 worst):")
-    width = max(len(p) for p in found.signal_pass_rates) if found.signal_pass_rates else 0
-    for path, rate in found.signal_pass_rates.items():
-        area = found.pooled_area.get(path)
-        lines.append(
-            f"    {path:<{width}}  {rate:5.0%}"
-            + (f"  (area {area:.3f})" if area is not None else "")
-        )
-    lines.extend(f"  gate: {failure}" for failure in found.failures)
-    return lines
 
 
 def campaign_payloads(dicts: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:

@@ -1,0 +1,422 @@
+"""Time-series statistics for regressions on autocorrelated residuals.
+
+Pre-whitening by an AR model chosen by BIC, heteroscedasticity- and autocorrelation-consistent
+(Newey–West) covariances with the Andrews plug-in bandwidth, effective sample sizes and
+degrees of freedom, the Ljung–Box test and the dominant frequencies of a spectrum. Used by
+:mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import fft as sfft
+from scipy import linalg as sla
+from scipy import signal as sps
+from scipy import stats
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Highest AR order tried by the pre-whitening filter (chosen by BIC).
+MAX_AR_ORDER = 10
+#: Andrews & Monahan (1992) bound the AR(1) coefficient of the scores so that the plug-in
+#: bandwidth stays finite when pre-whitening leaves a near-unit root.
+RHO_CAP = 0.97
+#: Relative singular-value cut-off when orthonormalising design matrices.
+RCOND = 1e-10
+#: How many spectral peaks :func:`dominant_frequencies` reports.
+N_PEAKS = 3
+
+
+@dataclass(frozen=True)
+class Whiteness:
+    """Ljung-Box portmanteau test of the remaining residual.
+
+    Attributes
+    ----------
+    lags:
+        The lags h at which Q(h) was evaluated, in samples of the regression grid.
+    statistic:
+        Q(h) at the lag giving the smallest p-value.
+    p_value:
+        That smallest p-value, Bonferroni-adjusted over ``lags``.
+    white:
+        ``p_value >= alpha``: no autocorrelation detected.
+    """
+
+    lags: tuple[int, ...]
+    statistic: float
+    p_value: float
+    white: bool
+
+
+# Thread-parallel BLAS gains nothing on these memory-bound, thin products and, on a machine
+# whose cores are already busy, its spinning threads slow them down by an order of magnitude;
+# numpy's own einsum loops are single-threaded.
+
+
+def dot(a: FloatArray, b: FloatArray) -> float:
+    return float(np.einsum("t,t->", a, b))
+
+
+def project_out(rows: FloatArray, q: FloatArray) -> FloatArray:
+    """Each row minus its projection on the orthonormal columns of q."""
+    coef = np.einsum("jt,tk->jk", rows, q)
+    return np.asarray(rows - np.einsum("jk,tk->jt", coef, q), dtype=np.float64)
+
+
+def block_means(x: FloatArray, factor: int) -> FloatArray:
+    if factor == 1:
+        return x
+    blocks = x.shape[0] // factor
+    means = x[: blocks * factor].reshape(blocks, factor).mean(axis=1)
+    return np.asarray(means, dtype=np.float64)
+
+
+def lag_matrix(u: FloatArray, order: int) -> FloatArray:
+    """Columns u[t−1], …, u[t−order] for t = order … n−1."""
+    n = u.shape[0]
+    return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
+
+
+def ar_order(u: FloatArray) -> int:
+    """AR order by BIC (Schwarz 1978), all orders fitted on the same sample.
+
+    One factorisation of the lag matrix gives every order's residual sum of squares, because
+    the AR(p) regressors are the first p lag columns.
+    """
+    n = u.shape[0]
+    top = min(MAX_AR_ORDER, max(0, n // 10 - 1))
+    if top == 0:
+        return 0
+    y = u[top:]
+    lagged = lag_matrix(u, top)
+    total = dot(y, y)
+    if total <= 0.0:
+        return 0
+    # Cholesky of the lag Gram matrix is the R of a QR of the lag matrix: the forward solve
+    # gives the projections of y on the nested AR(1) … AR(top) regressor spaces.
+    gram = np.einsum("ti,tj->ij", lagged, lagged)
+    try:
+        chol = np.linalg.cholesky(gram + np.eye(top) * 1e-12 * np.trace(gram))
+    except np.linalg.LinAlgError:
+        return 0
+    proj = sla.solve_triangular(chol, np.einsum("ti,t->i", lagged, y), lower=True) ** 2
+    ssr = np.maximum(total - np.concatenate(([0.0], np.cumsum(proj))), total * 1e-15)
+    m = y.shape[0]
+    bic = m * np.log(ssr / m) + np.arange(top + 1) * math.log(m)
+    return int(np.argmin(bic))
+
+
+def ar_fit(u: FloatArray, order: int) -> FloatArray:
+    """Least-squares AR(order) coefficients φ of u (no intercept: u has mean zero).
+
+    The persistence Σφ is biased low by about (1 + 3Σφ)/n (Kendall 1954, for AR(1)); that bias
+    makes tests anti-conservative near a unit root, so it is added back to φ₁, keeping
+    Σφ ≤ 1 − 1/n.
+    """
+    if order == 0 or u.shape[0] <= 2 * order + 2:
+        return np.zeros(0)
+    y = u[order:]
+    if dot(y, y) == 0.0:
+        return np.zeros(0)
+    lagged = lag_matrix(u, order)
+    gram = np.einsum("ti,tj->ij", lagged, lagged)
+    fitted, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", lagged, y), rcond=RCOND)
+    phi = np.array(fitted, dtype=np.float64)
+    persistence = float(np.sum(phi))
+    if persistence > 0.0:
+        # Σφ = 1 would null the constant column of the whitened design; 1 − 1/n keeps the
+        # offset identified, with the huge variance a unit root implies.
+        m = y.shape[0]
+        corrected = min(persistence + (1.0 + 3.0 * persistence) / m, 1.0 - 1.0 / m)
+        phi[0] += corrected - persistence
+    return phi
+
+
+def lag1_autocorrelation(x: FloatArray) -> FloatArray:
+    """Lag-one autocorrelation of each column about its mean; 1 for a constant column."""
+    centred = x - x.mean(axis=0)
+    num = np.einsum("ij,ij->j", centred[1:], centred[:-1])
+    den = np.einsum("ij,ij->j", centred, centred)
+    scale = np.einsum("ij,ij->j", x, x)
+    constant = den <= 1e-24 * np.maximum(scale, 1e-300)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(constant, 1.0, num / np.where(constant, 1.0, den))
+    return np.asarray(np.clip(rho, -1.0, 1.0), dtype=np.float64)
+
+
+def effective_df(n: int, k: int, phi: FloatArray, rho: FloatArray) -> npt.NDArray[np.int64]:
+    """Degrees of freedom n (1 − φρ)/(1 + φρ) − k per regressor (Bretherton et al. 1999).
+
+    φ is the persistence of the noise (Σφ of its AR model) and ρ the lag-one autocorrelation
+    of the regressor: a slowly varying regressor in persistent noise offers few independent
+    comparisons however many samples there are, and the estimated filter is least accurate
+    exactly there.
+    """
+    persistence = float(np.clip(np.sum(phi), 0.0, 1.0)) if phi.shape[0] else 0.0
+    prod = np.clip(persistence * rho, 0.0, 1.0)
+    eff = n * (1.0 - prod) / (1.0 + prod) - k
+    return np.asarray(np.clip(np.floor(eff), 1, max(n - k, 1)), dtype=np.int64)
+
+
+def whiten(x: FloatArray, phi: FloatArray) -> FloatArray:
+    """x_t − Σ φ_i x_{t−i} for t = p … n−1, on a vector or on every column of a matrix."""
+    p = phi.shape[0]
+    if p == 0:
+        return x
+    n = x.shape[0]
+    out = np.array(x[p:], dtype=np.float64, copy=True)
+    for i in range(1, p + 1):
+        out -= phi[i - 1] * x[p - i : n - i]
+    return out
+
+
+def orthonormal(x: FloatArray) -> FloatArray:
+    """Orthonormal basis of the column space of x, dropping numerically null directions."""
+    if x.shape[1] == 0:
+        return x
+    u, s, _ = np.linalg.svd(x, full_matrices=False)
+    keep = s > RCOND * max(float(s[0]), 1e-300)
+    return np.asarray(u[:, keep], dtype=np.float64)
+
+
+def autocovariances(scores: FloatArray, max_lag: int) -> FloatArray:
+    """Σ_t s_t s_{t−l} for l = 0 … max_lag, per column, by FFT."""
+    n = scores.shape[0]
+    size = sfft.next_fast_len(2 * n)
+    spectrum = np.fft.rfft(scores, n=size, axis=0)
+    acov = np.fft.irfft(spectrum * np.conj(spectrum), n=size, axis=0)
+    return np.asarray(acov[: max_lag + 1], dtype=np.float64)
+
+
+def andrews_bandwidth(scores: FloatArray) -> float:
+    """Andrews (1991) AR(1) plug-in bandwidth S_T for the Bartlett kernel.
+
+    α(1) = Σ_a 4ρ_a²σ_a⁴ / ((1−ρ_a)⁶(1+ρ_a)²) / Σ_a σ_a⁴ / (1−ρ_a)⁴ and
+    S_T = 1.1447 (α(1) T)^{1/3}, with ρ_a, σ_a² the AR(1) coefficient and innovation variance
+    of score column a.
+    """
+    n = scores.shape[0]
+    lagged = scores[:-1]
+    lead = scores[1:]
+    denom = np.einsum("ij,ij->j", lagged, lagged)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.einsum("ij,ij->j", lagged, lead) / denom
+    rho = np.clip(np.nan_to_num(rho, nan=0.0), -RHO_CAP, RHO_CAP)
+    innovations = lead - lagged * rho
+    sigma2 = np.einsum("ij,ij->j", innovations, innovations) / max(n - 1, 1)
+    num = float(np.sum(4 * rho**2 * sigma2**2 / ((1 - rho) ** 6 * (1 + rho) ** 2)))
+    den = float(np.sum(sigma2**2 / (1 - rho) ** 4))
+    if den <= 0.0:
+        return 1.0
+    return float(1.1447 * (num / den * n) ** (1.0 / 3.0))
+
+
+def bartlett_weights(bandwidth: float, max_lag: int) -> FloatArray:
+    lags = np.arange(max_lag + 1, dtype=np.float64)
+    return np.asarray(np.clip(1.0 - lags / max(bandwidth, 1.0), 0.0, None), dtype=np.float64)
+
+
+def long_run_sums(scores: FloatArray) -> FloatArray:
+    """Newey-West long-run variance Σ_t s_t² + 2 Σ_l w_l Σ_t s_t s_{t−l}, per column.
+
+    Each column gets its own Andrews bandwidth.
+    """
+    n = scores.shape[0]
+    bandwidths = np.array(
+        [andrews_bandwidth(scores[:, [j]]) for j in range(scores.shape[1])], dtype=np.float64
+    )
+    max_lag = int(min(n - 1, math.ceil(float(np.max(bandwidths, initial=1.0)))))
+    if max_lag <= 32:
+        acov = np.stack(
+            [np.einsum("ij,ij->j", scores[lag:], scores[: n - lag]) for lag in range(max_lag + 1)]
+        )
+    else:
+        acov = autocovariances(scores, max_lag)
+    lags = np.arange(max_lag + 1, dtype=np.float64)[:, None]
+    weights = np.clip(1.0 - lags / np.maximum(bandwidths, 1.0)[None, :], 0.0, None)
+    weights[0] = 0.5
+    return np.asarray(np.maximum(2.0 * np.sum(weights * acov, axis=0), 0.0), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class HacFit:
+    """Pre-whitened OLS with a HAC covariance."""
+
+    beta: FloatArray
+    cov: FloatArray
+    df: npt.NDArray[np.int64]
+    phi: FloatArray
+
+
+def hac_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
+    """Feasible GLS: OLS, AR(order) of its residual, filter y and X, OLS, Newey-West sandwich.
+
+    cov(β) = (X*ᵀX*)⁺ S (X*ᵀX*)⁺ · n/(n−k), S = Γ₀ + Σ_l w_l (Γ_l + Γ_lᵀ), Γ_l = Σ_t g_t g_{t−l}ᵀ,
+    g_t = x*_t e*_t.
+    """
+    beta0, *_ = np.linalg.lstsq(x, y, rcond=None)
+    phi = ar_fit(y - np.einsum("tk,k->t", x, beta0), order)
+    ys = whiten(y, phi)
+    xs = whiten(x, phi)
+    beta, *_ = np.linalg.lstsq(xs, ys, rcond=RCOND)
+    e = ys - np.einsum("tk,k->t", xs, beta)
+    g = xs * e[:, None]
+    n, k = xs.shape
+    bandwidth = andrews_bandwidth(g)
+    max_lag = int(min(n - 1, math.ceil(bandwidth)))
+    weights = bartlett_weights(bandwidth, max_lag)
+    s = np.einsum("ti,tj->ij", g, g)
+    for lag in range(1, max_lag + 1):
+        if weights[lag] <= 0.0:
+            break
+        gamma = np.einsum("ti,tj->ij", g[lag:], g[:-lag])
+        s += weights[lag] * (gamma + gamma.T)
+    bread = np.linalg.pinv(np.einsum("ti,tj->ij", xs, xs), rcond=RCOND)
+    cov = bread @ s @ bread * (n / max(n - k, 1))
+    return HacFit(
+        beta=np.asarray(beta, dtype=np.float64),
+        cov=np.asarray(cov, dtype=np.float64),
+        df=effective_df(y.shape[0], k, phi, lag1_autocorrelation(x)),
+        phi=phi,
+    )
+
+
+@dataclass(frozen=True)
+class Screen:
+    """Per-candidate coefficient, standard error and p-value when added to a base model."""
+
+    beta: FloatArray
+    se: FloatArray
+    p: FloatArray
+    df: npt.NDArray[np.int64]
+
+
+def residualise(v: FloatArray, x: FloatArray) -> FloatArray:
+    """v minus its least-squares projection on the few columns of x (normal equations).
+
+    The design here is a constant and at most a handful of standardised candidates, so the
+    k × k system is well conditioned and far cheaper than a factorisation of the n × k matrix.
+    """
+    gram = np.einsum("ti,tj->ij", x, x)
+    coef, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", x, v), rcond=RCOND)
+    return np.asarray(v - np.einsum("ti,i->t", x, coef), dtype=np.float64)
+
+
+def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> Screen:
+    """Test every row of z_rows (one candidate each), one at a time, added to the base design.
+
+    For candidate j: the OLS residual of y on [base, z_j] gives the AR(order) filter φ_j
+    (Cochrane-Orcutt), y, base and z_j are whitened with it and, by Frisch-Waugh-Lovell, the
+    coefficient is β_j = z̃ᵀỹ / z̃ᵀz̃ with ỹ, z̃ the whitened series with the whitened base
+    projected out; its HAC variance is LRV(z̃ e) / (z̃ᵀz̃)².
+    """
+    m, n = z_rows.shape
+    k = base.shape[1] + 1
+    q0 = orthonormal(base)
+    y_perp = project_out(y[None, :], q0)[0]
+    z_perp = project_out(z_rows, q0)
+    zz0 = np.einsum("ji,ji->j", z_perp, z_perp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b0 = np.where(zz0 > 0, np.einsum("jt,t->j", z_perp, y_perp) / zz0, 0.0)
+    beta = np.zeros(m)
+    se = np.full(m, np.inf)
+    df = np.ones(m, dtype=np.int64)
+    rho = lag1_autocorrelation(z_rows.T)
+    for j in range(m):
+        if zz0[j] <= 0.0:
+            continue
+        phi = ar_fit(y_perp - b0[j] * z_perp[j], order)
+        ys = whiten(y, phi)
+        zs = whiten(z_rows[j], phi)
+        y_t = residualise(ys, whiten(base, phi))
+        z_t = residualise(zs, whiten(base, phi))
+        zz = dot(z_t, z_t)
+        if zz <= 0.0:
+            continue
+        beta[j] = dot(z_t, y_t) / zz
+        e = y_t - beta[j] * z_t
+        nw = ys.shape[0]
+        lrv = float(long_run_sums((z_t * e)[:, None])[0])
+        se[j] = math.sqrt(lrv * nw / max(nw - k, 1)) / zz
+        df[j] = int(effective_df(n, k, phi, rho[j : j + 1])[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.abs(beta) / se
+    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
+    p = np.where(np.isfinite(se), p, 1.0)
+    return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+
+
+def effective_samples(u: FloatArray, order: int) -> float:
+    """Samples of white noise that would estimate the mean of u as precisely.
+
+    The AR(p) long-run variance gives n γ₀ (1 − Σφ)² / σ²; for a nearly deterministic u (a
+    drift, a slow wave) both (1 − Σφ) and σ² vanish and the ratio means nothing, so the
+    AR(1) value n (1 − ρ₁)/(1 + ρ₁) (Bartlett 1935) bounds it from above.
+    """
+    n = u.shape[0]
+    centred = u - float(np.mean(u))
+    gamma0 = dot(centred, centred)
+    if gamma0 <= 0.0:
+        return float(n)
+    rho1 = min(max(dot(centred[1:], centred[:-1]) / gamma0, -0.999999), 0.999999)
+    eff = n * (1.0 - rho1) / (1.0 + rho1)
+    phi = ar_fit(centred, order)
+    if phi.shape[0]:
+        residual = whiten(centred, phi)
+        sigma2 = dot(residual, residual) / residual.shape[0]
+        if sigma2 > 0.0:
+            eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
+    return float(min(max(eff, 1.0), n))
+
+
+def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> Whiteness:
+    """Ljung-Box (1978) portmanteau test of no autocorrelation up to each lag h.
+
+    Notes
+    -----
+    Q(h) = n (n + 2) Σ_{k=1}^{h} ρ̂_k² / (n − k), which is χ²(h) under white noise. The reported
+    statistic is the Q(h) with the smallest p-value; that p-value is multiplied by the number
+    of lags (Bonferroni), so that testing several lags does not inflate the error rate.
+    """
+    u = np.asarray(x, dtype=np.float64)
+    n = u.shape[0]
+    use = tuple(sorted({int(h) for h in lags if 1 <= int(h) < n}))
+    if not use:
+        return Whiteness(lags=(), statistic=0.0, p_value=1.0, white=True)
+    centred = u - float(np.mean(u))
+    acov = autocovariances(centred[:, None], max(use))[:, 0]
+    if acov[0] <= 0.0:
+        return Whiteness(lags=use, statistic=0.0, p_value=1.0, white=True)
+    rho = acov[1:] / acov[0]
+    terms = rho**2 / (n - np.arange(1, max(use) + 1))
+    best_q, best_p = 0.0, 1.0
+    for h in use:
+        q = float(n * (n + 2) * np.sum(terms[:h]))
+        p = float(stats.chi2.sf(q, h))
+        if p < best_p or h == use[0]:
+            best_q, best_p = q, p
+    adjusted = min(1.0, best_p * len(use))
+    return Whiteness(lags=use, statistic=best_q, p_value=adjusted, white=adjusted >= alpha)
+
+
+def dominant_frequencies(u: FloatArray, dt: float) -> tuple[float, ...]:
+    """The largest local maxima (DC excluded) of the Welch (1967) spectrum, in Hz."""
+    n = u.shape[0]
+    if n < 8 or not np.any(u != u[0]):
+        return ()
+    freqs, power = sps.welch(u, fs=1.0 / dt, nperseg=min(n, 4096))
+    if power.shape[0] < 3 or float(np.max(power)) <= 0.0:
+        return ()
+    padded = np.concatenate(([-np.inf], power[1:], [-np.inf]))
+    peaks, _ = sps.find_peaks(padded)
+    peaks = peaks[(peaks >= 1) & (peaks < power.shape[0])]
+    if peaks.shape[0] == 0:
+        return ()
+    top = peaks[np.argsort(power[peaks])[::-1][:N_PEAKS]]
+    return tuple(float(freqs[i]) for i in top)

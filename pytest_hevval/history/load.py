@@ -1,0 +1,100 @@
+"""The runs ``hevval compare`` is given: ``history:latest``, ``history:previous``,
+``history:<model version>``, a history record file or a ``hevval run --json`` file."""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import did_you_mean
+from ._base import HistoryError
+from .compare import specs_of
+from .records import migrate_record
+from .store import HistoryStore
+
+__all__ = ["HISTORY_PREFIX", "load_side", "report_problems"]
+
+#: How a compare operand names a recorded run.
+HISTORY_PREFIX = "history:"
+
+
+def report_problems(store: HistoryStore) -> None:
+    """Say on stderr which records of the store could not be read."""
+    for problem in store.problems:
+        print(f"skipped {problem}", file=sys.stderr)
+
+
+def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
+    """Resolve a compare operand to (spec results, label).
+
+    ``ref`` is ``history:latest``, ``history:previous`` (the record before the latest),
+    ``history:<model version>`` (looked up in ``directory``),
+    a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
+    """
+    if ref.startswith(HISTORY_PREFIX):
+        wanted = ref[len(HISTORY_PREFIX) :]
+        store = HistoryStore(directory)
+        if wanted in ("latest", "previous"):
+            entries = store.entries()
+            position = -1 if wanted == "latest" else -2
+            record = entries[position].record if len(entries) >= -position else None
+        else:
+            record = store.find(wanted)
+        report_problems(store)
+        if record is None and wanted == "previous" and store.versions():
+            raise HistoryError(
+                f"only one readable record in {directory}",
+                key=ref,
+                hint="history:previous needs two recorded runs",
+            )
+        if record is None:
+            versions = store.versions()
+            if not versions:
+                raise HistoryError(
+                    f"no readable records in {directory}",
+                    key=ref,
+                    hint="point --dir at the history folder, or record runs first",
+                )
+            suggestion = did_you_mean(wanted, versions)
+            raise HistoryError(
+                f"no record of model version {wanted!r} in {directory}"
+                + (f"; {suggestion}" if suggestion else ""),
+                key=ref,
+                hint="recorded versions: " + ", ".join(versions[-10:]),
+            )
+        return specs_of(record), record["model_version"]
+    path = Path(ref)
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise HistoryError(
+            "no such file",
+            file=ref,
+            hint="pass a JSON file, history:latest or history:<model version>",
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HistoryError(f"cannot read: {exc}", file=ref) from None
+    except json.JSONDecodeError as exc:
+        raise HistoryError(
+            f"not valid JSON at line {exc.lineno}: {exc.msg}",
+            file=ref,
+            hint="pass the output of `hevval run --json` or a history record",
+        ) from None
+    if (
+        isinstance(document, dict)
+        and "schema_version" in document
+        and ("model_version" in document or "results" in document)
+    ):
+        record = migrate_record(document, file=ref)
+        return specs_of(record), record["model_version"]
+    if isinstance(document, dict) and isinstance(document.get("specs"), list):
+        version = document.get("model_version")
+        return specs_of(document), version if isinstance(version, str) and version else path.name
+    raise HistoryError(
+        "neither a history record nor a run result (no 'specs' list)",
+        file=ref,
+        hint="pass the output of `hevval run --json` or a history record",
+    )

@@ -1,0 +1,234 @@
+"""Per-process state of one pytest session: options, the data cache, evaluations, results.
+
+The hooks in :mod:`pytest_hevval.plugin` delegate here. Every process evaluates the specs of
+the items it runs; only the controller (the process without ``workerinput``) writes history
+and reports, once, from the results the workers' reports carry back.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from ..errors import HevvalError
+from ..options import get_option
+from ..publish import Publisher, PublishOptions, diagnosis_panels
+from ..report.diagnosis import target_payload
+from ..report.terminal import run_summary
+from ..results.spec_result import SignalResult, SpecResult
+from ..scoring.diagnosis import diagnosis_target
+from ..scoring.engine import DataCache, Evaluation
+from ..scoring.run import RunOptions, relative_to, run_specs
+from ..spec.model import Spec
+
+__all__ = ["HevvalSession"]
+
+
+# eq=False keeps identity hashing: pluggy (before 1.4) keeps registered plugins in a set.
+@dataclass(eq=False)
+class HevvalSession:
+    config: pytest.Config
+    cache: DataCache = field(default_factory=DataCache)
+    evaluations: dict[str, Evaluation | HevvalError] = field(default_factory=dict)
+    #: Specs collected by this process, by path relative to the rootdir.
+    specs: dict[str, Spec] = field(default_factory=dict)
+    #: Spec results seen by this process (the controller receives them from worker reports).
+    results: dict[str, SpecResult] = field(default_factory=dict)
+    #: Spec results already attached to a report by this process.
+    shipped: set[str] = field(default_factory=set)
+    #: Diagnosis payloads by (spec, signal), for the reports (see publish.diagnosis_panels).
+    diagnoses: dict[tuple[str, str], Mapping[str, Any]] = field(default_factory=dict)
+    #: Lines for the terminal summary (history, comparison, ratchet).
+    notes: list[str] = field(default_factory=list)
+    annotations: list[str] = field(default_factory=list)
+    _publisher: Publisher | None = None
+    _run_options: RunOptions | None = None
+
+    # -- options ----------------------------------------------------------------------------
+    @property
+    def enabled(self) -> bool:
+        return bool(get_option(self.config, ""))
+
+    @property
+    def is_controller(self) -> bool:
+        return not hasattr(self.config, "workerinput")
+
+    @property
+    def rootdir(self) -> Path:
+        return Path(str(self.config.rootpath))
+
+    def option(self, name: str) -> Any:
+        return get_option(self.config, name)
+
+    def workers(self) -> int | None:
+        value = self.option("workers")
+        if value in (None, ""):
+            return None
+        try:
+            count = int(value)
+        except ValueError:
+            raise pytest.UsageError(
+                f"--hevval-workers must be a whole number (got {value!r})"
+            ) from None
+        if count < 1:
+            raise pytest.UsageError(f"--hevval-workers must be ≥ 1 (got {count})")
+        return count
+
+    @property
+    def publisher(self) -> Publisher:
+        if self._publisher is None:
+            try:
+                self._publisher = Publisher(PublishOptions.from_options(self.option, self.rootdir))
+            except HevvalError as exc:
+                raise pytest.UsageError(str(exc)) from None
+        return self._publisher
+
+    def validate_options(self) -> None:
+        """Fail fast, before collection, on option values that cannot work."""
+        self.workers()
+        if self.option("dask") and self.config.getoption("numprocesses", None):
+            raise pytest.UsageError(
+                "--hevval-dask and -n both spread the specs over processes; use one of them"
+            )
+        self.publisher  # noqa: B018 (parses the report, compare and ratchet options)
+
+    # -- session start: the baseline --------------------------------------------------------
+    def start(self) -> None:
+        """Pick the baseline before this run records anything (every process reads it)."""
+        from ..core.kernel import cold_cache_note
+
+        kernel_note = cold_cache_note() if self.is_controller else None
+        if kernel_note is not None:
+            self.notes.append(kernel_note)
+        try:
+            self.notes.extend(self.publisher.start(controller=self.is_controller))
+        except HevvalError as exc:
+            raise pytest.UsageError(f"hevval: {exc}") from None
+
+    # -- evaluation -------------------------------------------------------------------------
+    def register(self, spec: Spec) -> None:
+        self.specs[self.relative(spec.key)] = spec
+        self.cache.declare(spec.reference, spec.reference_columns())
+        self.cache.declare(spec.model, spec.model_columns())
+
+    def run_options(self) -> RunOptions:
+        """The scoring settings of this run, read from the options once."""
+        if self._run_options is None:
+            self._run_options = RunOptions(
+                rootdir=self.rootdir,
+                figures="html" in self.publisher.formats,
+                workers=self.workers(),
+                dask=str(self.option("dask")) if self.option("dask") else None,
+                data_hash=str(self.option("hash")),
+                intervals=not self.option("no-intervals"),
+                diagnose=str(self.option("diagnose")),
+            )
+            self.cache.data_hash = self._run_options.data_hash
+        return self._run_options
+
+    def prefetch_on_dask(self) -> None:
+        """Score every collected spec on the Dask cluster at once, before the items run."""
+        options = self.run_options()
+        if not options.dask or not self.specs:
+            return
+        specs = list(self.specs.values())
+        try:
+            outcomes = run_specs(specs, options)
+        except HevvalError as exc:
+            raise pytest.UsageError(f"--hevval-dask={options.dask}: {exc}") from None
+        for spec, outcome in zip(specs, outcomes, strict=True):
+            self.evaluations[spec.key] = outcome
+
+    def evaluate(self, spec: Spec) -> Evaluation:
+        """Evaluate a spec once per process; later items of the same spec reuse it."""
+        key = spec.key
+        options = self.run_options()
+        if key not in self.evaluations and options.dask:
+            self.prefetch_on_dask()
+        if key not in self.evaluations:
+            (self.evaluations[key],) = run_specs([spec], options, cache=self.cache)
+        outcome = self.evaluations[key]
+        if isinstance(outcome, HevvalError):
+            raise outcome
+        return outcome
+
+    def diagnosis_for(
+        self, evaluation: Evaluation | None, signal: SignalResult
+    ) -> Mapping[str, Any] | None:
+        """The diagnosis of the signal where this signal's error appears, if enabled."""
+        mode = self.option("diagnose")
+        if evaluation is None or mode == "off" or (mode == "failed" and signal.passed):
+            return None
+        target = diagnosis_target(signal)
+        found = evaluation.diagnoses.get(target)
+        if found is None:
+            return None
+        return target_payload(evaluation.result.spec, target, found)
+
+    def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
+        """Rules of --hevval-compare-fail this signal (or Φ, for None) breaks vs the baseline."""
+        return self.publisher.regressions_for(result, signal)
+
+    # -- results crossing from workers ------------------------------------------------------
+    def ship(self, result: SpecResult) -> dict[str, Any] | None:
+        """The spec's result as JSON data the first time a worker reports on the spec; the
+        controller (no xdist) keeps the typed result itself."""
+        if result.spec in self.shipped:
+            return None
+        self.shipped.add(result.spec)
+        if self.is_controller:
+            self.results[result.spec] = result
+            return None
+        return result.to_dict()
+
+    def keep_diagnosis(self, payload: Mapping[str, Any]) -> Mapping[str, Any] | None:
+        """Keep a diagnosis for the reports; JSON data to ship when this is a worker."""
+        if self.is_controller:
+            self.diagnoses.update(diagnosis_panels([payload]))
+            return None
+        return payload
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        payload = getattr(report, "hevval_spec", None)
+        if payload is not None:
+            self._receive(payload)
+        diagnosis = getattr(report, "hevval_diagnosis", None)
+        if diagnosis is not None:
+            self.diagnoses.update(diagnosis_panels([diagnosis]))
+        for recording in getattr(report, "hevval_campaign", None) or ():
+            self._receive(recording)
+
+    def _receive(self, payload: Mapping[str, Any]) -> None:
+        self.results[payload["spec"]] = SpecResult.from_dict(payload)
+
+    def spec_results(self) -> list[SpecResult]:
+        return [self.results[k] for k in sorted(self.results)]
+
+    def relative(self, path: str) -> str:
+        return relative_to(self.rootdir, path)
+
+    # -- session end: controller only -------------------------------------------------------
+    def finish(self, session: pytest.Session) -> None:
+        """Write reports, the comparison, the ratchet and the history record, once."""
+        published = self.publisher.publish(self.spec_results(), self.specs, self.diagnoses)
+        self.notes.extend(published.notes)
+        self.annotations.extend(published.annotations)
+        if published.failed and session.exitstatus == pytest.ExitCode.OK:
+            session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+    def summarise(self, terminalreporter: Any) -> None:
+        results = self.spec_results()
+        if not results and not self.notes and not self.annotations:
+            return
+        for line in self.annotations:
+            terminalreporter.write_line(line)
+        terminalreporter.write_sep("=", "hevval validation summary")
+        for line in run_summary(results, details=bool(self.option("details"))):
+            terminalreporter.write_line(line)
+        for note in self.notes:
+            for line in note.splitlines():
+                terminalreporter.write_line(line)

@@ -1,0 +1,311 @@
+"""The end of the pipeline, once for both front ends: results → everything a run leaves behind.
+
+``pytest --hevval`` and ``hevval run`` score specs (:mod:`pytest_hevval.scoring`), then hand
+the typed results here: each signal gets its diagnosis and its history trend, the reports are
+written, the run is compared with its baseline, the thresholds are ratcheted and the run is
+recorded. What comes back are lines for the front end to print and whether a step failed.
+Results become JSON data here, where they are written, and nowhere before.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from .errors import HevvalError
+from .results.spec_result import SpecResult
+from .spec.model import Spec
+
+__all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
+
+#: The title of every report a run writes.
+REPORT_TITLE = "hevval validation report"
+
+
+@dataclass(frozen=True)
+class PublishOptions:
+    """What a run leaves behind; read once from pytest's options or the command line."""
+
+    #: The project root: files are named relative to it in the notes.
+    rootdir: Path
+    #: Report formats, comma-separated (``html,json,md``); empty for none.
+    report: str = ""
+    report_dir: Path = Path(".hevval/report")
+    history_dir: Path = Path(".hevval/history")
+    record: bool = True
+    #: The model version as given (``None``: from the environment or git).
+    model_version: str | None = None
+    #: The baseline to compare with (``latest`` or a model version), or ``None``.
+    compare: str | None = None
+    compare_fail: str | None = None
+    create_baseline: bool = False
+    #: The ratchet margin as given, or ``None`` for no ratchet.
+    ratchet: str | None = None
+
+    @classmethod
+    def from_options(cls, option: Callable[[str], Any], rootdir: Path) -> PublishOptions:
+        """From an option getter that takes the names of :data:`~pytest_hevval.options.OPTIONS`
+        (pytest's ``--hevval-NAME`` and ``hevval run --NAME`` share them)."""
+
+        def text(name: str) -> str | None:
+            value = option(name)
+            return None if value in (None, "") else str(value)
+
+        return cls(
+            rootdir=rootdir,
+            report=text("report") or "",
+            report_dir=rootdir / str(option("report-dir")),
+            history_dir=rootdir / str(option("history-dir")),
+            record=not option("no-history"),
+            model_version=text("model-version"),
+            compare=text("compare"),
+            compare_fail=text("compare-fail"),
+            create_baseline=bool(option("create-baseline")),
+            ratchet=text("ratchet"),
+        )
+
+
+@dataclass
+class Publication:
+    """What publishing said and whether one of its steps failed the run."""
+
+    notes: list[str] = field(default_factory=list)
+    #: GitHub workflow commands, printed each on its own line before the summary.
+    annotations: list[str] = field(default_factory=list)
+    failed: bool = False
+
+
+class Publisher:
+    """Publishes one run; :meth:`start` before scoring, :meth:`publish` after.
+
+    Option values that cannot work raise :class:`~pytest_hevval.errors.HevvalError` at
+    construction, before anything is scored.
+    """
+
+    def __init__(self, options: PublishOptions) -> None:
+        from .history import parse_compare_fail, parse_margin
+        from .report import parse_formats
+
+        self.options = options
+        self.formats = parse_formats(options.report) if options.report else set()
+        self.rules = parse_compare_fail(options.compare_fail) if options.compare_fail else []
+        self.margin = parse_margin(options.ratchet) if options.ratchet else None
+        self.baseline: dict[str, Any] | None = None
+        self.model_version = "unknown"
+        self.started = datetime.now(timezone.utc)
+
+    @property
+    def wants_comparison(self) -> bool:
+        return bool(self.options.compare or self.options.compare_fail)
+
+    def start(self, *, controller: bool = True) -> list[str]:
+        """Name the model version and pick the baseline before this run records anything.
+
+        Every process of a run reads the baseline (items judge regressions against it); only
+        the ``controller`` decides what a missing one means, and raises when it fails the run.
+        """
+        from .history import HistoryStore, is_ci, missing_baseline, resolve_model_version
+
+        self.model_version = resolve_model_version(
+            self.options.model_version, os.environ, self.options.rootdir
+        )
+        if not self.wants_comparison:
+            return []
+        wanted = self.options.compare or "latest"
+        store = HistoryStore(self.options.history_dir)
+        self.baseline = store.latest() if wanted == "latest" else store.find(wanted)
+        if self.baseline is not None or not controller:
+            return []
+        decision = missing_baseline(
+            ci=is_ci(os.environ),
+            create_baseline=self.options.create_baseline,
+            directory=self.options.history_dir,
+            wanted=wanted,
+        )
+        if decision.fails:
+            raise HevvalError(decision.message)
+        return [decision.message]
+
+    def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
+        """Rules of ``compare-fail`` this signal (or Φ, for None) breaks against the baseline."""
+        if self.baseline is None or not self.rules:
+            return []
+        from .history import compare, regressions
+
+        comparison = compare([result.to_dict()], self.baseline)
+        return [
+            str(found)
+            for found in regressions(comparison, self.rules)
+            if found.signal == signal and (signal is not None or found.field == "phi")
+        ]
+
+    def publish(
+        self,
+        results: Sequence[SpecResult],
+        specs: Mapping[str, Spec],
+        diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
+    ) -> Publication:
+        """Reports, comparison, ratchet and history record of a run's results, in that order.
+
+        ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
+        (spec, signal), as :func:`diagnosis_panels` gives them.
+        """
+        out = Publication()
+        if not results:
+            return out
+        dicts = [result.to_dict() for result in results]
+        self._write_reports(dicts, diagnoses, out)
+        self._compare(dicts, out)
+        self._ratchet(dicts, specs, out)
+        self._record(dicts, out)
+        return out
+
+    def _relative(self, path: Path | str) -> str:
+        from .scoring.run import relative_to
+
+        return relative_to(self.options.rootdir, str(path))
+
+    def _write_reports(
+        self,
+        dicts: list[dict[str, Any]],
+        diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
+        out: Publication,
+    ) -> None:
+        if self.formats:
+            from .report import write_reports
+
+            try:
+                written = write_reports(
+                    self._decorate(dicts, diagnoses),
+                    self.formats,
+                    self.options.report_dir,
+                    title=REPORT_TITLE,
+                )
+            except HevvalError as exc:
+                out.notes.append(f"report: error: {exc}")
+                out.failed = True
+            else:
+                out.notes.extend(f"report: {self._relative(p)}" for p in written)
+        if os.environ.get("GITHUB_ACTIONS") == "true":
+            from .report import github_annotations
+
+            out.annotations.extend(github_annotations(dicts, self.options.rootdir))
+
+    def _decorate(
+        self,
+        dicts: list[dict[str, Any]],
+        diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
+    ) -> list[dict[str, Any]]:
+        """Report copies of the results with each signal's diagnosis and history trend."""
+        trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        if self.options.record:
+            from .history import HistoryStore
+
+            for record in HistoryStore(self.options.history_dir).records():
+                version = str(record.get("model_version", "?"))
+                for spec in record.get("specs", []):
+                    for signal in spec.get("signals", []):
+                        trends.setdefault((spec.get("spec", ""), signal["path"]), []).append(
+                            {
+                                "version": version,
+                                "phi": spec.get("phi"),
+                                "lambdas": signal.get("lambdas"),
+                            }
+                        )
+        decorated = []
+        for result in dicts:
+            signals = []
+            for signal in result["signals"]:
+                item = dict(signal)
+                found = diagnoses.get((result["spec"], signal["path"]))
+                if found is None and signal.get("origins"):
+                    found = diagnoses.get((result["spec"], signal["origins"][0]))
+                if found is not None:
+                    item["diagnosis"] = dict(found)
+                history = trends.get((result["spec"], signal["path"]))
+                if history:
+                    item["history"] = [
+                        *history,
+                        {
+                            "version": self.model_version,
+                            "phi": result["phi"],
+                            "lambdas": signal["lambdas"],
+                        },
+                    ]
+                signals.append(item)
+            decorated.append({**result, "signals": signals})
+        return decorated
+
+    def _compare(self, dicts: list[dict[str, Any]], out: Publication) -> None:
+        if self.baseline is None or not self.options.compare:
+            return
+        from .history import compare, comparison_table, regressions
+        from .history.compare import campaign_change_lines
+
+        comparison = compare(dicts, self.baseline, after_label=self.model_version)
+        found = regressions(comparison, self.rules) if self.rules else None
+        out.notes.append(comparison_table(comparison, found))
+        out.notes.extend(campaign_change_lines(comparison))
+
+    def _ratchet(
+        self, dicts: list[dict[str, Any]], specs: Mapping[str, Spec], out: Publication
+    ) -> None:
+        if self.margin is None:
+            return
+        from .history import ratchet_spec
+
+        for result in dicts:
+            spec = specs.get(result["spec"])
+            if spec is None:
+                continue
+            if spec.campaign is not None:
+                # One sidecar per spec file cannot hold each recording's own thresholds.
+                note = f"ratchet: {self._relative(spec.path)}: a campaign, not ratcheted"
+                if note not in out.notes:
+                    out.notes.append(note)
+                continue
+            written = {
+                "/".join(path): {**spec.thresholds, **node.thresholds}
+                for _, path, node in spec.walk()
+            }
+            try:
+                outcome = ratchet_spec(
+                    spec.path,
+                    result,
+                    written,
+                    margin=self.margin,
+                    model_version=self.model_version,
+                    created_utc=self.started,
+                )
+            except HevvalError as exc:
+                out.notes.append(f"ratchet: error: {exc}")
+                out.failed = True
+                continue
+            out.notes.append(outcome.summary())
+
+    def _record(self, dicts: list[dict[str, Any]], out: Publication) -> None:
+        if not self.options.record:
+            return
+        from .history import HistoryStore, make_record
+
+        try:
+            path = HistoryStore(self.options.history_dir).append(
+                make_record(dicts, model_version=self.model_version, started_utc=self.started)
+            )
+        except (HevvalError, OSError) as exc:
+            out.notes.append(f"history: error: the run was not recorded: {exc}")
+            out.failed = True
+            return
+        out.notes.append(f"history: recorded {self.model_version} in {self._relative(path)}")
+
+
+def diagnosis_panels(
+    payloads: Iterable[Mapping[str, Any]],
+) -> dict[tuple[str, str], Mapping[str, Any]]:
+    """Diagnosis payloads (see :func:`pytest_hevval.report.diagnosis.payload`) keyed by the
+    (spec, signal) a report shows them at."""
+    return {(str(p.get("spec", "")), str(p["signal"])): p for p in payloads}

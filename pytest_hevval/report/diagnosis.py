@@ -1,0 +1,310 @@
+"""The diagnosis in words: the one-line summary, each effect in physical units, and the
+full description ``hevval diagnose`` prints. The numbers come from
+:mod:`pytest_hevval.core.diagnosis`; only sentences are made here.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ..core.diagnosis import (
+    GENERIC_KINDS,
+    MIN_EXPLAINED_INCREASE,
+    MIN_SHARE,
+    SLOW_SCALE_S,
+    Diagnosis,
+    Effect,
+    Response,
+)
+from ..core.registry import get_characteristic
+from ..errors import HevvalError
+from ..results.diagnosis import SignalDiagnosis, candidate_unit
+
+__all__ = ["SUMMARY_NAMES", "describe", "effect_text", "payload", "summary", "target_payload"]
+
+EXACT_MATCH = "the model matches the reference exactly: the residual is zero"
+
+
+def payload(found: SignalDiagnosis) -> dict[str, Any]:
+    """The JSON form of a diagnosis with its sentences: the summary and each effect's text."""
+    out = found.to_dict()
+    out["summary"] = summary(found)
+    name = found.signal.rsplit("/", 1)[-1]
+    for effect in out["effects"]:
+        effect["text"] = effect_text(effect, name, found.unit)
+    return out
+
+
+def target_payload(spec: str, target: str, found: SignalDiagnosis | HevvalError) -> dict[str, Any]:
+    """The payload of a failing signal's diagnosis, or of why it could not be diagnosed."""
+    if isinstance(found, HevvalError):
+        return {"spec": spec, "signal": target, "summary": f"not diagnosed: {found}"}
+    return payload(found)
+
+
+def summary(found: SignalDiagnosis | Diagnosis) -> str:
+    """One line: the relevant effects with their shares, what else is worth a word."""
+    if isinstance(found, SignalDiagnosis):
+        text = summary(found.diagnosis)
+        if found.asked is not None and found.asked != found.signal:
+            return f"(in {found.signal}, below {found.asked}) {text}"
+        return text
+    if found.exact_match:
+        return EXACT_MATCH
+    return _summary(
+        found.effects,
+        found.responses,
+        lag_s=found.lag_s,
+        timing_significant=found.timing_significant,
+        remaining=found.remaining,
+    )
+
+
+def _format_pct(fraction: float) -> str:
+    return f"{100.0 * fraction:.0f} %"
+
+
+#: The summary names at most this many effects or channels per list; the full output and the
+#: JSON hold the rest.
+SUMMARY_NAMES = 3
+
+
+def _names_text(names: Sequence[str]) -> str:
+    """At most :data:`SUMMARY_NAMES` names, the rest counted; trailing spaces shown as such,
+    so that two logged columns that differ only by one stay apart."""
+    shown = [repr(n) if n != n.strip() else n for n in names[:SUMMARY_NAMES]]
+    rest = len(names) - len(shown)
+    return ", ".join(shown) + (f" and {rest} more" if rest > 0 else "")
+
+
+def _effect_phrase(e: Effect) -> str:
+    """One effect, with the numbers every output shows for it: its share of the residual and
+    its coefficient with its interval."""
+    share = f"explains {_format_pct(e.share)} of the residual"
+    low, high = e.interval
+    if e.kind == "gain":
+        return (
+            f"gain error {100.0 * e.coefficient:+.1f} % [{100.0 * low:+.1f}, {100.0 * high:+.1f}]"
+            f" {share}"
+        )
+    if e.kind == "offset":
+        return f"offset {e.coefficient:+.3g} [{low:.3g}, {high:.3g}] {share}"
+    if e.kind == "lag":
+        direction = "lags" if e.coefficient > 0 else "leads"
+        # The interval of the delay in the direction named: "leads by 0.9 s [0.69, 1.1]".
+        if e.coefficient < 0:
+            low, high = -high, -low
+        return (
+            f"the simulation {direction} the reference by {abs(e.coefficient):.2g} s "
+            f"[{low:.3g}, {high:.3g}], which {share}"
+        )
+    group = f" (one effect with {_names_text(e.members)})" if e.members else ""
+    return f"{e.name}{group} {share} (coef {e.coefficient:+.3g} [{low:.3g}, {high:.3g}])"
+
+
+def _summary(
+    effects: Sequence[Effect],
+    echoes: Sequence[Response],
+    *,
+    lag_s: float,
+    timing_significant: bool,
+    remaining: Any,
+) -> str:
+    parts = [_effect_phrase(e) for e in effects if e.relevant]
+    if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
+        direction = "lags" if lag_s < 0 else "leads"
+        parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
+    stand_ins = [e for e in effects if e.stands_in_for]
+    minor = [e.name for e in effects if e.significant and not e.relevant and not e.stands_in_for]
+    if not parts:
+        text = "no significant effect found: the residual is indistinguishable from noise"
+        if minor or stand_ins:
+            text = "no relevant effect found"
+        elif not remaining.white:
+            text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
+        parts.append(text)
+    elif not remaining.white:
+        parts.append("the remaining residual is still autocorrelated")
+    for e in stand_ins:
+        parts.append(f"{e.name} could stand in for {_names_text(e.stands_in_for)} on this record")
+    if minor:
+        parts.append("minor: " + _names_text(minor))
+    # Only the echoes that would have been offered as an effect are worth a word here.
+    loud = [e.name for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    if loud:
+        parts.append(f"moves with the measured signal, probably a consequence: {_names_text(loud)}")
+    return "; ".join(parts)
+
+
+def effect_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
+    """One effect in physical units with its interval, e.g. ``+0.94 kW of P_batt per kW of
+    Heating Power CAN [kW] [0.82, 1.06]``."""
+    coef = float(effect["coefficient"])
+    low, high = (float(v) for v in effect["interval"])
+    unit_text = f" {unit}" if unit else ""
+    kind = str(effect["kind"])
+    if kind == "offset":
+        return f"offset {coef:+.3g}{unit_text} of {signal} [{low:.3g}, {high:.3g}]"
+    if kind == "gain":
+        return f"gain error {100 * coef:+.2f} % [{100 * low:.2f}, {100 * high:.2f}]"
+    if kind == "lag":
+        late = "late" if coef > 0 else "early"
+        if coef < 0:
+            # The interval of the delay in the direction named.
+            low, high = -high, -low
+        return f"the simulation is {abs(coef):.3g} s {late} [{low:.3g}, {high:.3g}] s"
+    per = candidate_unit(str(effect["name"]), kind)
+    per_text = f"{per} of " if per else "unit of "
+    return (
+        f"{coef:+.3g}{unit_text} of {signal} per {per_text}{effect['name']} [{low:.3g}, {high:.3g}]"
+    )
+
+
+def _lambda_change(before: Mapping[str, Any], after: Mapping[str, Any]) -> str:
+    return ", ".join(
+        f"{get_characteristic(name).symbol} {float(before[name]):.4f} → {float(after[name]):.4f}"
+        for name in after
+        if name in before
+    )
+
+
+def _label(name: str) -> str:
+    """A channel's name, quoted when it has surrounding spaces (two logged columns can differ
+    only by a trailing space)."""
+    return repr(name) if name != name.strip() else name
+
+
+def _share_text(share: float) -> str:
+    return f"{100 * share:.1f} %"
+
+
+def _describe_effects(found: Mapping[str, Any]) -> list[str]:
+    effects = found.get("effects") or []
+    unit = f" {found['unit']}" if found.get("unit") else ""
+    share = float(found.get("min_share", MIN_SHARE))
+    before = found.get("lambdas") or {}
+    relevant = [e for e in effects if e["relevant"]]
+    stand_ins = [e for e in effects if e.get("stands_in_for")]
+    minor = [
+        e for e in effects if e["significant"] and not e["relevant"] and not e.get("stands_in_for")
+    ]
+    lines: list[str] = []
+    if relevant:
+        lines.append(
+            f"  effects (significant, each explaining at least {100 * share:.0f} % of the "
+            "residual), largest first; shares add up to what they explain together:"
+        )
+    for i, e in enumerate(relevant, start=1):
+        mean = float(e.get("offset_explained") or 0.0)
+        carries = (
+            f"; carries {mean:+.3g}{unit} of the mean shift"
+            if e["kind"] not in GENERIC_KINDS and abs(mean) > 0
+            else ""
+        )
+        scale = float(e.get("time_scale_s") or 0.0)
+        tested = f" (tested on {scale:g} s means)" if scale >= SLOW_SCALE_S else ""
+        lines.append(
+            f"   {i}. {e['text']}: explains {100 * e['share']:.1f} % of the residual"
+            f"{carries}{tested}"
+        )
+        if e.get("members"):
+            lines.append(
+                "      one effect, also measured by: " + ", ".join(map(_label, e["members"]))
+            )
+        if e.get("interchangeable"):
+            lines.append(
+                "      on this record, interchangeable with: " + ", ".join(e["interchangeable"])
+            )
+        if e.get("predicted") and before:
+            lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
+    for e in stand_ins:
+        instead = ", ".join(e["stands_in_for"])
+        lines.append(
+            f"  could stand in for {instead} on this record, not a finding of its own: "
+            f"{e['text']} ({_share_text(e['share'])})"
+        )
+    if minor:
+        lines.append(
+            f"  minor (significant, but under {100 * share:.0f} % each or not helping alone): "
+            + "; ".join(f"{e['text']} ({_share_text(e['share'])})" for e in minor)
+        )
+    if len(relevant) > 1 and found.get("predicted") and before:
+        lines.append(
+            f"  after adding all {len(relevant)}: {_lambda_change(before, found['predicted'])}"
+        )
+    for r in found.get("responses") or []:
+        how = (
+            "declared a response in the spec"
+            if r["reason"] == "declared"
+            else f"the measured signal explains {100 * r['measured_r2']:.0f} % of it, the "
+            f"residual adds {100 * r['residual_r2']:.1f} %"
+        )
+        lines.append(
+            f"  response: {r['name']} moves with {found['signal'].rsplit('/', 1)[-1]}, "
+            f"probably a consequence ({how}); not offered as a cause"
+        )
+    where = found.get("localisation")
+    if where and where.get("windows"):
+        spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in where["spans_s"][:3])
+        more = " …" if len(where["spans_s"]) > 3 else ""
+        text = (
+            f"  where: {100 * where['error_share']:.0f} % of the squared residual lies in "
+            f"{100 * where['time_share']:.0f} % of the time, in {where['windows']} window(s) of "
+            f"{where['window_s']:g} s: {spans}{more}"
+        )
+        if relevant and relevant[0].get("hot_share") is not None:
+            first = relevant[0]
+            hot = 100 * first["hot_share"]
+            text += (
+                f"; {first['name']} removes {hot:.0f} % of it there"
+                if hot >= 0
+                else f"; {first['name']} does not explain it there (it would add {-hot:.0f} %)"
+            )
+        lines.append(text)
+    return lines
+
+
+def describe(found: Mapping[str, Any]) -> list[str]:
+    """The lines ``hevval diagnose`` prints for one diagnosis, from its :func:`payload`."""
+    unit = f" {found['unit']}" if found.get("unit") else ""
+    origin = found["origin"]
+    lines = [
+        f"{found['signal']}: the error appears at {origin['path']} (level {origin['level']})",
+        f"  {found['summary']}",
+        f"  timing: lag {found['lag_s']:+.3g} s"
+        + (" (significant)" if found.get("timing_significant") else ""),
+        # The headline fit is the simulated signal alone against the reference; the effects
+        # below are fitted together, so their gain and offset can differ.
+        "  before any effect, reference ≈ gain · simulated + offset:",
+        f"    gain {found['gain']:.4g} [{found['gain_interval'][0]:.4g}, "
+        f"{found['gain_interval'][1]:.4g}]"
+        + (" (significant)" if found["gain_significant"] else ""),
+        f"    offset {found['offset']:+.4g}{unit} [{found['offset_interval'][0]:.4g}, "
+        f"{found['offset_interval'][1]:.4g}]"
+        + (" (significant)" if found["offset_significant"] else ""),
+    ]
+    candidates = found.get("candidates", [])
+    if candidates:
+        lines.append("  candidates (best first): explained alone / jointly, coefficient [95 % CI]")
+        for item in candidates[:10]:
+            joint = item.get("joint_explained_fraction")
+            joint_text = "   -  " if joint is None else f"{100 * joint:5.1f}%"
+            interval = item.get("interval") or [math.nan, math.nan]
+            mark = "*" if item.get("significant") else " "
+            lines.append(
+                f"   {mark} {item['name']} ({item['kind']}): "
+                f"{100 * item['explained_fraction']:5.1f}% / {joint_text}, "
+                f"{item['coefficient']:.4g} [{interval[0]:.4g}, {interval[1]:.4g}]"
+            )
+    lines.extend(_describe_effects(found))
+    remaining = found.get("remaining") or {}
+    if remaining:
+        verdict = "white" if remaining.get("white") else "not white"
+        lines.append(
+            f"  what remains: Ljung-Box lags {remaining.get('lags')}: p = "
+            f"{remaining.get('p_value', math.nan):.3g} ({verdict}); dominant frequencies "
+            + ", ".join(f"{f:.3g} Hz" for f in found.get("dominant_frequencies_hz", []))
+        )
+    return lines

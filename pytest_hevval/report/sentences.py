@@ -1,0 +1,129 @@
+"""Results in sentences: a missed threshold in physical units, a window or cell gate missed,
+where the error lies. The terminal, the failure reports and the HTML report all say it so."""
+
+from __future__ import annotations
+
+from ..core.measurement import ERROR_CHARACTERISTICS
+from ..core.registry import describe
+from ..core.uncertainty import value_text
+from ..defaults import UNCERTAINTY_SIGMA
+from ..results.local import NAMED_GROUPS, LocalFailure
+from ..results.measurement import ErrorCheck
+from ..results.spec_result import Failure, SignalResult
+
+__all__ = [
+    "failure_lines",
+    "failure_sentence",
+    "failure_text",
+    "local_failure_text",
+    "where_lines",
+    "within_uncertainty_lines",
+]
+
+
+def _quantity(value: float, unit: str | None) -> str:
+    return f"{value:.3g}" + (f" {unit}" if unit else "")
+
+
+def failure_sentence(
+    title: str,
+    characteristic: str,
+    value: float,
+    threshold: float,
+    check: ErrorCheck,
+    unit: str | None,
+) -> str:
+    """``λ4 RMS = 0.9412 < 0.95: RMS 1.23 kW is 0.21 kW over its limit 1.02 kW; …``.
+
+    ``title`` is the characteristic's heading (``λ4 RMS``), ``characteristic`` its name.
+    """
+    _, label = ERROR_CHARACTERISTICS.get(characteristic, ("", "error"))
+    text = (
+        f"{title} = {value:.4f} < {threshold:.4g}: {label} {_quantity(check.error, unit)} is "
+        f"{_quantity(check.margin, unit)} over its limit {_quantity(check.limit, unit)}"
+    )
+    if check.uncertainty is None:
+        return text
+    sigma = check.sigma if check.sigma is not None else UNCERTAINTY_SIGMA
+    verdict = "within" if check.within else "beyond"
+    return (
+        f"{text}; measurement uncertainty ±{_quantity(check.uncertainty, unit)} ({sigma:g}σ): "
+        f"{verdict} measurement uncertainty"
+    )
+
+
+def failure_text(failure: Failure, unit: str | None) -> str | None:
+    """The miss in the signal's unit and against the measurement uncertainty, if known."""
+    if failure.check is None:
+        return None
+    return failure_sentence(
+        describe(failure.characteristic).title,
+        failure.characteristic,
+        failure.value,
+        failure.threshold,
+        failure.check,
+        unit,
+    )
+
+
+def local_failure_text(failure: LocalFailure, title: str) -> str:
+    """A window or cell gate missed: how many groups, how badly, and the worst by name."""
+    noun = "windows" if failure.scope == "windows" else "cells"
+    named = ", ".join(failure.where[:NAMED_GROUPS])
+    more = (
+        f" (+{len(failure.where) - NAMED_GROUPS} more)" if len(failure.where) > NAMED_GROUPS else ""
+    )
+    need = "every one" if failure.required_share >= 1.0 else f"{failure.required_share:.0%} needed"
+    return (
+        f"{title} ≥ {failure.threshold:.4g} missed in {len(failure.where)} of {failure.judged} "
+        f"{noun} ({failure.passed}/{failure.judged} pass, {need}): worst {failure.value:.4f}; "
+        f"{named}{more}"
+    )
+
+
+def failure_lines(signal: SignalResult) -> list[str]:
+    """Each characteristic below its threshold, with the physical error behind it."""
+    errors = signal.characteristics.as_dict()
+    lines = []
+    for failure in signal.failures:
+        measured = failure_text(failure, signal.unit)
+        if measured is not None and failure.check and failure.check.uncertainty is not None:
+            lines.append(measured)
+            continue
+        characteristic = describe(failure.characteristic)
+        meaning = characteristic.explain(errors, signal.unit)
+        parts = signal.components.get(failure.characteristic)
+        if not meaning and parts:
+            meaning = ", ".join(f"{k} {v:.4g}" for k, v in parts.items())
+        value = value_text(failure.value, signal.intervals.get(failure.characteristic))
+        lines.append(
+            f"{characteristic.title} = {value} < {failure.threshold:.4g}"
+            + (f" ({meaning})" if meaning else "")
+        )
+    for local in signal.local_failures:
+        lines.append(local_failure_text(local, describe(local.characteristic).title))
+    return lines
+
+
+def within_uncertainty_lines(signal: SignalResult) -> list[str]:
+    """Thresholds missed within the measurement uncertainty that pass by the spec's choice."""
+    return [
+        f"{failure_text(f, signal.unit) or describe(f.characteristic).title}; passes by "
+        "measurement.within_uncertainty: pass"
+        for f in signal.within_uncertainty
+    ]
+
+
+def where_lines(signal: SignalResult) -> list[str]:
+    """Where and when the error lies: its concentration and the worst windows."""
+    if signal.local is None:
+        return []
+    lines = [f"where: {signal.local.concentration.get('sentence', '')}"]
+    worst = signal.local.worst_windows()
+    if worst:
+        windows = signal.local.windows
+        lines.append(
+            "worst windows: "
+            + ", ".join(f"{windows.labels[k]} ({windows.error_share[k]:.0%} of Σe²)" for k in worst)
+        )
+    return lines

@@ -1,0 +1,296 @@
+"""Residual diagnosis of a scored spec: from an evaluation to candidate effects and back.
+
+The maths lives in :mod:`pytest_hevval.core.diagnosis`; this module gathers the candidates —
+the spec's declared ``candidates:`` expressions, every measured reference channel the spec
+does not use, and the time derivative of each — on the aligned grid, and diagnoses a signal
+(or the level below it, when that one names the cause).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+import numpy.typing as npt
+
+from ..core.diagnosis import (
+    GENERIC_KINDS,
+    MIN_SHARE,
+    Candidate,
+    Diagnosis,
+    diagnose_residual,
+)
+from ..core.registry import FUSED_CHARACTERISTICS
+from ..data.record import Record
+from ..errors import DataError, HevvalError
+from ..results.diagnosis import SignalDiagnosis, candidate_unit
+from ..results.spec_result import SignalResult
+from .engine import Evaluation
+
+__all__ = [
+    "DIAGNOSE_MODES",
+    "candidates_for",
+    "derivative_name",
+    "diagnose_failures",
+    "diagnose_origin",
+    "diagnose_pair",
+    "diagnose_signal",
+    "diagnosis_target",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Channels beyond this many are not tried automatically (the spec's own come first).
+MAX_CHANNELS = 50
+#: Window of the centred mean applied to a channel before its derivative is taken.
+DERIVATIVE_SMOOTHING_S = 1.0
+
+
+def _smoothed(values: FloatArray, window: int) -> FloatArray:
+    if window <= 1:
+        return values
+    from scipy.ndimage import uniform_filter1d
+
+    return np.asarray(uniform_filter1d(values, size=window, mode="nearest"), dtype=np.float64)
+
+
+def _full_reference(evaluation: Evaluation) -> Record:
+    """Every numeric channel of the reference file (read once more, only for diagnosis)."""
+    cached = getattr(evaluation, "_full_reference", None)
+    if isinstance(cached, Record):
+        return cached
+    spec = evaluation.spec
+    assert evaluation.aligned is not None
+    record = evaluation.aligned.reference
+    if spec.reference.kind == "file" and spec.reference.path:
+        from ..data.readers import read_record
+
+        # If the whole file cannot be read, diagnose with the channels already read.
+        with contextlib.suppress(DataError):
+            record = read_record(str(spec.reference.path), None, spec.reference.options)
+    evaluation._full_reference = record  # type: ignore[attr-defined]
+    return record
+
+
+def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Candidate]:
+    """Declared expressions, then unused channels and their derivatives, on the grid."""
+    spec = evaluation.spec
+    aligned = evaluation.aligned
+    if aligned is None:
+        return []
+    time = aligned.time
+    keep = None if aligned.gap_mask is None else ~aligned.gap_mask
+    found: list[Candidate] = []
+
+    def add(name: str, kind: str, values: FloatArray) -> None:
+        # Scored arrays drop the grid points in gaps; candidates must drop the same ones.
+        if keep is not None:
+            values = values[keep]
+        if np.all(np.isfinite(values)) and np.ptp(values) > 0:
+            found.append(Candidate(name, kind, values))  # type: ignore[arg-type]
+
+    for name, expression in spec.candidates.items():
+        columns = aligned.columns("reference", expression.columns, "linear")
+        try:
+            add(name, "declared", np.asarray(expression.evaluate(columns, time), dtype=float))
+        except HevvalError:
+            continue
+    if not channels:
+        return found
+    used: set[str] = set()
+    for _, _, node in spec.walk():
+        used.update(node.ref.columns)
+        if node.ref.is_column:
+            used.add(node.ref.source)
+    record = _full_reference(evaluation)
+    # Logged channels are quantised (GPS elevation in centimetre steps) or held between CAN
+    # frames; differentiated sample by sample they are mostly steps. A centred 1 s mean first
+    # keeps the slow slope the model may lack.
+    smoothing = max(1, round(DERIVATIVE_SMOOTHING_S / aligned.grid.dt))
+    time_name = spec.reference.options.time
+    names = [
+        n
+        for n in (record.numeric or tuple(record.channels))
+        if n not in used and n != time_name and n in record.channels
+    ][:MAX_CHANNELS]
+    for name in names:
+        channel = record.channels[name]
+        values = np.asarray(channel.values, dtype=np.float64)
+        ok = np.isfinite(values)
+        if ok.sum() < 3:
+            continue
+        on_grid = np.interp(time, channel.time[ok], values[ok])
+        add(name, "channel", on_grid)
+        add(derivative_name(name), "derivative", np.gradient(_smoothed(on_grid, smoothing), time))
+    return found
+
+
+def _with_derivatives(names: Sequence[str]) -> tuple[str, ...]:
+    """Names declared for a channel also cover its derivative candidate."""
+    return (*names, *(derivative_name(n) for n in names))
+
+
+def derivative_name(channel: str) -> str:
+    """The name of the derivative candidate of a channel."""
+    return f"d/dt {channel}"
+
+
+def diagnose_pair(
+    evaluation: Evaluation,
+    reference: FloatArray,
+    simulated: FloatArray,
+    candidates: Sequence[Candidate],
+    unit: str | None = None,
+) -> Diagnosis:
+    """Diagnose one aligned pair of the evaluation with the spec's diagnosis settings.
+
+    ``unit`` is the scored signal's unit: candidates logged in the same physical dimension (a
+    load in kW for a power in kW) are named first among effects the record cannot tell apart.
+    """
+    assert evaluation.aligned is not None
+    settings = evaluation.spec.diagnosis
+    signal_unit = unit or ""
+    in_dimension = [
+        c.name
+        for c in candidates
+        if signal_unit
+        and (found := candidate_unit(c.name, c.kind)) is not None
+        and _same_dimension(found, signal_unit)
+    ]
+    return diagnose_residual(
+        reference,
+        simulated,
+        dt=evaluation.aligned.grid.dt,
+        candidates=candidates,
+        max_lag_s=evaluation.spec.alignment.max_lag_s,
+        responses=_with_derivatives(settings.responses),
+        # A channel the model reads is an input; the spec can name more causes.
+        causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
+        min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
+        groups=[members for _, members in settings.groups],
+        in_dimension=in_dimension,
+    )
+
+
+def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True) -> SignalDiagnosis:
+    """The full diagnosis of one signal (see docs/diagnosis.md)."""
+    if evaluation.aligned is None or path not in evaluation.arrays:
+        known = ", ".join(repr(p) for p in evaluation.arrays) or "none kept"
+        raise DataError(
+            f"no signal {path!r} in this spec (signals: {known})",
+            file=str(evaluation.spec.path),
+            hint="pass --signal with a path such as E_batt/P_batt",
+        )
+    reference, simulated = evaluation.arrays[path]
+    result = evaluation.result.signal(path)
+    diagnosis = diagnose_pair(
+        evaluation,
+        reference,
+        simulated,
+        candidates_for(evaluation, channels=channels),
+        result.unit,
+    )
+    by_path = {s.path: s for s in evaluation.result.signals}
+    origin_path = result.origins[0] if result.origins else path
+    origin = by_path.get(origin_path, result)
+    return SignalDiagnosis(
+        spec=evaluation.result.spec,
+        signal=path,
+        unit=result.unit,
+        passed=result.passed,
+        origin=(origin.path, origin.level),
+        origins=tuple((p, by_path[p].level) for p in result.origins if p in by_path),
+        diagnosis=diagnosis,
+    )
+
+
+#: Decimal prefixes that scale a unit without changing what it measures (kW and W).
+_SI_PREFIXES = ("k", "M", "G", "m", "µ", "u")
+
+
+def _same_dimension(unit: str, other: str) -> bool:
+    """Whether two unit texts measure the same quantity: the same symbol, up to one decimal
+    prefix (``kW`` and ``W``, ``mA`` and ``A``). Deliberately narrow: it only decides which of
+    two effects the record cannot tell apart is named first, so a miss costs nothing."""
+
+    def bare(text: str) -> set[str]:
+        text = text.strip()
+        forms = {text}
+        if len(text) > 1 and text[0] in _SI_PREFIXES:
+            forms.add(text[1:])
+        return forms
+
+    return bool(bare(unit) & bare(other))
+
+
+def _strongest_finding(found: Diagnosis) -> tuple[float, float]:
+    """How well a diagnosis names a cause: the share of its largest relevant effect that is a
+    channel, expression or derivative (a gain, offset or lag names no cause), then the largest
+    share of the residual one significant candidate explains alone."""
+    named = max(
+        (e.share for e in found.effects if e.relevant and e.kind not in GENERIC_KINDS),
+        default=0.0,
+    )
+    alone = max(
+        (c.explained_fraction for c in found.candidates if c.significant),
+        default=0.0,
+    )
+    return named, alone
+
+
+def diagnose_origin(evaluation: Evaluation, path: str) -> SignalDiagnosis:
+    """Diagnose the signal where an error appears, looking one level down when it emerges.
+
+    When the origin has children (they pass, and the error emerges where they combine), the
+    origin's own residual may be a running sum or a product, and the weakest child's residual
+    often names the cause more directly: a missing load shows in the power at each instant,
+    while in the energy it is a slow drift that any warming temperature can mimic. Both are
+    diagnosed and the one that names a cause (a relevant channel, expression or derivative)
+    with the larger share is returned, else the one with the stronger significant finding,
+    with ``asked`` naming the signal asked about.
+    """
+    found = replace(diagnose_signal(evaluation, path), asked=path)
+    result = evaluation.result
+    node = result.signal(path)
+    if node.children:
+        weakest = min(
+            (result.signal(child) for child in node.children),
+            key=lambda s: sum(s.lambdas[name] for name in FUSED_CHARACTERISTICS),
+        )
+        below = diagnose_signal(evaluation, weakest.path)
+        if _strongest_finding(below.diagnosis) > _strongest_finding(found.diagnosis):
+            return replace(below, asked=path)
+    return found
+
+
+#: Which signals a run diagnoses: none, the failing ones, or every one.
+DIAGNOSE_MODES = ("off", "failed", "all")
+
+
+def diagnosis_target(signal: SignalResult) -> str:
+    """The signal a signal's diagnosis looks at: where its error appears."""
+    return signal.origins[0] if signal.origins else signal.path
+
+
+def diagnose_failures(
+    evaluation: Evaluation, mode: str = "failed"
+) -> dict[str, SignalDiagnosis | HevvalError]:
+    """The diagnosis of every failing signal (every signal for ``mode="all"``), once per
+    signal where an error appears, keyed by that signal's path; a signal that cannot be
+    diagnosed keeps the error that says why."""
+    found: dict[str, SignalDiagnosis | HevvalError] = {}
+    if mode == "off" or evaluation.aligned is None:
+        return found
+    for signal in evaluation.result.signals:
+        if mode == "failed" and signal.passed:
+            continue
+        target = diagnosis_target(signal)
+        if target in found:
+            continue
+        try:
+            found[target] = diagnose_origin(evaluation, target)
+        except HevvalError as exc:
+            found[target] = exc
+    return found
