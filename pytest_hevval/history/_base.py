@@ -7,6 +7,7 @@ from typing import Any
 
 from ..core.characteristics import CHARACTERISTICS
 from ..errors import HevvalError
+from ..results.spec_result import PHYSICAL_ERRORS
 
 __all__ = [
     "CHARACTERISTICS",
@@ -15,9 +16,8 @@ __all__ = [
     "spec_key",
 ]
 
-#: Physical error quantities carried by every signal result, in the signal's unit (``lag_s`` in
-#: seconds). Lower magnitude is better for all of them.
-ERROR_FIELDS: tuple[str, ...] = ("lag_s", "mae", "rms", "delta_e", "error_std", "mean_error")
+#: Physical error quantities carried by every signal result (the results' own list).
+ERROR_FIELDS: tuple[str, ...] = PHYSICAL_ERRORS
 
 
 class HistoryError(HevvalError, ValueError):

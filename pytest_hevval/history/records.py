@@ -24,7 +24,7 @@ from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
 from ..results.codec import checked_number, plain_json
-from ..results.spec_result import ERROR_KEYS
+from ..results.spec_result import ERROR_KEYS, MEASURED_NUMBERS
 from ._base import HistoryError
 
 __all__ = [
@@ -420,7 +420,7 @@ def _normalise_signal(signal: Any, where: str, file: str | None) -> dict[str, An
         out["local"] = _compact_local(signal["local"])
     if isinstance(signal.get("local_failures"), list):
         out["local_failures"] = list(signal["local_failures"])
-    for key in ("lag_s", "peak_correlation", "mae", "rms", "delta_e", "error_std", "mean_error"):
+    for key in MEASURED_NUMBERS:
         if key in signal:
             out[key] = checked_number(
                 signal[key], where=f"{where}.{key}", file=file, error=HistoryError

@@ -20,6 +20,9 @@ from .local import LocalFailure, LocalResult
 from .measurement import ErrorCheck
 
 __all__ = [
+    "ERROR_KEYS",
+    "MEASURED_NUMBERS",
+    "PHYSICAL_ERRORS",
     "RESULT_SCHEMA_VERSION",
     "Failure",
     "SignalResult",
@@ -29,15 +32,15 @@ __all__ = [
 
 RESULT_SCHEMA_VERSION = 2
 
+#: The physical errors of a signal, in its unit (``lag_s`` in seconds); lower magnitude is
+#: better for every one.
+PHYSICAL_ERRORS: tuple[str, ...] = ("lag_s", "mae", "rms", "delta_e", "error_std", "mean_error")
+#: The numbers measured on a signal's pair besides its λ: the physical errors and the peak of
+#: the cross-correlation.
+MEASURED_NUMBERS: tuple[str, ...] = (PHYSICAL_ERRORS[0], "peak_correlation", *PHYSICAL_ERRORS[1:])
 #: The physical errors of a signal, flat in its JSON form beside ``lambdas``.
 ERROR_KEYS = (
-    "lag_s",
-    "peak_correlation",
-    "mae",
-    "rms",
-    "delta_e",
-    "error_std",
-    "mean_error",
+    *MEASURED_NUMBERS,
     "reference_range",
     "n_samples",
     "dt",
