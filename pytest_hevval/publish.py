@@ -14,11 +14,14 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .errors import HevvalError
 from .results.spec_result import SpecResult
 from .spec.model import Spec
+
+if TYPE_CHECKING:
+    from .history import Regression
 
 __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
@@ -95,6 +98,7 @@ class Publisher:
         self.rules = parse_compare_fail(options.compare_fail) if options.compare_fail else []
         self.margin = parse_margin(options.ratchet) if options.ratchet else None
         self.baseline: dict[str, Any] | None = None
+        self._regressions: dict[str, list[Regression]] = {}
         self.model_version = "unknown"
         self.started = datetime.now(timezone.utc)
 
@@ -130,16 +134,24 @@ class Publisher:
             raise HevvalError(decision.message)
         return [decision.message]
 
-    def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
-        """Rules of ``compare-fail`` this signal (or Φ, for None) breaks against the baseline."""
+    def regressions(self, result: SpecResult) -> list[Regression]:
+        """Every rule of ``compare-fail`` the result breaks against the baseline; each result
+        is compared once, however many of its signals ask."""
         if self.baseline is None or not self.rules:
             return []
-        from .history import compare, regressions
+        found = self._regressions.get(result.spec)
+        if found is None:
+            from .history import compare, regressions
 
-        comparison = compare([result.to_dict()], self.baseline)
+            found = regressions(compare([result.to_dict()], self.baseline), self.rules)
+            self._regressions[result.spec] = found
+        return found
+
+    def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
+        """Rules of ``compare-fail`` this signal (or Φ, for None) breaks against the baseline."""
         return [
             str(found)
-            for found in regressions(comparison, self.rules)
+            for found in self.regressions(result)
             if found.signal == signal and (signal is not None or found.field == "phi")
         ]
 

@@ -83,34 +83,35 @@ def run_specs(
     """
     if options.dask:
         outcomes = _on_dask(specs, options, progress)
-    else:
-        shared = cache if cache is not None else DataCache(options.data_hash)
-        for spec in specs:
-            shared.declare(spec.reference, spec.reference_columns())
-            shared.declare(spec.model, spec.model_columns())
-        outcomes = []
-        for done, spec in enumerate(specs, start=1):
-            outcome = _evaluate(spec, options, shared)
-            if isinstance(outcome, Evaluation):
-                _relative_result(outcome.result, options.rootdir)
-                _diagnose(outcome, options)
-            outcomes.append(outcome)
-            if progress is not None:
-                progress(done)
+        for outcome in outcomes:
+            _finish(outcome, options)
         return outcomes
-    for outcome in outcomes:
-        if isinstance(outcome, Evaluation):
-            _relative_result(outcome.result, options.rootdir)
+    shared = cache if cache is not None else DataCache(options.data_hash)
+    for spec in specs:
+        shared.declare(spec.reference, spec.reference_columns())
+        shared.declare(spec.model, spec.model_columns())
+    outcomes = []
+    for done, spec in enumerate(specs, start=1):
+        outcome = _evaluate(spec, options, shared)
+        # Right away: the aligned data are let go before the next spec is read.
+        _finish(outcome, options)
+        outcomes.append(outcome)
+        if progress is not None:
+            progress(done)
     return outcomes
 
 
-def _diagnose(evaluation: Evaluation, options: RunOptions) -> None:
+def _finish(outcome: Outcome, options: RunOptions) -> None:
+    """Paths relative to the root; the failing signals diagnosed where the data are here
+    (not after a Dask worker scored the spec); the aligned data released unless kept."""
+    if not isinstance(outcome, Evaluation):
+        return
+    _relative_result(outcome.result, options.rootdir)
     if options.diagnose != "off":
-        evaluation.diagnoses = diagnose_failures(evaluation, options.diagnose)
+        outcome.diagnoses = diagnose_failures(outcome, options.diagnose)
     if not options.keep_arrays:
-        # Nothing reads the aligned data after this: free it before the next spec is read.
-        evaluation.arrays = {}
-        evaluation.aligned = None
+        outcome.arrays = {}
+        outcome.aligned = None
 
 
 def _evaluate(spec: Spec, options: RunOptions, cache: DataCache) -> Outcome:
