@@ -24,6 +24,17 @@ __all__ = [
 ]
 
 
+#: The longest name or value an error message quotes: a column named by a megabyte of NUL
+#: bytes must not become a megabyte of message.
+MESSAGE_PART = 200
+
+
+def _bounded(text: str, limit: int = MESSAGE_PART) -> str:
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}… ({len(text) - limit:,} more characters)"
+
+
 class HevvalError(Exception):
     """Root of every error pytest-hevval raises on purpose.
 
@@ -59,10 +70,10 @@ class HevvalError(Exception):
         if self.key:
             parts.append(f"{self.key}: ")
         if self.column is not None:
-            parts.append(f"column {self.column!r}: ")
-        parts.append(self.problem)
+            parts.append(f"column {_bounded(repr(self.column))}: ")
+        parts.append(_bounded(self.problem, 4 * MESSAGE_PART))
         if self.hint:
-            parts.append(f"; {self.hint}")
+            parts.append(f"; {_bounded(self.hint, 4 * MESSAGE_PART)}")
         return "".join(parts)
 
     def with_context(self, **fields: Any) -> HevvalError:
@@ -124,6 +135,11 @@ class DegenerateSignalError(HevvalError, ValueError):
 
 class CharacteristicError(HevvalError, ValueError):
     """A characteristic is defined badly (name clash, bad field) or computed a bad value."""
+
+
+class OutputError(HevvalError, OSError):
+    """An output (JSON, a report, a history record, a sidecar, a plot) could not be written;
+    nothing was half-written."""
 
 
 class MissingExtraError(HevvalError, ImportError):

@@ -1,4 +1,10 @@
-"""The one way hevval writes a file: atomically, durably, with the usual permissions.
+"""The one way hevval reads an input file and writes an output: inputs are regular files of a
+bounded size, outputs are written atomically, durably, with the usual permissions.
+
+A spec, its sidecar, a data file, a history record or a compared run is opened only when it is
+a regular file: a named pipe would block the run until its time limit, a device could be read
+forever. The small inputs (specs, sidecars, records, runs) are read whole only under a limit
+on their size, so that a mistaken or hostile file cannot exhaust memory.
 
 History records, reports, ratchet sidecars and JSON output all go through here. A reader sees
 the old file or the new one, never half of one; a failure leaves the old file as it was and no
@@ -10,11 +16,94 @@ not 0600: ratchet sidecars and reports are files users commit and share.
 from __future__ import annotations
 
 import contextlib
+import errno
+import json
 import os
 import secrets
+import stat
 from pathlib import Path
+from typing import Any
 
-__all__ = ["publish", "write_atomic", "write_temporary"]
+from .errors import OutputError
+
+__all__ = [
+    "MAX_DOCUMENT_BYTES",
+    "MAX_JSON_DEPTH",
+    "InputRefused",
+    "check_input",
+    "output_error",
+    "publish",
+    "read_input",
+    "read_json",
+    "write_atomic",
+    "write_temporary",
+]
+
+#: The largest spec, sidecar, history record or run JSON read (a run of 600 signals with its
+#: intervals and windows writes about 10 MB).
+MAX_DOCUMENT_BYTES = 256 * 1024 * 1024
+#: The deepest nesting of a JSON document read (a history record nests about eight levels).
+MAX_JSON_DEPTH = 64
+
+
+class InputRefused(OSError):
+    """An input that is not a regular file, or too large to read whole; ``strerror`` says
+    which, so callers that name an unreadable file by its OSError need nothing new."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.strerror = message
+
+
+def check_input(path: Path | str) -> int:
+    """The size of ``path`` when it is a regular file (symbolic links followed); raises
+    :class:`InputRefused` for a folder, a named pipe, a socket or a device, and the usual
+    OSError (FileNotFoundError, PermissionError) when it cannot be looked at."""
+    info = os.stat(path)
+    if stat.S_ISREG(info.st_mode):
+        return info.st_size
+    if stat.S_ISDIR(info.st_mode):
+        kind = "a folder"
+    elif stat.S_ISFIFO(info.st_mode):
+        kind = "a named pipe"
+    elif stat.S_ISSOCK(info.st_mode):
+        kind = "a socket"
+    else:
+        kind = "a device"
+    raise InputRefused(f"{kind}, not a regular file")
+
+
+def read_input(path: Path | str, limit: int = MAX_DOCUMENT_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes (see :func:`check_input`)."""
+    size = check_input(path)
+    if size > limit:
+        raise InputRefused(f"{size:,} bytes, over the {limit:,}-byte limit for this kind of file")
+    with open(path, "rb") as stream:
+        data = stream.read(limit + 1)
+    if len(data) > limit:  # grew while being read
+        raise InputRefused(f"over the {limit:,}-byte limit for this kind of file")
+    return data
+
+
+def read_json(path: Path | str, limit: int = MAX_DOCUMENT_BYTES) -> Any:
+    """The JSON document in ``path``: OSError when it cannot be read (:func:`read_input`),
+    ValueError when it is not UTF-8 JSON (``json.JSONDecodeError`` with its line) or nests
+    deeper than :data:`MAX_JSON_DEPTH`."""
+    text = read_input(path, limit).decode("utf-8")
+    try:
+        document = json.loads(text)
+    except RecursionError:
+        raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels") from None
+    pending: list[tuple[Any, int]] = [(document, 1)]
+    while pending:
+        value, depth = pending.pop()
+        if depth > MAX_JSON_DEPTH:
+            raise ValueError(f"nested deeper than {MAX_JSON_DEPTH} levels")
+        if isinstance(value, dict):
+            pending.extend((item, depth + 1) for item in value.values())
+        elif isinstance(value, list):
+            pending.extend((item, depth + 1) for item in value)
+    return document
 
 
 def write_temporary(directory: Path, payload: bytes, *, stem: str = "hevval") -> Path:
@@ -90,17 +179,40 @@ def write_atomic(path: Path | str, content: str | bytes, *, replace: bool = True
     """Write ``content`` (text is UTF-8 with ``\\n`` line ends) to ``path`` atomically.
 
     Creates the parent folder. Returns False only when ``replace`` is False and ``path``
-    already exists (nothing is written then). OSError propagates for the caller to word.
+    already exists (nothing is written then). Raises :class:`~pytest_hevval.errors.OutputError`
+    (an OSError) naming the path when it cannot be written: a folder in its place, a file where
+    a folder should be, no permission, a full disk. The old file is then left as it was.
     """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
     payload = content.encode("utf-8") if isinstance(content, str) else content
-    temp = write_temporary(target.parent, payload, stem=target.name)
     try:
-        written = publish(temp, target, replace=replace)
-        if written:
-            fsync_directory(target.parent)
-        return written
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            temp.unlink()
+        if target.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "it is a folder")
+        target.parent.mkdir(parents=True, exist_ok=True)
+        temp = write_temporary(target.parent, payload, stem=target.name)
+        try:
+            written = publish(temp, target, replace=replace)
+            if written:
+                fsync_directory(target.parent)
+            return written
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                temp.unlink()
+    except OutputError:
+        raise
+    except OSError as exc:
+        raise output_error(target, exc) from None
+
+
+def output_error(path: Path | str, exc: OSError) -> OutputError:
+    """The clear error for an output that could not be written, from the OSError that said so."""
+    reason = exc.strerror or str(exc)
+    if exc.errno == errno.ENOSPC:
+        hint = "free some disk space, or write somewhere else"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        hint = "make the folder writable, or write somewhere else"
+    elif isinstance(exc, (FileExistsError, NotADirectoryError)):
+        hint = "a file stands where a folder is needed: remove it, or write somewhere else"
+    else:
+        hint = "choose another path"
+    return OutputError(f"cannot write it: {reason}", file=str(path), hint=hint)

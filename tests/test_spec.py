@@ -178,7 +178,8 @@ MALFORMED = [
     ),
     (
         MINIMAL.replace("  - signal: v\n", "  - {signal: a/b}\n"),
-        "/p/t.hevval.yaml:4: sets[0].signal: must be a non-empty name without '/' or '::' "
+        "/p/t.hevval.yaml:4: sets[0].signal: must be a non-empty name on one line, of printable "
+        "characters, without '/' or '::' "
         "(got 'a/b')",
     ),
     (

@@ -139,7 +139,9 @@ def figure_data(
     # Peak like λ1's lag search: ties to the most negative lag (argmax order).
     peak_index = int(np.argmax(curve))
 
-    hist_counts, hist_edges = np.histogram(residual, bins=bins)
+    hist_counts, hist_edges = np.histogram(
+        residual, bins=bins, range=_histogram_range(residual, bins)
+    )
     cdf = np.cumsum(hist_counts) / n
 
     overlay = {
@@ -178,3 +180,15 @@ def figure_data(
             "std": _round_scalar(float(residual.std(ddof=1))),
         },
     }
+
+
+def _histogram_range(residual: npt.NDArray[np.float64], bins: int) -> tuple[float, float]:
+    """The residual's range, widened where it is narrower than ``bins`` distinct floats at its
+    magnitude: a model equal to the reference plus a constant leaves a residual that is that
+    constant up to rounding, which cannot be cut into finite bins."""
+    low, high = float(np.min(residual)), float(np.max(residual))
+    floor = 4.0 * bins * float(np.spacing(max(abs(low), abs(high), np.finfo(np.float64).tiny)))
+    if high - low >= floor:
+        return low, high
+    centre = low / 2.0 + high / 2.0
+    return centre - floor, centre + floor

@@ -214,6 +214,21 @@ def _span(records: Iterable[tuple[Record, Iterable[str], float]]) -> tuple[float
     return start, stop
 
 
+#: The most points a grid may hold (8 bytes each, per column): 24 h at 5 kHz.
+MAX_GRID_SAMPLES = 432_000_000
+
+
+def _check_grid_size(n: int, start: float, stop: float, rate_hz: float) -> None:
+    """Refuse a grid before it is allocated: its size is the work every signal does."""
+    if n > MAX_GRID_SAMPLES:
+        raise DataError(
+            f"the grid would hold {n:.3g} points ({stop - start:g} s at {rate_hz:g} Hz), over "
+            f"the limit of {MAX_GRID_SAMPLES:.3g}",
+            key="alignment.rate_hz",
+            hint="lower alignment.rate_hz, or score a shorter alignment.window",
+        )
+
+
 def find_offset(
     reference: Channel,
     model: Channel,
@@ -229,6 +244,7 @@ def find_offset(
     start = max(float(reference.time[0]), float(model.time[0]) - max_offset_s)
     stop = min(float(reference.time[-1]), float(model.time[-1]) + max_offset_s)
     n = math.floor((stop - start) * rate_hz + 1e-9) + 1
+    _check_grid_size(n, start, stop, rate_hz)
     if n < 16:
         raise DataError("the records overlap too little to find a time offset")
     grid = start + np.arange(n) / rate_hz
@@ -317,6 +333,7 @@ def align_records(
     # A stop that lies on a grid point to within the on-grid tolerance is the last point: the
     # record's last sample is kept, not lost to rounding.
     n = math.floor((stop - start) * rate_hz + ON_GRID_TOLERANCE) + 1
+    _check_grid_size(n, start, stop, rate_hz)
     if n < 3:
         raise DataError(
             f"the overlap [{start:g}, {stop:g}] s holds fewer than 3 samples at {rate_hz:g} Hz",

@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import DataError, MissingExtraError, did_you_mean
+from ..files import check_input
 from .record import Channel, Record
 
 __all__ = ["run_fmu"]
@@ -72,6 +73,12 @@ def run_fmu(
     _check_window(fmu_path, start_time, stop_time, step_size)
     if not os.path.exists(fmu_path):
         raise DataError("FMU file not found", file=fmu_path, hint="check the path")
+    try:
+        check_input(fmu_path)
+    except OSError as exc:
+        raise DataError(
+            f"cannot read the FMU: {exc.strerror or exc}", file=fmu_path, hint="name the .fmu file"
+        ) from None
 
     try:
         description = fmpy.read_model_description(fmu_path, validate=False)

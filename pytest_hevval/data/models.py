@@ -40,7 +40,7 @@ def import_callable(reference: str, folders: Iterable[Path], *, source: str) -> 
     with _search_path(folders):
         try:
             module = importlib.import_module(module_name)
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:
             raise DataError(
                 f"cannot import the model module {module_name!r}: {type(exc).__name__}: {exc}",
                 file=source,
@@ -150,6 +150,15 @@ def run_callable(
             output = function(frame, **params)
     except HevvalError:
         raise
+    except SystemExit as exc:
+        # sys.exit in a model would end the run with its code and no result: a gate that
+        # passes without scoring anything.
+        raise DataError(
+            f"the model called sys.exit({exc.code!r}) instead of returning its output",
+            file=spec_file,
+            key="model.callable",
+            hint=f"make {reference_to} return a DataFrame (with the time column) instead",
+        ) from None
     except Exception as exc:
         frames = traceback.extract_tb(exc.__traceback__)[1:]
         where = ""

@@ -60,8 +60,9 @@ class SourceOptions:
     decimal: str | None = None
     #: HDF5 group / MAT struct / table key that holds the channels.
     group: str | None = None
-    #: Multiply the time column by this to get seconds (e.g. 0.001 for ms).
-    time_scale: float = 1.0
+    #: Multiply the time column by this to get seconds (e.g. 0.001 for ms); None when the
+    #: spec does not say (a unit in the time column's header then decides).
+    time_scale: float | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import did_you_mean
+from ..files import read_json
 from ._base import HistoryError
 from .compare import specs_of
 from .records import migrate_record
@@ -68,18 +69,24 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
         return specs_of(record), record["model_version"]
     path = Path(ref)
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
+        document = read_json(path)
     except FileNotFoundError:
         raise HistoryError(
             "no such file",
             file=ref,
             hint="pass a JSON file, history:latest or history:<model version>",
         ) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HistoryError(f"cannot read: {exc}", file=ref) from None
+    except OSError as exc:
+        raise HistoryError(f"cannot read: {exc.strerror or exc}", file=ref) from None
     except json.JSONDecodeError as exc:
         raise HistoryError(
             f"not valid JSON at line {exc.lineno}: {exc.msg}",
+            file=ref,
+            hint="pass the output of `hevval run --json` or a history record",
+        ) from None
+    except ValueError as exc:  # not UTF-8, or nested too deep
+        raise HistoryError(
+            f"cannot read: {exc}",
             file=ref,
             hint="pass the output of `hevval run --json` or a history record",
         ) from None

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..defaults import HISTORY_DIR
-from ..files import fsync_directory, publish, write_temporary
+from ..files import fsync_directory, publish, read_json, write_temporary
 from ._base import HistoryError
 from .records import migrate_record, parse_utc, validate_record
 
@@ -127,19 +127,20 @@ class HistoryStore:
         found: list[StoredRecord] = []
         for path in sorted(self.directory.glob("*.json")):
             try:
-                text = path.read_text(encoding="utf-8")
-            except (OSError, UnicodeDecodeError) as exc:
-                self.problems.append(StoreProblem(path, f"unreadable: {exc}"))
+                document = read_json(path)
+            except OSError as exc:
+                self.problems.append(StoreProblem(path, f"unreadable: {exc.strerror or exc}"))
                 continue
-            if not text.strip():
-                self.problems.append(StoreProblem(path, "empty file (a write may be in progress)"))
-                continue
-            try:
-                document = json.loads(text)
             except json.JSONDecodeError as exc:
-                self.problems.append(
-                    StoreProblem(path, f"not valid JSON at line {exc.lineno}: {exc.msg}")
+                problem = (
+                    "empty file (a write may be in progress)"
+                    if not exc.doc.strip()
+                    else f"not valid JSON at line {exc.lineno}: {exc.msg}"
                 )
+                self.problems.append(StoreProblem(path, problem))
+                continue
+            except ValueError as exc:  # not UTF-8, or nested too deep
+                self.problems.append(StoreProblem(path, f"unreadable: {exc}"))
                 continue
             try:
                 record = migrate_record(document, file=str(path))

@@ -6,6 +6,7 @@ series; :func:`plot_history` imports matplotlib only when called.
 
 from __future__ import annotations
 
+import io
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -17,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.registry import describe, order_names
+from ..files import write_atomic
 from ..results.codec import json_number, keyed_lambdas
 from ._base import HistoryError, spec_key
 
@@ -411,5 +413,7 @@ def plot_history(rows: Sequence[HistoryRow], path: Path | str) -> Path:
     axes[-1].set_xticks(range(len(runs)))
     axes[-1].set_xticklabels([version for _, version in runs], rotation=45, ha="right")
     axes[-1].set_xlabel("model version (oldest first)")
-    figure.savefig(path)
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=path.suffix.lower().lstrip("."))
+    write_atomic(path, buffer.getvalue())
     return path

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import HevvalError, did_you_mean
-from ..files import write_atomic
+from ..files import output_error, write_atomic
 
 __all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
 
@@ -70,7 +70,10 @@ def write_reports(
             f"(choose from {', '.join(FORMATS)})"
         )
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(directory, exc) from None
     stamp = generated_utc or datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
     written: list[Path] = []
     for name in FORMATS:

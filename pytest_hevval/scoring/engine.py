@@ -151,7 +151,17 @@ class DataCache:
             union = wanted | self._declared.get(key, set())
             if cached is not None:
                 union |= set(cached.channels)
-            record = _reader()(str(source.path), sorted(union), source.options)
+            while True:
+                try:
+                    record = _reader()(str(source.path), sorted(union), source.options)
+                    break
+                except DataError as exc:
+                    # A column another spec declared and the file lacks is that spec's error,
+                    # not this one's: read without it, and let that spec's own read say so.
+                    if exc.column is None or exc.column in wanted or exc.column not in union:
+                        raise
+                    union.discard(exc.column)
+                    self._declared.get(key, set()).discard(exc.column)
             self.reads[key[0]] = self.reads.get(key[0], 0) + 1
             self._records[key] = record
             self._start_digest(key[0])

@@ -11,6 +11,7 @@ import glob
 import hashlib
 import itertools
 import math
+import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar, cast
@@ -35,6 +36,7 @@ from ..defaults import (
     WITHIN_UNCERTAINTY,
 )
 from ..errors import ExpressionError, SpecError, did_you_mean
+from ..files import read_input
 from .expressions import Expression, parse_signal
 from .model import (
     ROLES,
@@ -210,6 +212,9 @@ class _Context:
         return str(value)
 
     def number(self, value: Any, line: int, key: str) -> float:
+        if isinstance(value, str) and _EXPONENT_NUMBER.fullmatch(value.strip()):
+            # YAML 1.1 reads 1e3 (no dot) as text; YAML 1.2, and every user, as a thousand.
+            value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.error(line, key, "must be a number", got=value)
         try:
@@ -232,6 +237,37 @@ class _Context:
         if number < 0:
             raise self.error(line, key, "must be 0 or more", got=value)
         return number
+
+    def weight(self, value: Any, line: int, key: str) -> float:
+        """A weight (β, α): only ratios count, so bounded far below where Σ α·β overflows."""
+        number = self.non_negative(value, line, key)
+        if number > MAX_WEIGHT:
+            raise self.error(
+                line,
+                key,
+                f"must be at most {MAX_WEIGHT:g} (only the ratios of weights count)",
+                got=value,
+            )
+        return number
+
+    def unit_text(self, value: Any, line: int, key: str) -> str:
+        """A unit as pint reads it, bounded before pint sees it: pint evaluates powers with
+        Python's integers, so ``m * 9**9**9`` would compute for ever."""
+        text = self.text(value, line, key)
+        problem = None
+        if len(text) > _MAX_UNIT_TEXT:
+            problem = f"is longer than {_MAX_UNIT_TEXT} characters"
+        elif not text.isprintable():
+            problem = "must be one line of printable characters"
+        elif _CHAINED_POWER.search(text) or any(
+            abs(float(power)) > _MAX_UNIT_POWER for power in _POWER.findall(text)
+        ):
+            problem = f"may raise a unit only to a power of at most {_MAX_UNIT_POWER}, once"
+        elif text.count("(") != text.count(")"):
+            problem = "has unbalanced parentheses"
+        if problem is not None:
+            raise self.error(line, key, problem, got=text)
+        return text
 
     def unit_interval(self, value: Any, line: int, key: str) -> float:
         number = self.number(value, line, key)
@@ -269,6 +305,19 @@ def _show(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+#: The most cells a region map may have (its bins multiplied): each is scored per signal.
+MAX_REGION_CELLS = 100_000
+#: The largest weight β or α: weights are relative, and Σ α·β must stay far from overflow.
+MAX_WEIGHT = 1e6
+#: A number in exponent form without a dot, which YAML 1.1 reads as text (``1e3``).
+_EXPONENT_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)[eE][+-]?\d+")
+#: Bounds on a unit's text (``ref_unit``, ``sim_unit``, ``unit``).
+_MAX_UNIT_TEXT = 64
+_MAX_UNIT_POWER = 12
+_POWER = re.compile(r"(?:\*\*|\^)\s*\(?\s*([+-]?\d+(?:\.\d*)?)")
+_CHAINED_POWER = re.compile(r"(?:\*\*|\^)\s*\(?\s*[+-]?[\d.]+\s*\)?\s*(?:\*\*|\^)")
+
+
 def _join(key: str, name: str | int) -> str:
     if isinstance(name, int):
         return f"{key}[{name}]"
@@ -279,7 +328,7 @@ def load_spec(path: str | Path) -> Spec:
     """Read and validate one spec file."""
     spec_path = Path(path)
     try:
-        raw = spec_path.read_bytes()
+        raw = read_input(spec_path)
     except OSError as exc:
         raise SpecError(
             f"cannot read the spec file ({exc.strerror or exc})", file=str(spec_path)
@@ -397,6 +446,10 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         _check_local_scored(context, regions.gate.thresholds, None, "regions.gate.thresholds")
     _check_phi_defined(context, roots, sets_line)
     name = context.get(top, "name", "", context.text, _default_name(path))
+    if not name.isprintable():
+        raise context.error(
+            top.line_of("name"), "name", "must be one line of printable characters", got=name
+        )
     return Spec(
         path=path,
         name=name,
@@ -511,7 +564,7 @@ def _source(
         encoding=context.get(mapping, "encoding", key, context.text, None),
         decimal=context.get(mapping, "decimal", key, context.text, None),
         group=context.get(mapping, "group", key, context.text, None),
-        time_scale=context.get(mapping, "time_scale", key, context.positive, 1.0),
+        time_scale=context.get(mapping, "time_scale", key, context.positive, None),
         extra=extra,
     )
     path: str | None = None
@@ -739,7 +792,7 @@ def _weights(context: _Context, top: LineDict, scored: set[str]) -> dict[str, fl
                 "unknown characteristic",
                 hint=did_you_mean(raw_name, (*_registered_names(), *THRESHOLD_ALIASES)) or None,
             )
-        values[canonical] = context.non_negative(value, line, _join("weights", raw_name))
+        values[canonical] = context.weight(value, line, _join("weights", raw_name))
     _check_scored(context, values, scored, top.line_of("weights"), "weights")
     effective = [
         values.get(c.name, c.default_weight)
@@ -902,19 +955,30 @@ def _diagnosis_groups(
     return tuple(groups)
 
 
+def _item_name(context: _Context, name: str, line: int, key: str) -> str:
+    """A name that becomes part of a test item's id: one printable line without '/' or '::'
+    (a line break in it could print a forged line, such as a PASSED, into a CI log)."""
+    if not name.strip() or "/" in name or "::" in name or not name.isprintable():
+        raise context.error(
+            line,
+            key,
+            "must be a non-empty name on one line, of printable characters, without '/' or '::'",
+            got=name,
+        )
+    return name
+
+
 def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
     mapping = context.mapping(value, line, key)
     context.check_keys(mapping, _SIGNAL_KEYS, key)
     if "signal" not in mapping:
         raise context.error(mapping.line, _join(key, "signal"), "is required (the signal's name)")
-    name = context.text(mapping["signal"], mapping.line_of("signal"), _join(key, "signal"))
-    if not name.strip() or "/" in name or "::" in name:
-        raise context.error(
-            mapping.line_of("signal"),
-            _join(key, "signal"),
-            "must be a non-empty name without '/' or '::'",
-            got=name,
-        )
+    name = _item_name(
+        context,
+        context.text(mapping["signal"], mapping.line_of("signal"), _join(key, "signal")),
+        mapping.line_of("signal"),
+        _join(key, "signal"),
+    )
     ref = _expression(context, mapping.get("ref", name), mapping.line_of("ref"), _join(key, "ref"))
     sim = _expression(context, mapping.get("sim", name), mapping.line_of("sim"), _join(key, "sim"))
     children_value = mapping.get("children")
@@ -932,14 +996,18 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
             _signal(context, item, children_value.line_of(i), f"{key}.children[{i}]")
             for i, item in enumerate(children_value)
         )
+    ref_unit = context.get(mapping, "ref_unit", key, context.unit_text, None)
+    sim_unit = context.get(mapping, "sim_unit", key, context.unit_text, None)
     return SignalSpec(
         name=name,
         ref=ref,
         sim=sim,
         line=mapping.line,
         key=key,
-        alpha=context.get(mapping, "alpha", key, context.non_negative, 1.0),
-        unit=context.get(mapping, "unit", key, context.text, None),
+        alpha=context.get(mapping, "alpha", key, context.weight, 1.0),
+        # A side's unit given alone still converts: the signal is scored in the reference's
+        # unit (or the model's, when only that is given).
+        unit=context.get(mapping, "unit", key, context.unit_text, None) or ref_unit or sim_unit,
         description=context.get(mapping, "description", key, context.text, None),
         interpolation=cast(
             "Interpolation | None",
@@ -949,8 +1017,8 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         ),
         reference_range=context.get(mapping, "reference_range", key, context.positive, None),
         thresholds=_thresholds(context, mapping, "thresholds", _join(key, "thresholds")),
-        ref_unit=context.get(mapping, "ref_unit", key, context.text, None),
-        sim_unit=context.get(mapping, "sim_unit", key, context.text, None),
+        ref_unit=ref_unit,
+        sim_unit=sim_unit,
         ref_scale=context.get(mapping, "ref_scale", key, context.number, 1.0),
         ref_offset=context.get(mapping, "ref_offset", key, context.number, 0.0),
         sim_scale=context.get(mapping, "sim_scale", key, context.number, 1.0),
@@ -1147,6 +1215,10 @@ def _region_bins(
                 raise context.error(line, entry, "a bin count must be at least 1", got=item)
             bins.append(item)
             continue
+        if isinstance(item, list) and len(item) > MAX_REGION_CELLS + 1:
+            raise context.error(
+                line, entry, f"may list at most {MAX_REGION_CELLS + 1} edges", got=len(item)
+            )
         if not isinstance(item, list) or len(item) < 2:
             raise context.error(
                 line, entry, "must be a bin count or a list of at least two edges", got=item
@@ -1155,6 +1227,14 @@ def _region_bins(
         if any(b <= a for a, b in itertools.pairwise(edges)):
             raise context.error(line, entry, "bin edges must increase", got=list(edges))
         bins.append(edges)
+    cells = math.prod(b if isinstance(b, int) else len(b) - 1 for b in bins)
+    if cells > MAX_REGION_CELLS:
+        raise context.error(
+            line,
+            where,
+            f"makes {cells:,} region cells, over the limit of {MAX_REGION_CELLS:,}",
+            hint="use fewer bins: each cell needs samples of its own to be judged",
+        )
     return tuple(bins)
 
 
@@ -1359,13 +1439,7 @@ def _recording_entries(
             )
         recording_id = context.get(mapping, "id", key, context.text, _recording_id(path))
         id_line = mapping.line_of("id") if "id" in mapping else mapping.line
-        if not recording_id.strip() or "/" in recording_id or "::" in recording_id:
-            raise context.error(
-                id_line,
-                _join(key, "id"),
-                "must be a non-empty name without '/' or '::'",
-                got=recording_id,
-            )
+        _item_name(context, recording_id, id_line, _join(key, "id"))
         if recording_id in entries:
             raise context.error(
                 id_line,

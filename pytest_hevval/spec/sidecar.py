@@ -13,6 +13,7 @@ import yaml
 
 from ..core.registry import is_registered, registered_characteristics
 from ..errors import SpecError, did_you_mean
+from ..files import read_input
 
 __all__ = ["Thresholds", "load_sidecar", "sidecar_path"]
 
@@ -39,7 +40,7 @@ def load_sidecar(spec_path: Path | str) -> Thresholds:
     """Read the threshold sidecar of ``spec_path``; ``{}`` when there is none."""
     path = sidecar_path(spec_path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_input(path).decode("utf-8")
     except FileNotFoundError:
         return {}
     except (OSError, UnicodeDecodeError) as exc:

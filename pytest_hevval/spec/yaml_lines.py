@@ -36,6 +36,9 @@ class LineList(list[Any]):
         return self.line
 
 
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
 class _LineLoader(yaml.SafeLoader):
     def construct_object(self, node: yaml.Node, deep: bool = False) -> Any:
         try:
@@ -56,20 +59,28 @@ class _LineLoader(yaml.SafeLoader):
         mapping = LineDict()
         mapping.line = node.start_mark.line + 1
         mapping.key_lines = {}
+        written = sum(1 for key_node, _ in node.value if key_node.tag != _MERGE_TAG)
         self.flatten_mapping(node)
-        for key_node, value_node in node.value:
+        # flatten_mapping puts the pairs of merge keys (`<<: *base`) first: the mapping's own
+        # keys then override them, as YAML's merge key defines; only its own may not repeat.
+        merged = len(node.value) - written
+        own_keys: set[str] = set()
+        for index, (key_node, value_node) in enumerate(node.value):
             key = self.construct_object(key_node, deep=True)
             if not isinstance(key, str):
                 # Keys are names: keep them as written, so that YAML 1.1's booleans do not
                 # turn `on:` into True; other non-string keys reach the validator as text.
                 key = key_node.value if isinstance(key_node, yaml.ScalarNode) else str(key)
-            if key in mapping:
+            own = index >= merged
+            if key in mapping and own and key in own_keys:
                 raise yaml.constructor.ConstructorError(
                     "while constructing a mapping",
                     node.start_mark,
                     f"found duplicate key {key!r}",
                     key_node.start_mark,
                 )
+            if own:
+                own_keys.add(key)
             mapping[key] = self.construct_object(value_node, deep=True)
             mapping.key_lines[key] = key_node.start_mark.line + 1
         return mapping
@@ -91,6 +102,68 @@ _LineLoader.add_constructor(
 )
 
 
+#: The most values a spec may expand to, aliases counted as often as they are used: a spec of
+#: a thousand signals holds a few ten thousands; an alias bomb (nine aliases of nine aliases
+#: of …) billions, which no loop over the spec would finish.
+MAX_EXPANDED_NODES = 1_000_000
+
+
 def load_yaml_with_lines(text: str) -> Any:
-    """Parse YAML text safely; mappings become :class:`LineDict`, sequences :class:`LineList`."""
-    return yaml.load(text, Loader=_LineLoader)
+    """Parse YAML text safely; mappings become :class:`LineDict`, sequences :class:`LineList`.
+
+    Raises ``yaml.YAMLError`` for a document whose aliases expand it beyond
+    :data:`MAX_EXPANDED_NODES` values, or that refers to itself.
+    """
+    loader = _LineLoader(text)
+    try:
+        root = loader.get_single_node()
+        if root is None:
+            return None
+        _check_expansion(root)
+        return loader.construct_document(root)
+    finally:
+        loader.dispose()
+
+
+def _check_expansion(root: yaml.Node) -> None:
+    """Count the values the document expands to, each alias as often as it is used."""
+    sizes: dict[int, int] = {}
+    pending: list[tuple[yaml.Node, bool]] = [(root, False)]
+    open_nodes: set[int] = set()
+    while pending:
+        node, children_done = pending.pop()
+        if id(node) in sizes:
+            continue
+        children = _children(node)
+        if children_done:
+            open_nodes.discard(id(node))
+            size = 1 + sum(sizes[id(child)] for child in children)
+            if size > MAX_EXPANDED_NODES:
+                raise yaml.constructor.ConstructorError(
+                    None,
+                    None,
+                    f"its aliases expand to over {MAX_EXPANDED_NODES:,} values",
+                    node.start_mark,
+                )
+            sizes[id(node)] = size
+            continue
+        if id(node) in open_nodes:
+            raise yaml.constructor.ConstructorError(
+                None, None, "an alias refers to the value that holds it", node.start_mark
+            )
+        open_nodes.add(id(node))
+        pending.append((node, True))
+        for child in children:
+            if id(child) in open_nodes:
+                raise yaml.constructor.ConstructorError(
+                    None, None, "an alias refers to the value that holds it", child.start_mark
+                )
+            pending.append((child, False))
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [item for pair in node.value for item in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []

@@ -18,6 +18,7 @@ from collections.abc import Iterable, Sequence
 from typing import cast
 
 from ...errors import DataError, HevvalError, MissingExtraError, did_you_mean
+from ...files import check_input
 from ..record import Reader, Record, SourceOptions
 from ..remote import is_url, read_url
 
@@ -165,6 +166,12 @@ def read_record(path: str, columns: Iterable[str] | None, options: SourceOptions
         )
     if os.path.isdir(path):
         raise DataError("this is a directory, not a data file", file=path, hint="name a file")
+    try:
+        check_input(path)
+    except OSError as exc:
+        raise DataError(
+            f"cannot read it: {exc.strerror or exc}", file=path, hint="name a regular data file"
+        ) from None
     if os.path.getsize(path) == 0:
         raise DataError("the file is empty (0 bytes)", file=path, hint=_rewrite_hint(fmt))
     wanted = None if columns is None else list(dict.fromkeys(columns))
@@ -173,6 +180,12 @@ def read_record(path: str, columns: Iterable[str] | None, options: SourceOptions
         record = reader(path, wanted, options)
     except MissingExtraError as exc:
         raise exc.with_context(file=path) from None
+    except OSError as exc:  # no permission, a read error of the disk, a file gone meanwhile
+        raise DataError(
+            f"cannot read it: {exc.strerror or exc}",
+            file=path,
+            hint="check the file's permissions and that it is complete",
+        ) from None
     record.meta.setdefault("format", fmt)
     return record
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import math
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from types import ModuleType
@@ -27,6 +28,23 @@ _TIME_NAMES = ("time", "t", "timestamp", "timestamps", "zeit", "time_s", "second
 
 _ONE_DAY = 86400.0
 
+#: Seconds in one unit of a time column, by the unit its header names (``Time [ms]``).
+TIME_UNITS: dict[str, float] = {
+    "s": 1.0,
+    "sec": 1.0,
+    "secs": 1.0,
+    "second": 1.0,
+    "seconds": 1.0,
+    "ms": 1e-3,
+    "msec": 1e-3,
+    "us": 1e-6,
+    "µs": 1e-6,
+    "μs": 1e-6,
+    "ns": 1e-9,
+    "min": 60.0,
+    "h": 3600.0,
+}
+
 
 def _import(module: str, feature: str, extra: str) -> ModuleType:
     try:
@@ -41,12 +59,19 @@ _EPOCH_UNITS: tuple[tuple[str, float], ...] = (("s", 1.0), ("ms", 1e-3), ("us", 
 _EPOCH_SECONDS = (3.15e8, 4.1e9)
 
 
-def _clock_seconds(raw: npt.NDArray[Any]) -> tuple[npt.NDArray[Any], float] | None:
+def _clock_seconds(
+    raw: npt.NDArray[Any], unit_scale: float | None = None
+) -> tuple[npt.NDArray[Any], float] | None:
     """Absolute time stamps as (seconds since the first stamp, the first as Unix seconds).
 
     Absolute means: datetime64 values (naive ones are taken as UTC), ISO-8601 text, or numbers
-    whose first value is a Unix time in s, ms, µs or ns between 1980 and 2100. None for a
-    relative time base (seconds from some start), which is returned as it is by the caller.
+    whose first value is a Unix time in s, ms, µs or ns between 1980 and 2100 (in the unit the
+    column's header names, when it names one). None for a relative time base (seconds from some
+    start), which is returned as it is by the caller.
+
+    Stamps stored as floats cannot hold more than their magnitude allows (an epoch second
+    carries about 0.24 µs); the times from the first stamp are rounded to that resolution, so
+    that 10 Hz stamps give steps of 0.1 s and not 0.1000000238 s.
     """
     values = np.asarray(raw)
     if values.ndim != 1 or values.size == 0:
@@ -65,18 +90,29 @@ def _clock_seconds(raw: npt.NDArray[Any]) -> tuple[npt.NDArray[Any], float] | No
         stamps = parsed.to_numpy(dtype="datetime64[ns]").astype(np.int64)
     elif values.dtype.kind in "iuf":
         first = float(values[0])
-        for _, scale in _EPOCH_UNITS:
+        scales = [unit_scale] if unit_scale is not None else [s for _, s in _EPOCH_UNITS]
+        for scale in scales:
             if _EPOCH_SECONDS[0] <= first * scale <= _EPOCH_SECONDS[1]:
                 if values.dtype.kind in "iu":
                     # Subtract in integers: epoch nanoseconds exceed float64's exact range.
                     relative = (values.astype(np.int64) - int(values[0])).astype(np.float64)
                 else:
-                    relative = values.astype(np.float64) - first
+                    relative = _at_resolution(values.astype(np.float64) - first, first)
                 return relative * scale, first * scale
         return None
     else:
         return None
     return (stamps - stamps[0]).astype(np.float64) * 1e-9, float(stamps[0]) * 1e-9
+
+
+def _at_resolution(relative: FloatArray, magnitude: float) -> FloatArray:
+    """Times from the first stamp rounded to the power of ten at or above the spacing of
+    floats at the stamps' ``magnitude``: what lies below it is rounding, not measurement."""
+    spacing = float(np.spacing(abs(magnitude)))
+    if spacing <= 0.0:
+        return relative
+    quantum = 10.0 ** math.ceil(math.log10(spacing))
+    return np.asarray(np.round(relative / quantum) * quantum, dtype=np.float64)
 
 
 def _start_meta(start_epoch_s: float) -> dict[str, Any]:
@@ -96,7 +132,7 @@ def _time_base(
     first_line: int | None = None,
 ) -> tuple[FloatArray, dict[str, Any]]:
     """:func:`_check_time` for relative or absolute (clock) time; the meta of a clock start."""
-    clock = _clock_seconds(raw)
+    clock = _clock_seconds(raw, time_scale(source, column, options)[0] if _numeric(raw) else None)
     if clock is None:
         return _check_time(source, column, raw, options, first_line=first_line), {}
     relative, start = clock
@@ -104,14 +140,53 @@ def _time_base(
     return checked, _start_meta(start)
 
 
+def _numeric(raw: npt.NDArray[Any]) -> bool:
+    return np.asarray(raw).dtype.kind in "iuf"
+
+
 def _clock_options(options: SourceOptions) -> SourceOptions:
     """Clock time is seconds already: no time_scale, no milliseconds check."""
     return SourceOptions(
         time=options.time,
         format=options.format,
-        time_scale=1.0,
-        extra={**options.extra, "check_time_unit": False},
+        time_scale=None,
+        extra={**options.extra, "check_time_unit": False, "clock_seconds": True},
     )
+
+
+def time_scale(source: str, column: str, options: SourceOptions) -> tuple[float, bool]:
+    """Seconds per unit of a time column, and whether its unit is stated.
+
+    One rule for every reader: a unit in the header (``Time [ms]``) is honoured; the spec's
+    ``time_scale`` says it where the header does not, and must agree where it does; a header
+    unit that is not a unit of time is refused rather than ignored.
+    """
+    given = options.time_scale
+    if options.extra.get("clock_seconds"):
+        return 1.0, True
+    header = _unit_from_name(column)
+    if header is None:
+        return (1.0, False) if given is None else (float(given), True)
+    scale = TIME_UNITS.get(header.lower()) or TIME_UNITS.get(header)
+    if scale is None:
+        if given is not None:
+            return float(given), True  # the spec says what the header's unit is
+        raise DataError(
+            f"the time column's header names the unit {header!r}, which is not a unit of time",
+            file=source,
+            column=column,
+            hint="set `time_scale:` to the seconds in one of its units (0.001 for milliseconds),"
+            " or rename the column",
+        )
+    if given is not None and not math.isclose(float(given), scale, rel_tol=1e-9):
+        raise DataError(
+            f"the time column's header says {header}, {scale:g} s per unit, but `time_scale` "
+            f"is {float(given):g}",
+            file=source,
+            column=column,
+            hint="remove `time_scale:` (the header's unit is used) or correct it",
+        )
+    return scale, True
 
 
 def _check_time(
@@ -166,10 +241,11 @@ def _check_time(
             column=column,
             hint="sort the data by time and drop repeated rows",
         )
-    if options.time_scale == 1.0 and options.extra.get("check_time_unit", True):
+    scale, stated = time_scale(source, column, options)
+    if not stated and options.extra.get("check_time_unit", True):
         _check_time_unit(source, column, time)
-    if options.time_scale != 1.0:
-        time = time * float(options.time_scale)
+    if scale != 1.0:
+        time = time * scale
     return time
 
 
@@ -256,9 +332,14 @@ def _pick_time(
             hint=(suggestion + " " if suggestion else "")
             + "set `time:` to the name of the time column",
         )
-    for name in names:
-        bare = re.sub(r"\s*[\[(].*$", "", name).strip().lower()
-        if bare in _TIME_NAMES or bare.startswith("time"):
+    bare = [re.sub(r"\s*[\[(].*$", "", name).strip().lower() for name in names]
+    # An exact time name wins over a name that merely starts like one (`time` over
+    # `timer_ticks`); a prefix counts only when no letter follows it (`time_s`, `Time.1`).
+    for name, stem in zip(names, bare, strict=True):
+        if stem in _TIME_NAMES:
+            return name
+    for name, stem in zip(names, bare, strict=True):
+        if stem.startswith("time") and not stem[4:5].isalpha():
             return name
     candidates = list(fallback) if fallback else list(names)
     if not candidates:

@@ -26,6 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ...errors import DataError, did_you_mean
+from ...files import check_input
 from ..record import Channel, Record, SourceOptions
 from ._common import _corrupt, _import
 from .mdf import _open_mdf
@@ -392,14 +393,16 @@ def _id_text(key: int) -> str:
 
 def _load_database(database_path: str) -> Any:
     cantools = _import("cantools", "reading CAN logs", "can")
-    if not os.path.isfile(database_path):
-        problem = "is a directory" if os.path.isdir(database_path) else "not found"
+    try:
+        check_input(database_path)
+    except OSError as exc:
+        problem = "not found" if isinstance(exc, FileNotFoundError) else (exc.strerror or str(exc))
         raise DataError(
             f"CAN database {problem}",
             file=database_path,
             key=DATABASE_KEY,
             hint="check the `dbc:` path (relative paths start at the spec file)",
-        )
+        ) from None
     try:
         # strict=False: real databases often overlap multiplexed signals cantools would refuse.
         database = cantools.database.load_file(database_path, strict=False)

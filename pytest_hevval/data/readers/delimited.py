@@ -44,6 +44,18 @@ def _read_head(path: str) -> bytes:
         return stream.read(_SNIFF_BYTES)
 
 
+def _check_text(path: str, head: bytes) -> None:
+    """A delimited file is text: NUL bytes say it is binary (or a file still being written)."""
+    at = head.find(b"\x00")
+    if at >= 0 and not head.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise DataError(
+            f"byte {at} is a NUL byte: this is not a text CSV or TSV file",
+            file=path,
+            hint="name the data file itself (an export may still be in progress), or set "
+            "`format:` when it is another format",
+        )
+
+
 def _sniff_encoding(head: bytes) -> str:
     if head.startswith(b"\xef\xbb\xbf"):
         return "utf-8-sig"
@@ -123,6 +135,8 @@ def _read_delimited(
     head = _read_head(path)
     if options.encoding is not None:
         _check_encoding(path, options.encoding)
+    else:  # a declared encoding (UTF-16, UTF-32) has NUL bytes of its own
+        _check_text(path, head)
     encoding = options.encoding or _sniff_encoding(head)
     header = _header_line(head, encoding)
     if not header:

@@ -87,12 +87,27 @@ def _read_hdf5_group(
             hint=suggestion or f"set `group:` to one of: {listing}",
         )
     datasets: dict[str, Any] = {}
+    # Links into other files are refused before any object is looked up, since looking one
+    # up follows it. Names as bytes, at the library's level: one that is not UTF-8 must not
+    # stop the check.
+    for raw_name in node.id.__iter__():
+        if node.id.links.get_info(raw_name).type == h5py.h5l.TYPE_EXTERNAL:
+            target, file_name = node.id.links.get_val(raw_name)
+            _refuse_other_files(path, _hdf5_name(raw_name), h5py.ExternalLink(file_name, target))
     for raw_name, obj in node.items():
         name = _hdf5_name(raw_name)
         if name.startswith("#") or not isinstance(obj, h5py.Dataset):
             continue
+        _refuse_other_files(path, name, obj)
         if _vector_length(obj.shape) is not None:
             datasets[name] = obj
+        elif columns is not None and name in columns:
+            raise DataError(
+                f"is a dataset of shape {tuple(obj.shape)}, not one channel",
+                file=path,
+                column=name,
+                hint="store each channel as a 1-D dataset (one value per time step)",
+            )
     names = list(datasets)
     if not names:
         where = "the file root" if key == "/" else f"group {key!r}"
@@ -146,6 +161,31 @@ def _read_hdf5_group(
     meta = {"group": key}
     return _table_record(
         path, time_name, time, values, available=names, numeric=numeric, units=units, meta=meta
+    )
+
+
+def _refuse_other_files(path: str, name: str, item: Any) -> None:
+    """A link or a dataset whose data lie in another file is refused: a spec and its data come
+    from the change a CI gate judges, and must not make hevval read (and publish) a file the
+    spec does not name, such as ``../outside/secret.txt`` or ``/etc/passwd``."""
+    import h5py
+
+    if isinstance(item, h5py.ExternalLink):
+        elsewhere = f"a link to {item.path!r} in the file {item.filename!r}"
+    elif isinstance(item, h5py.Dataset) and item.external:
+        files = sorted({str(entry[0]) for entry in item.external})
+        elsewhere = "stored outside the file, in " + ", ".join(repr(f) for f in files)
+    elif isinstance(item, h5py.Dataset) and item.is_virtual:
+        files = sorted({str(source.file_name) for source in item.virtual_sources()})
+        elsewhere = "a virtual dataset of " + ", ".join(repr(f) for f in files)
+    else:
+        return
+    raise DataError(
+        f"{elsewhere}: hevval reads only the data file the spec names",
+        file=path,
+        column=name,
+        hint="copy the data into this file (for example with `h5repack`), or name the file "
+        "that holds them in the spec",
     )
 
 

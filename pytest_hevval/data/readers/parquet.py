@@ -54,6 +54,14 @@ def _read_parquet_columns(
         raise _corrupt(path, "Parquet", exc) from None
     with closing(parquet_file):
         names = [str(n) for n in schema.names]
+        repeated = sorted({n for n in names if names.count(n) > 1})
+        if repeated:
+            raise DataError(
+                f"the file has {names.count(repeated[0])} columns named {repeated[0]!r}",
+                file=path,
+                column=repeated[0],
+                hint="give each column its own name when the file is written",
+            )
         types = pa.types
 
         def is_numeric(name: str) -> bool:
@@ -71,6 +79,15 @@ def _read_parquet_columns(
         if time_table.num_rows == 0:
             raise _no_rows(path)
         time_column = time_table.column(0)
+        if time_column.null_count:
+            missing = np.flatnonzero(time_column.is_null().to_numpy(zero_copy_only=False))
+            raise DataError(
+                f"time is missing at index {int(missing[0])} "
+                f"({time_column.null_count} missing in all)",
+                file=path,
+                column=time_name,
+                hint="remove those rows or fill in their time",
+            )
         start_meta: dict[str, Any] = {}
         if types.is_timestamp(time_column.type) or types.is_duration(time_column.type):
             # Absolute or elapsed time stamps become seconds since the first sample.
