@@ -183,7 +183,9 @@ def _expected(database: Any, messages: Sequence[Any]) -> dict[str, tuple[list[fl
         for name, value in decoded.items():
             column = f"{spec.name}.{name}" if name == "temp" else name
             times, values = out.setdefault(column, ([], []))
-            times.append(message.timestamp - first)
+            # Epoch seconds as floats carry about 0.24 µs: times from the first frame are
+            # known to the microsecond, and the reader keeps them so (10 ms, not 9.99999 ms).
+            times.append(float(np.round((message.timestamp - first) / 1e-6) * 1e-6))
             values.append(float(value))
     return out
 

@@ -310,7 +310,7 @@ MINIMAL = "reference: a.csv\nmodel: b.csv\nsets: [{signal: x}]\n"
         ("a: !!timestamp x\n", ":1: invalid YAML: cannot read this value as timestamp"),
         ("a: !!map [1]\n", ":1: invalid YAML: cannot read this value as map"),
         ("a: !!seq {a: 1}\n", ":1: invalid YAML: cannot read this value as seq"),
-        ("reference: &r [*r]\n", ":1: invalid YAML: found unconstructable recursive node"),
+        ("reference: &r [*r]\n", ":1: invalid YAML: an alias refers to the value that holds it"),
         (
             MINIMAL.replace("x}", "x, alpha: " + "9" * 400 + "}"),
             ":3: sets[0].alpha: must be a finite number",

@@ -292,3 +292,14 @@ def test_region_bins_that_would_make_millions_of_cells(project: Path) -> None:
     (project / "hostile.hevval.yaml").write_text(text, encoding="utf-8")
     done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
     _clear_error(done, "hostile.hevval.yaml", "regions.bins", "region cells")
+
+
+@pytest.mark.parametrize("suffix", ["csv", "parquet", "mat", "h5", "mf4", "tdms"])
+def test_a_ten_gigabyte_file_of_nul_bytes_as_data(project: Path, suffix: str) -> None:
+    """A sparse file: no disk used, but a reader that loads it whole runs out of memory."""
+    path = project / f"sim.{suffix}"
+    with open(path, "wb") as stream:
+        stream.truncate(10 * 1024**3)
+    (project / "hostile.hevval.yaml").write_text(SPEC.replace("sim.csv", path.name), "utf-8")
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, path.name)

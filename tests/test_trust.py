@@ -225,3 +225,49 @@ def test_hdf5_data_in_another_file_is_refused(tmp_path: Path, kind: str) -> None
         read_record(str(path), None, SourceOptions())
     assert error.value.column == "v"
     assert "other.h5" in str(error.value) or "secret.txt" in str(error.value)
+
+
+@pytest.mark.parametrize("suffix", ["h5", "mat"])
+@pytest.mark.parametrize("time_scale", [None, 0.001])
+def test_epoch_milliseconds_in_hdf5_and_mat_become_seconds_from_the_start(
+    tmp_path: Path, suffix: str, time_scale: float | None
+) -> None:
+    """These readers took epoch numbers as a relative time base: milliseconds read as seconds
+    (undetected under a day) or, with time_scale, absolute seconds at 1.7e9."""
+    stamps = np.round((1.7e9 + np.arange(0.0, 60.0, 0.01)) * 1000)
+    path = tmp_path / f"a.{suffix}"
+    if suffix == "h5":
+        h5py = pytest.importorskip("h5py")
+        with h5py.File(path, "w") as handle:
+            handle["time"] = stamps
+            handle["v"] = V
+    else:
+        scipy_io = pytest.importorskip("scipy.io")
+        scipy_io.savemat(path, {"time": stamps, "v": V})
+    record = read_record(str(path), ["v"], SourceOptions(time_scale=time_scale))
+    time = record.channels["v"].time
+    assert time[0] == 0.0
+    assert time[1] == pytest.approx(0.01)
+    assert record.meta["start_epoch_s"] == pytest.approx(1.7e9)
+
+
+def test_a_full_disk_is_an_error_naming_the_output_and_leaves_the_old_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import errno
+
+    from pytest_hevval import files
+    from pytest_hevval.errors import OutputError
+
+    target = tmp_path / "out.json"
+    target.write_text("old", encoding="utf-8")
+
+    def full(*args: object, **kwargs: object) -> Path:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files, "write_temporary", full)
+    with pytest.raises(OutputError, match="cannot write it: No space left on device") as error:
+        files.write_atomic(target, "new")
+    assert error.value.file == str(target)
+    assert "free some disk space" in str(error.value)
+    assert target.read_text("utf-8") == "old"

@@ -190,5 +190,7 @@ def _histogram_range(residual: npt.NDArray[np.float64], bins: int) -> tuple[floa
     floor = 4.0 * bins * float(np.spacing(max(abs(low), abs(high), np.finfo(np.float64).tiny)))
     if high - low >= floor:
         return low, high
+    if low == high and floor <= 1.0:
+        return low - 0.5, high + 0.5  # numpy's own range for a constant
     centre = low / 2.0 + high / 2.0
     return centre - floor, centre + floor

@@ -132,7 +132,8 @@ def _time_base(
     first_line: int | None = None,
 ) -> tuple[FloatArray, dict[str, Any]]:
     """:func:`_check_time` for relative or absolute (clock) time; the meta of a clock start."""
-    clock = _clock_seconds(raw, time_scale(source, column, options)[0] if _numeric(raw) else None)
+    scale, stated = time_scale(source, column, options) if _numeric(raw) else (1.0, False)
+    clock = _clock_seconds(raw, scale if stated else None)
     if clock is None:
         return _check_time(source, column, raw, options, first_line=first_line), {}
     relative, start = clock

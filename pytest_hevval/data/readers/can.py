@@ -28,7 +28,7 @@ import numpy.typing as npt
 from ...errors import DataError, did_you_mean
 from ...files import check_input
 from ..record import Channel, Record, SourceOptions
-from ._common import _corrupt, _import
+from ._common import _at_resolution, _corrupt, _import
 from .mdf import _open_mdf
 
 __all__ = ["CAN_EXTENSIONS", "DATABASE_KEY", "SignalLayout", "decode_signal", "read_can"]
@@ -546,6 +546,9 @@ def _group(frames: _Frames, origin: float) -> dict[int, _MessageFrames]:
     for start, end in zip(starts, ends, strict=True):
         rows = order[start:end]
         time = frames.time[rows] - origin
+        if frames.absolute:
+            # Epoch seconds as floats carry about 0.24 µs: keep what they carry, not rounding.
+            time = _at_resolution(time, origin)
         later = np.r_[time[1:] > time[:-1], True]
         kept = rows[later]
         groups[int(keys[start])] = _MessageFrames(

@@ -14,7 +14,6 @@ from ._common import (
     ValueArray,
     _as_list,
     _as_values,
-    _check_time,
     _corrupt,
     _import,
     _is_numeric_dtype,
@@ -22,6 +21,7 @@ from ._common import (
     _no_rows,
     _not_numbers,
     _table_record,
+    _time_base,
     _vector_plan,
 )
 from .guards.hdf5 import _HDF5_SIGNATURE, _hdf5_get_checked, _hdf5_groups, _hdf5_name
@@ -145,7 +145,7 @@ def _read_hdf5_group(
         raise _corrupt(path, "MAT" if matlab else "HDF5", exc) from None
     if time_raw.size == 0:
         raise _no_rows(path)
-    time = _check_time(path, time_name, time_raw, options)
+    time, start_meta = _time_base(path, time_name, time_raw, options)
     values: dict[str, ValueArray] = {}
     for name in wanted:
         if not is_numeric(name):
@@ -158,7 +158,7 @@ def _read_hdf5_group(
         n: _attr_text(datasets[n].attrs.get("unit", datasets[n].attrs.get("units")))
         for n in [time_name, *wanted]
     }
-    meta = {"group": key}
+    meta: dict[str, Any] = {"group": key, **start_meta}
     return _table_record(
         path, time_name, time, values, available=names, numeric=numeric, units=units, meta=meta
     )

@@ -15,13 +15,13 @@ from ..record import Record, SourceOptions
 from ._common import (
     _as_list,
     _as_values,
-    _check_time,
     _corrupt,
     _import,
     _is_numeric_dtype,
     _kind_name,
     _no_rows,
     _table_record,
+    _time_base,
     _vector_plan,
 )
 from .guards.mat5 import _mat5_problem
@@ -148,9 +148,9 @@ def _read_mat5(path: str, columns: list[str] | None, options: SourceOptions) -> 
         )
     if time_raw.size == 0:
         raise _no_rows(path)
-    time = _check_time(path, time_name, time_raw, options)
+    time, start_meta = _time_base(path, time_name, time_raw, options)
     values = {n: _as_values(path, n, data[n]) for n in wanted}
-    meta: dict[str, Any] = {"mat_version": "5"}
+    meta: dict[str, Any] = {"mat_version": "5", **start_meta}
     if group:
         meta["group"] = group
     return _table_record(path, time_name, time, values, available=names, numeric=numeric, meta=meta)

@@ -6,6 +6,7 @@ scipy segfaults on some damaged element tags and allocates gigabytes for damaged
 
 from __future__ import annotations
 
+import mmap
 import struct
 import zlib
 
@@ -114,7 +115,16 @@ def _mat5_problem(path: str) -> str | None:
     segmentation fault instead of an exception. One damaged byte is enough for either.
     """
     with open(path, "rb") as stream:
-        return mat5_problem_in(stream.read())
+        head = stream.read(128)
+        if head and not head.strip(b"\x00"):
+            # No MAT header of any version is NUL bytes; scipy would read a v4 file of empty
+            # variables from them, as far as the file goes.
+            return "the file starts with NUL bytes where a MAT header should be"
+        if head[126:128] not in (b"IM", b"MI"):
+            return None  # MAT v4, or not a MAT file: scipy tells
+        # Mapped, not read: the walk touches the element tags, not the whole file.
+        with mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as data:
+            return mat5_problem_in(data)  # type: ignore[arg-type]
 
 
 def mat5_problem_in(data: bytes) -> str | None:
