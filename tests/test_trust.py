@@ -271,3 +271,20 @@ def test_a_full_disk_is_an_error_naming_the_output_and_leaves_the_old_file(
     assert error.value.file == str(target)
     assert "free some disk space" in str(error.value)
     assert target.read_text("utf-8") == "old"
+
+
+def test_an_expression_error_names_the_side_it_is_on(tmp_path: Path) -> None:
+    """An overflowing `ref:` expression was reported at `sim`."""
+    from pytest_hevval.errors import ExpressionError
+
+    pd.DataFrame({"t": T, "v": V}).to_csv(tmp_path / "ref.csv", index=False)
+    pd.DataFrame({"t": T, "v": V}).to_csv(tmp_path / "sim.csv", index=False)
+    spec = _spec(
+        tmp_path, "path: ref.csv", "path: sim.csv", signal="{signal: w, ref: 'v ** 1e5', sim: v}"
+    )
+    from pytest_hevval.scoring.run import RunOptions, run_specs
+    from pytest_hevval.spec.load import load_spec
+
+    (outcome,) = run_specs([load_spec(spec)], RunOptions(rootdir=tmp_path, intervals=False))
+    assert isinstance(outcome, ExpressionError)
+    assert outcome.key == "sets[0].ref"

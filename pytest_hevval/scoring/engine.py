@@ -584,14 +584,13 @@ def _signal_arrays(
         unique.setdefault(_signature(node), node)
     values: dict[Signature, tuple[FloatArray, FloatArray]] = {}
     for signature, node in unique.items():
-        try:
-            values[signature] = (
-                _signal_values(aligned, "reference", node.ref, node),
-                _signal_values(aligned, "model", node.sim, node),
-            )
-        except ExpressionError as exc:
-            side = "ref" if exc.column in reference.channels else "sim"
-            raise exc.with_context(line=node.line, key=f"{node.key}.{side}") from None
+        pair = []
+        for side, expression, key in (("reference", node.ref, "ref"), ("model", node.sim, "sim")):
+            try:
+                pair.append(_signal_values(aligned, side, expression, node))
+            except ExpressionError as exc:
+                raise exc.with_context(line=node.line, key=f"{node.key}.{key}") from None
+        values[signature] = (pair[0], pair[1])
     if aligned.gap_mask is not None and aligned.gap_mask.any():
         keep = ~aligned.gap_mask
         values = {k: (r[keep], s[keep]) for k, (r, s) in values.items()}
