@@ -288,3 +288,24 @@ def test_an_expression_error_names_the_side_it_is_on(tmp_path: Path) -> None:
     (outcome,) = run_specs([load_spec(spec)], RunOptions(rootdir=tmp_path, intervals=False))
     assert isinstance(outcome, ExpressionError)
     assert outcome.key == "sets[0].ref"
+
+
+def test_an_hdf5_group_reached_through_a_link_into_another_file_is_refused(
+    tmp_path: Path,
+) -> None:
+    """`group:` naming an external link, and the group listing of an error message, must not
+    open the other file either (a named pipe there would hang the run)."""
+    h5py = pytest.importorskip("h5py")
+    with h5py.File(tmp_path / "other.h5", "w") as other:
+        other["g/time"] = np.arange(10.0)
+        other["g/v"] = np.arange(10.0)
+    path = tmp_path / "a.h5"
+    with h5py.File(path, "w") as handle:
+        handle["time"] = np.arange(10.0)
+        handle["elsewhere"] = h5py.ExternalLink(str(tmp_path / "other.h5"), "/g")
+    with pytest.raises(DataError, match="leads through a link to '/g' in the file") as error:
+        read_record(str(path), None, SourceOptions(group="elsewhere"))
+    assert error.value.key == "group"
+    with pytest.raises(DataError, match="no group 'nowhere'") as missing:
+        read_record(str(path), None, SourceOptions(group="nowhere"))
+    assert "elsewhere" not in str(missing.value)

@@ -24,7 +24,13 @@ from ._common import (
     _time_base,
     _vector_plan,
 )
-from .guards.hdf5 import _HDF5_SIGNATURE, _hdf5_get_checked, _hdf5_groups, _hdf5_name
+from .guards.hdf5 import (
+    _HDF5_SIGNATURE,
+    _hdf5_get_checked,
+    _hdf5_groups,
+    _hdf5_name,
+    hdf5_external_links,
+)
 
 # A MATLAB v7.3 file is HDF5 with a 512-byte (or larger power-of-two) user block in front.
 
@@ -87,13 +93,9 @@ def _read_hdf5_group(
             hint=suggestion or f"set `group:` to one of: {listing}",
         )
     datasets: dict[str, Any] = {}
-    # Links into other files are refused before any object is looked up, since looking one
-    # up follows it. Names as bytes, at the library's level: one that is not UTF-8 must not
-    # stop the check.
-    for raw_name in node.id.__iter__():
-        if node.id.links.get_info(raw_name).type == h5py.h5l.TYPE_EXTERNAL:
-            target, file_name = node.id.links.get_val(raw_name)
-            _refuse_other_files(path, _hdf5_name(raw_name), h5py.ExternalLink(file_name, target))
+    # Links into other files are refused before any object is looked up: a look-up follows.
+    for raw_name, (file_name, target) in hdf5_external_links(node).items():
+        _refuse_other_files(path, _hdf5_name(raw_name), h5py.ExternalLink(file_name, target))
     for raw_name, obj in node.items():
         name = _hdf5_name(raw_name)
         if name.startswith("#") or not isinstance(obj, h5py.Dataset):

@@ -111,9 +111,25 @@ def _check_hdf5_group(path: str, group: Any) -> None:
         )
 
 
+def hdf5_external_links(group: Any) -> dict[bytes, tuple[str, str]]:
+    """The group's links into other files, by name as the file stores it: (file, path) each.
+
+    Read at the library's level: looking a link up through h5py follows it, opening the other
+    file (a named pipe there would block), and h5py cannot look up names that are not UTF-8.
+    """
+    import h5py
+
+    found: dict[bytes, tuple[str, str]] = {}
+    for raw_name in group.id.__iter__():
+        if group.id.links.get_info(raw_name).type == h5py.h5l.TYPE_EXTERNAL:
+            file_name, target = group.id.links.get_val(raw_name)
+            found[raw_name] = (_hdf5_name(file_name), _hdf5_name(target))
+    return found
+
+
 def _hdf5_get_checked(path: str, handle: Any, key: str) -> Any:
     """``handle.get(key)``, checking every group on the way, and a group found, before a name
-    is looked up in it."""
+    is looked up in it; a link into another file on the way is refused."""
     import h5py
 
     node = handle
@@ -121,6 +137,15 @@ def _hdf5_get_checked(path: str, handle: Any, key: str) -> Any:
         if not isinstance(node, h5py.Group):
             return None
         _check_hdf5_group(path, node)
+        external = hdf5_external_links(node).get(part.encode("utf-8", "surrogateescape"))
+        if external is not None:
+            raise DataError(
+                f"{key!r} leads through a link to {external[1]!r} in the file {external[0]!r}: "
+                "hevval reads only the data file the spec names",
+                file=path,
+                key="group",
+                hint="copy the data into this file, or name the file that holds them",
+            )
         node = node.get(part)
         if node is None:
             return None
@@ -139,7 +164,11 @@ def _hdf5_groups(path: str, handle: Any) -> list[str]:
     while pending:
         prefix, group = pending.pop()
         _check_hdf5_group(path, group)
-        for raw_name, obj in group.items():
+        external = hdf5_external_links(group)
+        for raw_name in group.id.__iter__():
+            if raw_name in external:
+                continue  # another file's groups are not this file's
+            obj = group.get(raw_name)
             name = _hdf5_name(raw_name)
             if not isinstance(obj, h5py.Group) or name.startswith("#"):
                 continue
