@@ -9,7 +9,7 @@ from hypothesis.extra import numpy as hnp
 
 from pytest_hevval.core.tree import TreeNode
 
-__all__ = ["finite", "regression_terms", "signal_pairs", "signal_trees"]
+__all__ = ["finite", "quantised_pairs", "regression_terms", "signal_pairs", "signal_trees"]
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
@@ -25,6 +25,24 @@ def signal_pairs(
     assume(np.ptp(reference) > 1e-6 * (np.abs(reference).max() + 1))
     simulated = draw(hnp.arrays(np.float64, n, elements=finite))
     return reference, simulated
+
+
+@st.composite
+def quantised_pairs(
+    draw: st.DrawFn, min_size: int = 2, max_size: int = 60
+) -> tuple[np.ndarray, np.ndarray]:
+    """An aligned pair of quantised curves: a few levels, each often held for several samples,
+    so that many warping paths cost exactly the same. The quantum is not a power of two, so
+    sums of squared differences round, and the order they are summed in can break a tie."""
+    n = draw(st.integers(min_size, max_size))
+    quantum = draw(st.sampled_from([0.1, 0.3, 1 / 3, 0.7]))
+
+    def curve() -> np.ndarray:
+        hold = draw(st.integers(1, 6))
+        levels = draw(hnp.arrays(np.int64, -(-n // hold), elements=st.integers(-4, 4)))
+        return np.repeat(levels, hold)[:n] * quantum
+
+    return curve(), curve()
 
 
 @st.composite

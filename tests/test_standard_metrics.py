@@ -145,6 +145,13 @@ def test_iso18571_phase_score_is_the_standards_linear_ramp(shift: int) -> None:
     assert rating.phase == pytest.approx(1 - abs(shift) / (0.2 * n))
 
 
+def test_iso18571_refuses_curves_the_phase_shift_leaves_too_short_for_the_slope() -> None:
+    # Ten samples may shift by two, leaving eight: fewer than the slope's nine-sample average.
+    ref = np.array([0.0, 0.0, 0.0, 1.0, 3.0, 1.0, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(DegenerateSignalError, match="overlap in 8 samples after the phase shift"):
+        iso18571_rating(ref, np.roll(ref, 2))
+
+
 def test_iso18571_banded_approximation_stays_near_the_exact_score(
     i3_pairs: dict[str, tuple[np.ndarray, np.ndarray]], kernel_path: str
 ) -> None:

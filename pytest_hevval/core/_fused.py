@@ -538,8 +538,10 @@ def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-
 def dtw_path(x, y, band):  # type: ignore[no-untyped-def]
     """ISO/TS 18571's warping path of x onto y with |i − j| ≤ band: (rows, cols) from (0, 0).
 
-    The compiled form of ``core.standard.iso18571._dtw_path``: the same recurrence, band layout
-    and ties (up, then left, then diagonal), cell by cell instead of a row's running minimum.
+    The compiled form of ``core.standard.iso18571._dtw_path``: the same recurrence and ties
+    (up, then left, then diagonal), row by row where numpy goes diagonal by diagonal. Each D is
+    gap·gap + best, rounded twice as numpy's square and sum are (no fastmath here: a fused
+    multiply-add would round once), so both paths choose the same path among equal costs.
     """
     n = x.shape[0]
     width = 2 * band + 1

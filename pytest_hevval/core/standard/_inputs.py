@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -47,6 +49,19 @@ def checked_pair(
             hint="compare a signal that varies, or leave this metric off for it",
         )
     return ref, sim
+
+
+def power_of_two_exponent(peak: float) -> int:
+    """The k that brings ``peak`` into [0.5, 1) as peak·2^k; 0 for a zero or non-finite peak.
+
+    Multiplying by 2^k only changes the exponent, so values scaled by it (``np.ldexp``) keep
+    every bit and every ratio between them, as long as none leaves the normal float range: a
+    metric computed on them gives the same bits for data in any unit that differs by a power
+    of two, and values of about 1 have squares and sums far from overflow and underflow.
+    """
+    if peak == 0.0 or not math.isfinite(peak):
+        return 0
+    return -math.frexp(peak)[1]
 
 
 # A mean below this fraction of the peak is round-off: a signal that swings about zero.

@@ -22,6 +22,11 @@ aligned grid, whatever its rate (the slope's dt cancels in its ratio). Identical
 ``objective-rating-metrics`` package (the standard's reference implementation in Python) to
 better than 0.001 on its curves; ``tests/test_standard_metrics.py`` checks it.
 
+Units: both curves are first scaled by one power of two (exact in binary floating point), so
+a pair in units a power of two apart gets the same bits, and values from 1e-300 to 1e300 score
+as at 1. Ties: where several warping paths cost the same, the numpy and the compiled paths
+compute every cell of the recurrence alike and so pick the same one.
+
 Long records: the warping band holds about N²/5 cells. Up to :data:`EXACT_DTW_CELLS` cells the
 band is the standard's; beyond it the band is narrowed to fit (``banded`` = 1 in the
 components) — the measured deviation is in docs/metrics.md.
@@ -30,14 +35,16 @@ components) — the measured deviation is in docs/metrics.md.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from scipy import signal as sps
 
 from .. import kernel
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair, degenerate
+from ._inputs import FloatArray, checked_pair, degenerate, power_of_two_exponent
 
 __all__ = [
     "EXACT_DTW_CELLS",
@@ -53,9 +60,11 @@ EXACT_DTW_CELLS = 64_000_000
 # Correlations closer than this are a tie (FFT round-off must not break the standard's ties).
 _CORRELATION_TIE = 1e-12
 _MIN_SAMPLES = 10
-# Rows of the warping band held as float64 at once (their backtracking steps are then chosen
-# together): 256 rows of a 4,000-sample band are 1.6 MB.
-_DTW_BLOCK = 256
+# Samples of the slope's moving average; the phase shift can leave fewer than _MIN_SAMPLES.
+_SLOPE_AVERAGE = 9
+# Anti-diagonals of the warping band held as float64 at once (their backtracking steps are
+# then chosen together): 512 diagonals of a 4,000-sample band are 1.6 MB.
+_DTW_BLOCK = 512
 
 
 @dataclass(frozen=True)
@@ -104,7 +113,9 @@ def iso18571_rating(
     max_cells: int = EXACT_DTW_CELLS,
 ) -> Iso18571Rating:
     """ISO/TS 18571 rating of ``simulated`` against ``reference`` (one grid, equal length)."""
-    ref, sim = checked_pair(reference, simulated, metric="iso18571", min_samples=_MIN_SAMPLES)
+    ref, sim = _unit_scaled(
+        *checked_pair(reference, simulated, metric="iso18571", min_samples=_MIN_SAMPLES)
+    )
     p = parameters
     n = ref.shape[0]
     corridor = _corridor(ref, sim, p)
@@ -118,6 +129,13 @@ def iso18571_rating(
     else:
         ref_s, sim_s = ref, sim
     m = ref_s.shape[0]
+    if m < _SLOPE_AVERAGE:
+        raise degenerate(
+            "iso18571",
+            f"the curves overlap in {m} samples after the phase shift, fewer than the "
+            f"{_SLOPE_AVERAGE} of the slope's moving average",
+            "compare longer curves",
+        )
     band = max(0, math.ceil(p.warping_window * m) - 1)
     banded = m * (2 * band + 1) > max_cells
     if banded:
@@ -166,6 +184,28 @@ def iso18571_characteristic(
     )
 
 
+def _unit_scaled(ref: FloatArray, sim: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Both curves times the one power of two that brings the larger peak into [0.5, 1).
+
+    Every score is a ratio and a power of two changes no significand, so no score moves; but
+    the arithmetic then runs on the same numbers for a pair in any unit a power of two apart,
+    so the rating is the same bits. Values of at most 1 keep every square and sum finite
+    (squares of 1e200 overflow, those of 1e-300 vanish, which broke the warping and moved the
+    phase shift); the larger peak rather than the reference's keeps them so when the
+    simulation is far above the reference. Refused when the reference would then fall below
+    the normal floats: its values would lose bits.
+    """
+    ref_peak = float(np.max(np.abs(ref)))
+    exponent = power_of_two_exponent(max(ref_peak, float(np.max(np.abs(sim)))))
+    if math.ldexp(ref_peak, exponent) < sys.float_info.min:
+        raise degenerate(
+            "iso18571",
+            "the signals' magnitudes differ by a factor beyond the float range",
+            "check the model output's column and scale",
+        )
+    return np.ldexp(ref, exponent), np.ldexp(sim, exponent)
+
+
 def _ramp(error: float, limit: float, exponent: float) -> float:
     """The standard's score of an error: 1 at 0, 0 from ``limit`` on, ((ε_lim − ε)/ε_lim)^k."""
     if error <= 0.0:
@@ -190,8 +230,10 @@ def _phase_shift(ref: FloatArray, sim: FloatArray, phase_limit: float) -> int:
     """The shift of ``sim`` (samples; negative = sim lags) with the highest overlap correlation."""
     n = ref.shape[0]
     shifts = math.floor(n * phase_limit) + 1
-    x = ref - ref.mean()
-    y = sim - sim.mean()
+    # Pearson's r is the same for each curve in its own unit: scaled apart, neither one's
+    # squares underflow where the other is far larger.
+    x = _centred_unit(ref)
+    y = _centred_unit(sim)
     cross = sps.correlate(y, x, mode="full", method="fft" if n > 256 else "direct")
     m = np.arange(1, shifts)
     # left[m]: ref[:n-m] against sim[m:]; right[m]: ref[m:] against sim[:n-m].
@@ -211,6 +253,14 @@ def _phase_shift(ref: FloatArray, sim: FloatArray, phase_limit: float) -> int:
         return 0
     lag = (best + 1) // 2
     return -lag if best % 2 == 1 else lag
+
+
+def _centred_unit(values: FloatArray) -> FloatArray:
+    """``values`` minus their mean, scaled by a power of two to a peak in [0.5, 1)."""
+    centred = values - values.mean()
+    return np.asarray(
+        np.ldexp(centred, power_of_two_exponent(float(np.max(np.abs(centred))))), np.float64
+    )
 
 
 def _overlap_correlation(
@@ -257,60 +307,32 @@ def _relative_l1(candidate: FloatArray, reference: FloatArray, when_zero: str) -
 def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.ndarray]:
     """The minimal warping path of x onto y with |i − j| ≤ band, from (0, 0) to (n−1, n−1).
 
-    D[i, j] = (x_i − y_j)² + min(D[i−1, j], D[i, j−1], D[i−1, j−1]). Within a row the
-    left-neighbour term is a running minimum: with A_j = c_j + min(D[i−1, j], D[i−1, j−1]) and
-    S the row's cumulative cost, D[i, j] = S_j + min_{k ≤ j}(A_k − S_k), so each row is a few
-    vector operations. Rows are kept in band coordinates (k = j − i + band) a block at a time;
-    the backtracking steps of a whole block are then chosen at once, ties going up, then left,
-    then diagonal (as dtwalign backtracks). Memory: one byte per band cell. With the ``fast``
-    extra, bands the kernel takes (:func:`~pytest_hevval.core.kernel.kernel_for`, counted in
-    cells) run as one compiled loop with the same ties.
+    D[i, j] = (x_i − y_j)² + min(D[i−1, j], D[i, j−1], D[i−1, j−1]), ties going up, then left,
+    then diagonal (as dtwalign backtracks). Equal-cost paths are common (piecewise-constant or
+    quantised curves), so which one wins must not depend on round-off: both paths evaluate
+    every cell as this one sum of two floats, so their D, steps and path are the same bits.
+    With the ``fast`` extra, bands the kernel takes
+    (:func:`~pytest_hevval.core.kernel.kernel_for`, counted in cells) run as one compiled loop
+    row by row. The numpy path runs along anti-diagonals instead (d = i + j): a cell needs only
+    the two diagonals before it, so each diagonal is three vector operations. Memory: one byte
+    per band cell.
     """
     n = x.shape[0]
-    width = 2 * band + 1
-    compiled = kernel.kernel_for(n * width, ("dtw_path",))
+    # A wider band allows nothing more, and the diagonals below would only grow.
+    band = min(band, n - 1)
+    compiled = kernel.kernel_for(n * (2 * band + 1), ("dtw_path",))
     if compiled is not None:
         return kernel.dtw_path(compiled, x, y, band)
-    choice = np.empty((n, width), dtype=np.int8)
-    # Row r of the block sits at rows[r + 1], band cell k at column k + 1, with inf padding on
-    # both sides; rows[0] is the last row of the previous block.
-    rows = np.full((_DTW_BLOCK + 1, width + 2), np.inf)
-    # Band cell k of row i pairs x_i with y_{i+k−band}; cells off the grid cost 0 and are
-    # never written, so a row's prefix sums over the whole band equal those over its cells.
-    padded = np.concatenate((np.full(band, np.nan), y, np.full(band, np.nan)))
-    windows = np.lib.stride_tricks.sliding_window_view(padded, width)
-    for first in range(0, n, _DTW_BLOCK):
-        last = min(n, first + _DTW_BLOCK)
-        cost = np.subtract(x[first:last, None], windows[first:last])
-        np.square(cost, out=cost)
-        cost[np.isnan(cost)] = 0.0
-        total = np.cumsum(cost, axis=1)
-        before = total - cost  # Σ of the row's costs left of each cell
-        for i in range(first, last):
-            lo = max(0, band - i)
-            hi = min(width, n - i + band)
-            r = i - first
-            previous = rows[r]
-            reach = np.minimum(previous[lo + 2 : hi + 2], previous[lo + 1 : hi + 1])
-            if i == 0:
-                reach[0] = 0.0
-            reach -= before[r, lo:hi]
-            np.minimum.accumulate(reach, out=reach)
-            np.add(reach, total[r, lo:hi], out=rows[r + 1, lo + 1 : hi + 1])
-        count = last - first
-        up = rows[:count, 2:]
-        diagonal = rows[:count, 1:-1]
-        left = rows[1 : count + 1, :-2]
-        step = np.where(left < up, np.int8(1), np.int8(0))
-        step[diagonal < np.minimum(up, left)] = 2
-        choice[first:last] = step
-        rows[0] = rows[count]
-        rows[1:] = np.inf
+    choice = _dtw_steps(x, y, band)
     i = j = n - 1
     path_rows = [i]
     path_cols = [j]
     while i or j:
-        move = choice.item(i, j - i + band) if i and j else (1 if i == 0 else 0)
+        if i and j:
+            d = i + j
+            move = choice.item(d, (i - j + band - ((d + band) & 1)) >> 1)
+        else:
+            move = 1 if i == 0 else 0
         if move == 0:
             i -= 1
         elif move == 1:
@@ -321,6 +343,81 @@ def _dtw_path(x: FloatArray, y: FloatArray, band: int) -> tuple[np.ndarray, np.n
         path_rows.append(i)
         path_cols.append(j)
     return np.asarray(path_rows[::-1]), np.asarray(path_cols[::-1])
+
+
+def _dtw_steps(x: FloatArray, y: FloatArray, band: int) -> npt.NDArray[np.int8]:
+    """The backtracking step of every band cell (0 up, 1 left, 2 diagonal) by anti-diagonal.
+
+    Cell s of diagonal d is (i, j) with i + j = d and i − j + band = 2s + p, p the parity of
+    d + band: a diagonal holds band + 1 cells (the last one off the band when p = 1). Its
+    up, left and diagonal neighbours are cells s − 1 + p, s + p of diagonal d − 1 and s of
+    d − 2, so a diagonal is two minima and one sum over contiguous slices.
+    """
+    n = x.shape[0]
+    cells = band + 1
+    diagonals = 2 * n - 1
+    choice = np.empty((diagonals, cells), dtype=np.int8)
+    # Off the grid x is +inf and y −inf, so the cost there is +inf and no NaN can arise: such
+    # cells, like those off the band, keep D = +inf as the compiled loop's padding does.
+    pad = band + 1
+    xs = np.concatenate((np.full(pad, np.inf), x, np.full(pad, np.inf)))
+    ys = np.concatenate((np.full(pad, -np.inf), y, np.full(pad, -np.inf)))[::-1].copy()
+    x_windows = np.lib.stride_tricks.sliding_window_view(xs, cells)
+    y_windows = np.lib.stride_tricks.sliding_window_view(ys, cells)
+    # One block for short curves; else blocks of an even number of diagonals, so that every
+    # block starts on an even diagonal and reads and writes the same views of ``rows``.
+    block = min(_DTW_BLOCK, diagonals)
+    # Row r + 2 holds diagonal first + r, cell s at column s + 1 with +inf on both sides; rows
+    # 0 and 1 are the two diagonals before the block. A row holds its cells' costs until D
+    # replaces them.
+    rows = np.full((block + 2, cells + 2), np.inf)
+    # The path starts at (0, 0): its diagonal neighbour (−1, −1) costs 0, so D[0, 0] is its
+    # cost plus 0, as in the compiled loop.
+    rows[0, 1 + band // 2] = 0.0
+    nearer = np.empty((block, cells))  # min(up, left), kept for choosing the steps
+    best = np.empty(cells)
+    # Made once, these views spare the loop (two diagonals per sample) their slicing.
+    recurrence = []
+    for r in range(block):
+        p = (r + band) & 1
+        previous, here = rows[r + 1], rows[r + 2, 1:-1]
+        recurrence.append(
+            (
+                previous[p : p + cells],
+                previous[p + 1 : p + 1 + cells],
+                nearer[r],
+                rows[r, 1:-1],
+                here,
+            )
+        )
+    for first in range(0, diagonals, block):
+        last = min(diagonals, first + block)
+        count = last - first
+        costs = rows[2 : count + 2, 1:-1]
+        for start in (0, 1):
+            # Cell s of diagonal d pairs x[(d − band + 1) // 2 + s] with y[(d + band) // 2 − s]:
+            # from one diagonal to the next of its parity, x moves one sample on and y one back.
+            d = first + start
+            k = (count - start + 1) // 2
+            xi = pad + (d - band + 1) // 2
+            yi = n + pad - 1 - (d + band) // 2
+            np.subtract(
+                x_windows[xi : xi + k], y_windows[yi - k + 1 : yi + 1][::-1], out=costs[start::2]
+            )
+        np.square(costs, out=costs)
+        costs[(first + band + 1) & 1 :: 2, band] = np.inf  # off the band where p = 1
+        for up, left, upleft, diagonal, here in recurrence[:count]:
+            np.minimum(up, left, out=upleft)
+            np.minimum(upleft, diagonal, out=best)
+            np.add(here, best, out=here)
+        for start in (0, 1):
+            p = (first + start + band) & 1
+            previous = rows[start + 1 : count + 1 : 2]
+            steps = choice[first + start : last : 2]
+            np.less(previous[:, p + 1 : p + 1 + cells], previous[:, p : p + cells], out=steps)
+            np.copyto(steps, 2, where=rows[start:count:2, 1:-1] < nearer[start:count:2])
+        rows[:2] = rows[count : count + 2]
+    return choice
 
 
 def _smoothed_slope(values: FloatArray) -> FloatArray:
