@@ -4,6 +4,7 @@ Run from the project root::
 
     python benchmarks/bench_campaign.py --recordings 10 --repeat 1    # quick
     python benchmarks/bench_campaign.py                              # 100 recordings, 3 repeats
+    python benchmarks/bench_campaign.py --part spread --counts 50,100,200 --repeat 3
 
 The data: ``--recordings`` recordings of 10 min at 10 Hz (6,000 samples) with 20 channels, and a
 callable model that reproduces each channel with a lag, a gain and noise. Two ways to score the
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -111,6 +113,70 @@ def prepare(count: int) -> tuple[list[Path], Path]:
     return singles, campaign
 
 
+def prepare_exported(count: int) -> Path:
+    """The recordings of :func:`prepare` with the model's runs exported to one Parquet file
+    each (``sim/rec007.parquet``), as a Simulink or Dymola batch leaves them, and a campaign
+    spec over both (``model: {path: sim/{id}.parquet}``)."""
+    prepare(count)
+    sim = ROOT / "sim"
+    sim.mkdir(exist_ok=True)
+    namespace: dict[str, object] = {}
+    exec(MODEL, namespace)  # the callable the other parts run, to export what it computes
+    run = namespace["run"]
+    for index in range(count):
+        target = sim / f"rec{index:03d}.parquet"
+        if not target.exists():
+            run(_recording(index)).to_parquet(target, index=False)  # type: ignore[operator]
+    for extra in sorted(sim.glob("rec*.parquet"))[count:]:
+        extra.unlink()
+    spec = ROOT / "campaign-exported.hevval.yaml"
+    spec.write_text(
+        "reference: {path: data/rec*.parquet}\n"
+        "model: {path: 'sim/{id}.parquet'}\n"
+        "campaign: {min_pass_rate: 0.5}\n"
+        "alignment: {max_lag_s: 2}\nthresholds: {mae: 0.9}\nmin_phi: 0.8\n" + _sets()
+    )
+    return spec
+
+
+def _pytest_run(spec: Path, extra: list[str]) -> float:
+    """Wall seconds of one whole ``pytest --hevval`` process over ``spec``, as a user runs it."""
+    command = [sys.executable, "-m", "pytest", "--hevval", spec.name, "-q", "-p"]
+    command += ["no:cacheprovider", "--hevval-no-history", *extra]
+    started = time.perf_counter()
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+    seconds = time.perf_counter() - started
+    if done.returncode not in (0, 1) or "campaign" not in done.stdout:
+        raise SystemExit(f"{' '.join(command)} failed ({done.returncode}):\n{done.stdout[-3000:]}")
+    return seconds
+
+
+def spread(counts: list[int], repeat: int) -> None:
+    """Serial against ``-n 2`` against a two-worker local Dask cluster, for each campaign size,
+    the three alternating within each repetition."""
+    ways = {
+        "serial": [],
+        "-n 2": ["-p", "xdist", "-n", "2"],
+        "dask": ["--hevval-dask=local"],
+    }
+    for count in counts:
+        spec = prepare_exported(count)
+        _pytest_run(spec, [])  # the file cache and the kernel's cache warm for every way
+        times: dict[str, list[float]] = {way: [] for way in ways}
+        for _ in range(repeat):
+            for way, extra in ways.items():
+                times[way].append(_pytest_run(spec, extra))
+        line = f"{count} recordings ({count * (CHANNELS + 2) + 1} items):"
+        for way, found in times.items():
+            median = statistics.median(found)
+            ratios = [t / s for t, s in zip(found, times["serial"], strict=True)]
+            line += (
+                f" {way} {median:.2f} s ({min(found):.2f}–{max(found):.2f}; "
+                f"÷ serial, per repetition: median {statistics.median(ratios):.2f})"
+            )
+        print(line, f"load average {os.getloadavg()[0]:.2f}", flush=True)
+
+
 def score(specs: list[Path], *, campaign: bool, intervals: bool = True) -> tuple[float, float]:
     """(wall, CPU) time of loading and scoring ``specs`` (and the verdict, for a campaign)."""
     from pytest_hevval.results.campaign import campaign_verdicts
@@ -181,12 +247,21 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument(
         "--part",
-        choices=("all", "campaign", "intervals"),
+        choices=("all", "campaign", "intervals", "spread"),
         default="all",
         help="campaign: campaign against single specs; intervals: the campaign with and "
-        "without the bootstrap intervals",
+        "without the bootstrap intervals; spread: a campaign over exported model files as "
+        "whole pytest runs, serial against -n 2 against Dask (sizes from --counts)",
+    )
+    parser.add_argument(
+        "--counts",
+        default="50,100,200",
+        help="spread: comma-separated campaign sizes (recordings)",
     )
     args = parser.parse_args()
+    if args.part == "spread":
+        spread([int(c) for c in args.counts.split(",")], args.repeat)
+        return
     singles, campaign = prepare(args.recordings)
     sys.path.insert(0, str(ROOT))
     from pytest_hevval.core.kernel import KERNEL_ENV, describe

@@ -60,14 +60,17 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 def _run(args: argparse.Namespace) -> int:
     from . import __version__
+    from .core.kernel import compile_note, prepare
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
     from .results.campaign import campaign_verdicts
+    from .scoring.cluster import error_payload
     from .scoring.engine import Evaluation
     from .scoring.run import RunOptions, relative_to, run_specs
     from .spec.load import load_specs
 
+    prepare()
     rootdir = Path.cwd()
     publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
@@ -94,11 +97,14 @@ def _run(args: argparse.Namespace) -> int:
 
     outcomes = run_specs(specs, options, progress=advance)
     progress.close()
-    evaluations = []
-    for outcome in outcomes:
-        if not isinstance(outcome, Evaluation):
-            raise outcome
-        evaluations.append(outcome)
+    evaluations = [outcome for outcome in outcomes if isinstance(outcome, Evaluation)]
+    errors = [
+        (relative_to(rootdir, spec.key), outcome)
+        for spec, outcome in zip(specs, outcomes, strict=True)
+        if not isinstance(outcome, Evaluation)
+    ]
+    if errors and not evaluations:
+        raise errors[0][1]
     results = [evaluation.result for evaluation in evaluations]
     for line in run_summary(results, details=args.details):
         print(line)
@@ -109,13 +115,19 @@ def _run(args: argparse.Namespace) -> int:
         for signal in [None, *(s.path for s in result.signals)]
         for found in publisher.regressions_for(result, signal)
     ]
-    passed = all(r.passed for r in results) and all(v.passed for v in verdicts) and not regressions
+    passed = (
+        all(r.passed for r in results)
+        and all(v.passed for v in verdicts)
+        and not regressions
+        and not errors
+    )
     payload = {
         "schema_version": 1,
         "hevval_version": __version__,
         "passed": passed,
         "specs": [r.to_dict() for r in results],
         **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
+        **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
     }
     # The common single-spec case also exposes the spec's own fields at the top level.
     if len(results) == 1:
@@ -134,11 +146,17 @@ def _run(args: argparse.Namespace) -> int:
     )
     for line in published.annotations:
         print(line)
-    for note in [*notes, *published.notes]:
+    kernel_note = compile_note()
+    for note in [*notes, *published.notes, *([kernel_note] if kernel_note else [])]:
         print(note)
     for spec, signal, found in regressions:
         what = "Φ" if signal is None else signal
         print(f"regression: {spec}: {what}: {found}")
+    # The others were scored and published; the specs that could not be are named once each.
+    for _, error in errors:
+        print(f"hevval run: error: {error}", file=sys.stderr)
+    if errors:
+        return EXIT_USAGE
     return EXIT_OK if passed and not published.failed else EXIT_FAILED
 
 

@@ -18,6 +18,7 @@ import os
 import pytest
 from hypothesis import settings
 
+from pytest_hevval.core import kernel
 from pytest_hevval.plugin import session
 from pytest_hevval.scoring import engine
 
@@ -41,6 +42,10 @@ with contextlib.suppress(ImportError):  # the parquet extra
 # --hevval. Imported here, its finder stays for the whole session.
 with contextlib.suppress(ImportError):
     _KEPT_LOADED.append(importlib.import_module("importlib_metadata"))
+# A run with numba's cache cold compiles the kernel in a background process and says so in its
+# summary; tests of that set this back (tests/test_kernel.py), the others must not depend on
+# whether an earlier test warmed the cache.
+os.environ[kernel.BACKGROUND_COMPILE_ENV] = "0"
 # The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
 # and the next would pay its import again.
 with contextlib.suppress(Exception):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import sys
 from pathlib import Path
@@ -78,6 +79,13 @@ def write_campaign(root: Path, *, gain: float = 1.0, rate: float = 0.6) -> None:
 @pytest.fixture
 def project(pytester: pytest.Pytester) -> pytest.Pytester:
     return pytester
+
+
+def hevval_run(project: pytest.Pytester, *args: str) -> pytest.RunResult:
+    """``hevval run fleet.hevval.yaml --no-history ARGS`` in a child process."""
+    return project.run(
+        sys.executable, "-m", "pytest_hevval", "run", "fleet.hevval.yaml", "--no-history", *args
+    )
 
 
 # -- pytest items, end to end -----------------------------------------------------------------
@@ -158,18 +166,35 @@ def test_same_outcomes_under_xdist_and_selection(project: pytest.Pytester) -> No
     rerun.assert_outcomes(failed=3)
 
 
+def test_recordings_spread_over_workers_and_the_gate_judges_them_all(
+    project: pytest.Pytester,
+) -> None:
+    """Under -n 2 each worker scores whole recordings (a recording's items stay together, so
+    its file is read once) and the campaign item, judged once every recording is in, fails
+    the run as it does serially, in the terminal and in JUnit XML."""
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    result = project.runpytest(
+        "--hevval", "--hevval-no-history", "-p", "xdist", "-n", "2", "-v", "--junitxml=out.xml"
+    )
+    result.assert_outcomes(passed=10, failed=3)
+    workers: dict[str, set[str]] = {}
+    for line in result.stdout.lines:
+        if line.startswith("[gw") and "::Trip" in line:
+            worker, _, rest = line.partition("]")
+            recording = rest.split("::")[1]
+            workers.setdefault(recording, set()).add(worker)
+    assert set(workers) == set(TRIPS)
+    assert all(len(found) == 1 for found in workers.values()), workers
+    assert len(set().union(*workers.values())) == 2
+    result.stdout.fnmatch_lines(["FAILED fleet.hevval.yaml::campaign*"])
+    xml = (project.path / "out.xml").read_text()
+    assert 'name="campaign"' in xml
+    assert "pass_rate" in xml
+
+
 def test_cli_run_gives_the_campaign_verdict(project: pytest.Pytester) -> None:
     write_campaign(project.path, gain=1.4, rate=0.9)
-    result = project.run(
-        sys.executable,
-        "-m",
-        "pytest_hevval",
-        "run",
-        "fleet.hevval.yaml",
-        "--json",
-        "out.json",
-        "--no-history",
-    )
+    result = hevval_run(project, "--json", "out.json")
     assert result.ret == 1
     payload = json.loads((project.path / "out.json").read_text())
     (campaign,) = payload["campaigns"]
@@ -261,7 +286,27 @@ def test_table_of_recordings_passes_parameters(tmp_path: Path) -> None:
             "reference: {path: data/Trip*.csv, time: t}\nmodel: {path: data/TripA.csv}\n",
             2,
             "model.path",
-            "a campaign runs the model on each recording",
+            "names one file, but a campaign needs the model's output for each recording "
+            "(recording 'TripA' has none)",
+        ),
+        (
+            "reference: {path: data/TripA.csv, time: t}\nmodel: {path: 'sim/{id}.csv'}\n",
+            2,
+            "model.path",
+            "has {id}, which each recording of a campaign fills in",
+        ),
+        (
+            GLOB_HEAD + "recordings:\n  - {id: TripA, model: sim/a.csv}\n",
+            4,
+            "recordings.model",
+            "names a model output file, but the spec's model is a callable",
+        ),
+        (
+            "reference: {time: t}\nmodel: {path: sim/one.csv}\nrecordings:\n"
+            "  - {path: data/TripA.csv, model: sim/a.csv}\n  - {path: data/TripB.csv}\n",
+            2,
+            "model.path",
+            "(recording 'TripB' has none)",
         ),
         (
             "reference: {time: t}\nmodel: {callable: 'm:run'}\nrecordings:\n"
@@ -287,6 +332,136 @@ def test_bad_campaigns_are_spec_errors(
     error = caught.value
     assert (error.file, error.line, error.key) == (str(path), line, key)
     assert message in str(error)
+
+
+def write_exported(root: Path, *, gain: float = 1.0, extra: str | None = "Trip99") -> None:
+    """The campaign of :func:`write_campaign` with the model's runs exported to files, one per
+    recording (as a Simulink or Dymola batch writes them), instead of a callable."""
+    write_campaign(root, gain=gain)
+    (root / "sim").mkdir(exist_ok=True)
+    for trip in TRIPS:
+        measured = pd.read_csv(root / "data" / f"{trip}.csv")
+        scale = gain if trip == "Trip03" else 1.0
+        exported = pd.DataFrame(
+            {"time_s": measured["t"], "speed": measured["speed"]}
+            | {"P": 2.0 * measured["speed"] * scale}
+        )
+        exported.to_csv(root / "sim" / f"{trip}.csv", index=False)
+    if extra:
+        exported.to_csv(root / "sim" / f"{extra}.csv", index=False)
+    spec = SPEC.format(gain=gain, rate=0.6).replace(
+        'model: {callable: "campaign_model:run", inputs: [speed]}',
+        "model: {path: 'sim/{id}.csv', time: time_s}",
+    )
+    spec = spec.replace(f"  - {{id: Trip03, params: {{gain: {gain}}}}}\n", "")
+    (root / "fleet.hevval.yaml").write_text(spec)
+
+
+def test_exported_model_files_score_like_the_callable(project: pytest.Pytester) -> None:
+    """The same campaign, once with the model run in-process and once from exported files,
+    gives the same items, outcomes and verdict; a file no recording uses is named."""
+    write_campaign(project.path, gain=1.4)
+    from_callable = project.runpytest("--hevval", "--hevval-no-history")
+    write_exported(project.path, gain=1.4)
+    from_files = project.runpytest("--hevval", "--hevval-no-history")
+    assert (
+        from_files.parseoutcomes()
+        == from_callable.parseoutcomes()
+        == {
+            "passed": 11,
+            "failed": 2,
+        }
+    )
+    from_files.stdout.fnmatch_lines(
+        [
+            "campaign fleet.hevval.yaml (fleet): PASS, 2 of 3*",
+            "  model output files no recording uses: sim/Trip99.csv",
+        ]
+    )
+    assert "FAILED fleet.hevval.yaml::Trip03::P" in from_files.stdout.str()
+
+
+def test_a_recording_without_its_model_file_names_both(project: pytest.Pytester) -> None:
+    write_exported(project.path, extra=None)
+    (project.path / "sim" / "Trip02.csv").unlink()
+    result = project.runpytest("--hevval", "--hevval-no-history")
+    # The gate fails too: a recording without a result cannot be judged.
+    result.assert_outcomes(passed=9, failed=1, errors=3)
+    text = result.stdout.str()
+    assert "recording 'Trip02' has no model output: the file does not exist" in text
+    assert "sim/Trip02.csv" in text
+    assert "data/Trip02.csv" in text
+    assert "model output files no recording uses" not in text
+    result.stdout.fnmatch_lines(
+        ["campaign fleet.hevval.yaml (fleet): FAIL (3 of 4 recordings scored)*"]
+    )
+
+
+def test_cli_run_scores_the_others_and_names_the_recording_it_could_not(
+    project: pytest.Pytester,
+) -> None:
+    write_exported(project.path, extra=None)
+    (project.path / "sim" / "Trip04.csv").unlink()
+    result = hevval_run(project, "--json", "out.json")
+    assert result.ret == 2
+    errors = [line for line in result.stderr.lines if line.startswith("hevval run: error:")]
+    assert len(errors) == 1
+    assert "recording 'Trip04' has no model output" in errors[0]
+    payload = json.loads((project.path / "out.json").read_text())
+    assert payload["passed"] is False
+    assert [e["spec"] for e in payload["errors"]] == ["fleet.hevval.yaml::Trip04"]
+    assert payload["errors"][0]["file"].endswith("sim/Trip04.csv")
+    assert {s["spec"] for s in payload["specs"]} == {
+        f"fleet.hevval.yaml::{t}" for t in TRIPS if t != "Trip04"
+    }
+    assert payload["campaigns"][0]["missing"] == ["Trip04"]
+
+
+def test_exported_model_files_on_dask(project: pytest.Pytester) -> None:
+    """Each recording is its own task, its files read where the task runs; the items, the
+    gate and the JSON agree with a run on this machine."""
+    if importlib.util.find_spec("distributed") is None:
+        pytest.skip("distributed is not installed (the dask extra)")
+    write_exported(project.path, gain=1.4)
+    serial = project.runpytest("--hevval", "--hevval-no-history")
+    # In a subprocess: importing distributed inside an in-process run would leave state
+    # (tblib's pickling hooks) pointing at modules pytester removes afterwards.
+    remote = project.runpytest_subprocess("--hevval", "--hevval-no-history", "--hevval-dask=local")
+    assert serial.parseoutcomes() == remote.parseoutcomes() == {"passed": 11, "failed": 2}
+    remote.stdout.fnmatch_lines(["  model output files no recording uses: sim/Trip99.csv"])
+    runs = {}
+    for name, extra in (("here", []), ("dask", ["--dask", "local"])):
+        done = hevval_run(project, "--json", f"{name}.json", *extra)
+        assert done.ret == 1, done.stderr.str()
+        runs[name] = json.loads((project.path / f"{name}.json").read_text())
+    assert runs["here"]["campaigns"] == runs["dask"]["campaigns"]
+    assert [s["phi"] for s in runs["here"]["specs"]] == [s["phi"] for s in runs["dask"]["specs"]]
+
+
+def test_each_row_may_name_its_model_file(tmp_path: Path) -> None:
+    text = _spec(
+        tmp_path,
+        "reference: {time: t}\n"
+        "model: {time: time_s}\n"
+        "recordings:\n"
+        "  - {path: data/TripA.csv, model: sim/a_run.parquet}\n"
+        "  - {id: cold, path: data/TripB.csv, model: sim/b_run.parquet}\n",
+    )
+    specs = parse_spec_text(text, tmp_path / "c.hevval.yaml").per_recording()
+    assert [(s.recording, s.model.kind, s.model.options.time) for s in specs] == [
+        ("TripA", "file", "time_s"),
+        ("cold", "file", "time_s"),
+    ]
+    assert specs[1].model.path == str((tmp_path / "sim" / "b_run.parquet").resolve())
+
+
+def test_cli_run_lists_unused_model_files_in_the_json(project: pytest.Pytester) -> None:
+    write_exported(project.path)
+    result = hevval_run(project, "--json", "out.json")
+    assert result.ret == 0, result.stdout.str()
+    (campaign,) = json.loads((project.path / "out.json").read_text())["campaigns"]
+    assert campaign["unused_models"] == ["sim/Trip99.csv"]
+    assert campaign["passed"] is True
 
 
 def test_unknown_recording_on_the_command_line(tmp_path: Path) -> None:

@@ -27,7 +27,6 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 import numpy.typing as npt
 from scipy import linalg as sla
-from scipy import stats
 
 from ..errors import DegenerateSignalError, SpecError
 from .importance import MAX_TERMS, explained_sums, shapley_from_sums
@@ -391,6 +390,8 @@ class _Series:
 
 
 def _interval(beta: float, se: float, df: int, alpha: float) -> tuple[float, float]:
+    from scipy import stats  # over a second to import; scoring never needs it
+
     half = float(stats.t.ppf(1.0 - alpha / 2.0, df)) * se
     return (beta - half, beta + half)
 
@@ -1216,6 +1217,8 @@ def _free_name(name: str, taken: set[str]) -> str:
 def _p_value(beta: float, se: float, df: int) -> float:
     if se <= 0.0 or not math.isfinite(se):
         return 0.0 if beta != 0.0 and se == 0.0 else 1.0
+    from scipy import stats
+
     return float(2.0 * stats.t.sf(abs(beta) / se, df))
 
 

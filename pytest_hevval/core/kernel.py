@@ -9,11 +9,18 @@ results are combined in chunk order, so a result is the same for any thread coun
 with numpy to rounding. Signals scored side by side on the engine's threads run side by side
 in the kernel too.
 
-Compiling takes seconds, which a user must never pay by surprise: on the ``auto`` path the
-kernel runs only for records of at least :data:`KERNEL_MIN_SAMPLES` samples, or when its
-on-disk cache is already warm. numba writes that cache next to this module (``__pycache__``)
-or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that folder, and
-``hevval kernel --compile`` (:func:`compile_all`) fills it at once.
+Compiling takes seconds and loading compiled code most of a second, which a user must never
+pay by surprise. On the ``auto`` path a process takes the kernel once it pays: when the numpy
+time the kernel would have saved so far in this process (estimated per function from
+:data:`NUMPY_EXTRA_S`) reaches what loading it costs (:data:`KERNEL_LOAD_S`), so a short run
+stays on numpy and a long one switches early. If numba's on-disk cache does not hold the
+kernel yet, the first run that would pay starts one compile in a separate, low-priority process
+(:func:`start_background_compile`) and goes on on numpy; it takes the kernel as soon as that
+process has cached it, and every later run finds it warm. Records of at least
+:data:`KERNEL_MIN_SAMPLES` samples take the kernel at once, compiling it in the run if need be.
+numba writes its cache next to this module (``__pycache__``) or under ``NUMBA_CACHE_DIR``; CI
+keeps it between runs by caching that folder, and ``hevval kernel --compile``
+(:func:`compile_all`) fills it at once.
 
 ``HEVVAL_KERNEL`` forces a path: ``numpy``, ``numba`` (an error if numba cannot be loaded) or
 ``auto`` (the default). numba is imported only when the kernel is about to run, and any
@@ -22,6 +29,7 @@ failure to import it (not installed, or built for an older numpy) leaves the num
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import importlib
@@ -43,6 +51,7 @@ import numpy.typing as npt
 from ..errors import HevvalError, MissingExtraError
 
 __all__ = [
+    "BACKGROUND_COMPILE_ENV",
     "COMPILED",
     "KERNEL_ENV",
     "KERNEL_MIN_SAMPLES",
@@ -51,11 +60,13 @@ __all__ = [
     "cache_folder",
     "cache_warm",
     "cached_functions",
-    "cold_cache_note",
     "compile_all",
+    "compile_note",
     "describe",
     "kernel_for",
     "load_or_raise",
+    "prepare",
+    "start_background_compile",
 ]
 
 KernelPath = Literal["auto", "numpy", "numba"]
@@ -67,6 +78,29 @@ KERNEL_ENV = "HEVVAL_KERNEL"
 #: such record (0.5 s at 10^8 samples on two threads, docs/performance.md), never a surprise
 #: on short records.
 KERNEL_MIN_SAMPLES = 1 << 26
+#: What loading the compiled kernel costs a process, in seconds: importing numba (0.22 s) and
+#: loading the cached code, most of it on the first function (0.52 s); measured 2026-11-26,
+#: docs/performance.md.
+KERNEL_LOAD_S = 0.75
+#: Seconds the numpy path spends beyond the compiled loop, per sample (per band cell for the
+#: warping path), for each function; the callers' work is weighed by the first function they
+#: name. Measured on records of 10^4–10^6 samples (docs/performance.md), rounded down: the
+#: estimate only decides when loading the kernel has paid for itself.
+NUMPY_EXTRA_S = {
+    "main_pass": 6e-9,
+    "lag_window": 6e-9,
+    "quarter_level": 1e-9,
+    "interpolate": 2e-9,
+    "grouped_sums": 3e-9,
+    "fine_block_sums": 3e-9,
+    "dtw_path": 1.5e-8,
+}
+#: Environment variable that, set to 0, stops a run from starting a background compile (for a
+#: job that must not leave a process behind; the test suite sets it for stable output).
+BACKGROUND_COMPILE_ENV = "HEVVAL_BACKGROUND_COMPILE"
+#: A background compile another process started is trusted for this long (seconds) before a
+#: run starts its own: long enough for every function on a busy machine.
+COMPILE_LOCK_S = 600.0
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
@@ -215,8 +249,9 @@ def cached_functions() -> dict[str, bool]:
     return {name: _cache_holds(folder, (name,)) for name in COMPILED}
 
 
-def compile_all() -> dict[str, float]:
-    """Compile every function of :data:`COMPILED` into numba's on-disk cache, in seconds each.
+def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
+    """Compile every function of :data:`COMPILED` (those of ``order`` first, in that order)
+    into numba's on-disk cache, in seconds each.
 
     Each runs once through its wrapper on a small record, so numba compiles the signature a
     scoring run calls (float64, contiguous) and stores it; from then on the auto path takes the
@@ -248,7 +283,7 @@ def compile_all() -> dict[str, float]:
         "dtw_path": lambda: dtw_path(module, x[:32], y[:32], 3),
     }
     seconds: dict[str, float] = {}
-    for name in COMPILED:
+    for name in dict.fromkeys([*order, *COMPILED]):
         started = time.perf_counter()
         calls[name]()
         seconds[name] = time.perf_counter() - started
@@ -282,24 +317,125 @@ def load_or_raise() -> ModuleType:
     return module
 
 
+# Numpy seconds the kernel would have saved in this process so far (see kernel_for).
+_would_save = [0.0]
+_background: dict[str, Any] = {}
+
+
 def kernel_for(
     samples: int, functions: tuple[str, ...] = ("main_pass", "lag_window")
 ) -> ModuleType | None:
-    """The compiled module if it should score a record of ``samples`` samples, else None.
+    """The compiled module if it should score ``samples`` samples (band cells for the warping
+    path) with ``functions``, else None.
 
-    ``functions`` are the compiled functions the caller will run: on the auto path a short
-    record takes the kernel only when all of them are already in numba's cache.
+    On the auto path a record of :data:`KERNEL_MIN_SAMPLES` or more takes the kernel. A
+    shorter one takes it once the kernel pays in this process (see the module's docstring) and
+    numba's cache holds every one of ``functions``; where it does not, a compile starts in the
+    background and this record stays on numpy.
     """
     path = requested_path()
     if path == "numpy":
         return None
     if path == "numba":
         return load_or_raise()
-    if samples < KERNEL_MIN_SAMPLES and not cache_warm(functions):
-        return None
     if not _numba_installed():
         return None
-    return _load()
+    if samples >= KERNEL_MIN_SAMPLES:
+        return _load()
+    loaded = _loaded.get("module")
+    if loaded is not None and cache_warm(functions):
+        return loaded  # the load is paid already
+    with _lock:
+        _would_save[0] += samples * NUMPY_EXTRA_S.get(functions[0], 0.0)
+        pays = _would_save[0] >= KERNEL_LOAD_S
+    if not pays:
+        return None
+    if cache_warm(functions):
+        return _load()
+    start_background_compile(functions)
+    return None
+
+
+def prepare() -> None:
+    """At the start of a run: where the auto path may take the kernel and numba's cache does not
+    hold it, start compiling it in the background now, while the run reads its data, so that
+    the run can take it as soon as it pays. Imports nothing."""
+    try:
+        if requested_path() != "auto":
+            return
+    except HevvalError:  # a bad value: the scoring itself reports it, with its hint
+        return
+    if _numba_installed() and not cache_warm(COMPILED):
+        start_background_compile()
+
+
+def start_background_compile(first: tuple[str, ...] = ()) -> bool:
+    """Compile the kernel into numba's cache in a separate low-priority process, ``first``
+    first; True if this call started it.
+
+    Once per process; and not while another process's compile of the same cache (a lock file
+    in the cache folder, trusted for :data:`COMPILE_LOCK_S`) is under way. The run that starts
+    it does not wait for it.
+    """
+    if os.environ.get(BACKGROUND_COMPILE_ENV, "").strip() == "0":
+        return False
+    with _lock:
+        if _background:
+            return False
+        _background["asked"] = True
+    folder = cache_folder()
+    marker = folder / ".hevval-compiling"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            if time.time() - marker.stat().st_mtime < COMPILE_LOCK_S:
+                return False
+            marker.unlink()
+        except FileNotFoundError:
+            pass
+        descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        os.close(descriptor)
+    except OSError:
+        return False  # a folder numba could not write to either: stay on numpy
+    order = [name for name in first if name in COMPILED]
+    order += [name for name in COMPILED if name not in order]
+    script = (
+        "import os, sys\n"
+        "if hasattr(os, 'nice'):\n"
+        "    os.nice(10)\n"
+        "from pytest_hevval.core import kernel\n"
+        "try:\n"
+        "    kernel.compile_all(tuple(sys.argv[2:]))\n"
+        "finally:\n"
+        "    os.unlink(sys.argv[1])\n"
+    )
+    try:
+        process = _launch([sys.executable, "-c", script, str(marker), *order])
+    except OSError:
+        with contextlib.suppress(OSError):
+            marker.unlink()
+        return False
+    _background["process"] = process
+    return True
+
+
+def _launch(command: list[str]) -> Any:
+    """Start ``command`` detached from the run: no input, output dropped, its own session (so
+    that ending the run, or Ctrl-C in its terminal, leaves the compile to finish)."""
+    import subprocess
+
+    return subprocess.Popen(
+        command,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+
+
+def background_compile_started() -> bool:
+    """Whether this process started a background compile (for the run's closing note)."""
+    return "process" in _background
 
 
 def active_path() -> str:
@@ -309,19 +445,14 @@ def active_path() -> str:
     return "numba" if _load() is not None else "numpy"
 
 
-def cold_cache_note() -> str | None:
-    """A line for the end of a run's summary when numba is installed but not every compiled
-    function is cached, so short records are scored on numpy; None otherwise. Imports nothing."""
-    try:
-        if requested_path() != "auto":
-            return None
-    except HevvalError:  # a bad value: the scoring itself reports it, with its hint
-        return None
-    if not _numba_installed() or cache_warm(COMPILED):
+def compile_note() -> str | None:
+    """A line for the end of a run's summary when this process started a background compile;
+    None otherwise. Imports nothing."""
+    if not background_compile_started():
         return None
     return (
-        f"hevval: the compiled kernel is not cached, so records under {KERNEL_MIN_SAMPLES:,} "
-        "samples are scored on numpy; 'hevval kernel --compile' caches it once"
+        "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy "
+        "until it was ready; it is being compiled in the background for the next runs"
     )
 
 
@@ -339,14 +470,14 @@ def describe() -> str:
     version = getattr(numba, "__version__", "?")
     if path == "numba":
         return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
-    warm = (
-        "cache warm: every record"
-        if cache_warm(COMPILED)
-        else "cache cold: hevval kernel --compile fills it"
-    )
+    if cache_warm(COMPILED):
+        return (
+            f"kernel: numba {version} (cache warm) once a run's work pays for loading it "
+            f"(about {KERNEL_LOAD_S:g} s of numpy time); numpy before"
+        )
     return (
-        f"kernel: numba {version} for records of ≥ {KERNEL_MIN_SAMPLES:,} samples ({warm}); "
-        "numpy otherwise"
+        f"kernel: numba {version} (cache cold: the first run that would gain compiles it in "
+        "the background; hevval kernel --compile fills it now); numpy until then"
     )
 
 

@@ -16,8 +16,6 @@ import numpy as np
 import numpy.typing as npt
 from scipy import fft as sfft
 from scipy import linalg as sla
-from scipy import signal as sps
-from scipy import stats
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -347,6 +345,8 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
         df[j] = int(effective_df(n, k, phi, rho[j : j + 1])[0])
     with np.errstate(invalid="ignore", divide="ignore"):
         t = np.abs(beta) / se
+    from scipy import stats  # over a second to import; scoring never needs it
+
     p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
     p = np.where(np.isfinite(se), p, 1.0)
     return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
@@ -398,6 +398,8 @@ def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> 
     best_q, best_p = 0.0, 1.0
     for h in use:
         q = float(n * (n + 2) * np.sum(terms[:h]))
+        from scipy import stats
+
         p = float(stats.chi2.sf(q, h))
         if p < best_p or h == use[0]:
             best_q, best_p = q, p
@@ -410,6 +412,8 @@ def dominant_frequencies(u: FloatArray, dt: float) -> tuple[float, ...]:
     n = u.shape[0]
     if n < 8 or not np.any(u != u[0]):
         return ()
+    from scipy import signal as sps
+
     freqs, power = sps.welch(u, fs=1.0 / dt, nperseg=min(n, 4096))
     if power.shape[0] < 3 or float(np.max(power)) <= 0.0:
         return ()

@@ -160,15 +160,56 @@ def run_callable(
             hint=f"make {reference_to} return a DataFrame (with the time column) instead",
         ) from None
     except Exception as exc:
-        frames = traceback.extract_tb(exc.__traceback__)[1:]
-        where = ""
-        if frames:
-            last = frames[-1]
-            where = f" at {Path(last.filename).name}:{last.lineno}"
+        where = _model_line(exc, folders)
+        given = [str(c) for c in frame.columns]
+        missing = exc.args[0] if isinstance(exc, KeyError) and exc.args else None
+        if isinstance(missing, str) and missing not in given:
+            in_file = missing in reference.available
+            raise DataError(
+                f"the model asked for the column {missing!r}{where}, which it was not given: "
+                "it receives only the columns the spec names"
+                + (" (the data file has this one)" if in_file else "")
+                + f"; it got {_listing(given)}",
+                file=spec_file,
+                key="model.inputs",
+                hint=f"add {missing!r} to `inputs:` under `model:` in the spec"
+                if in_file
+                else "add the column to `inputs:` under `model:` in the spec, with the name the "
+                "data file gives it",
+            ) from None
         raise DataError(
             f"the model raised {type(exc).__name__}: {exc}{where}",
             file=spec_file,
             key="model.callable",
-            hint=f"run {reference_to} on the reference data directly to debug it",
+            hint=f"run {reference_to} on the columns it was given ({_listing(given)}; "
+            "`inputs:` under `model:` chooses them) to debug it",
         ) from None
     return record_from_frame(output, model_time, label)
+
+
+def _model_line(exc: BaseException, folders: Iterable[Path]) -> str:
+    """`` at models/ev.py:212``: the deepest line of the model's own code in the traceback
+    (a line inside pandas or numpy says nothing about the model), else the deepest line."""
+    frames = traceback.extract_tb(exc.__traceback__)[1:]
+    if not frames:
+        return ""
+    roots = [Path(folder).resolve() for folder in folders]
+
+    def own(filename: str) -> Path | None:
+        path = Path(filename).resolve()
+        for root in roots:
+            if path.is_relative_to(root) and "site-packages" not in path.parts:
+                return path.relative_to(root)
+        return None
+
+    for frame in reversed(frames):
+        relative = own(frame.filename)
+        if relative is not None:
+            return f" at {relative.as_posix()}:{frame.lineno}"
+    return f" at {Path(frames[-1].filename).name}:{frames[-1].lineno}"
+
+
+def _listing(names: list[str], shown: int = 12) -> str:
+    """Names for a message: all of a few, the first ``shown`` of many."""
+    quoted = ", ".join(repr(n) for n in names[:shown])
+    return f"[{quoted}]" if len(names) <= shown else f"[{quoted}, … {len(names) - shown} more]"

@@ -79,6 +79,25 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         state.start()
 
 
+def pytest_collection_modifyitems(
+    session: pytest.Session, config: pytest.Config, items: list[pytest.Item]
+) -> None:
+    state = state_of(config)
+    if state is not None and not state.is_controller:
+        from .items import defer_campaign_gates
+
+        items[:] = defer_campaign_gates(items, state)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node: Any, error: Any) -> None:
+    state = state_of(node.config)
+    if state is not None:
+        state.receive_gates(getattr(node, "workeroutput", None) or {})
+
+
+# First: the campaign gates judged here must reach JUnit XML before it is written.
+@pytest.hookimpl(tryfirst=True)
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     state = state_of(session.config)
     if state is not None and state.is_controller:
@@ -93,9 +112,12 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
-    """Keep every item of one spec on one worker, so each spec's data is read once."""
+    """Keep every item of one spec, or of one recording of a campaign, on one worker, so each
+    data file is read once and a campaign's recordings spread over the workers."""
     if state_of(config) is None or config.getoption("dist", "load") != "load":
         return None
-    from xdist.scheduler import LoadFileScheduling
+    from xdist.scheduler import LoadScopeScheduling
 
-    return LoadFileScheduling(config, log)
+    # Its scope of a node id is all but the last ``::`` part: the spec file for a spec's items,
+    # ``file::recording`` for a campaign recording's.
+    return LoadScopeScheduling(config, log)

@@ -27,7 +27,15 @@ from ..spec.model import Spec
 from .session import HevvalSession
 from .stash import session_key
 
-__all__ = ["CampaignItem", "PhiItem", "Recording", "SignalItem", "SpecFile"]
+__all__ = [
+    "CampaignItem",
+    "PhiItem",
+    "Recording",
+    "SignalItem",
+    "SpecFile",
+    "defer_campaign_gates",
+    "judge_campaign",
+]
 
 
 def junit_property(name: str) -> str:
@@ -104,9 +112,12 @@ class _SpecItem(pytest.Item):
     def setup(self) -> None:
         try:
             self.evaluation = self.state.evaluate(self.spec)
+            return
         except HevvalError as exc:
-            # An ERROR (setup), shown as the message alone: the data, not the code, is at fault.
-            pytest.fail(str(exc), pytrace=False)
+            message = self.state.error_once(self.spec.key, self.nodeid, exc)
+        # An ERROR (setup), shown as the message alone: the data, not the code, is at fault.
+        # Outside the except block, so that pytest does not print it twice as a chain.
+        pytest.fail(message, pytrace=False)
 
     @property
     def result(self) -> SpecResult:
@@ -195,19 +206,57 @@ class CampaignItem(_SpecItem):
                 self.outcomes[str(recording.recording)] = exc
 
     def runtest(self) -> None:
-        from ..report.terminal import verdict_lines
-        from ..results.campaign import verdict
-
         results = [o.result for o in self.outcomes.values() if isinstance(o, Evaluation)]
-        if not results:
-            raise ThresholdMissed(
-                "no recording of the campaign could be scored:\n"
-                + "\n".join(f"  {name}: {error}" for name, error in self.outcomes.items())
-            )
         # Every recording's result reaches the controller, even those deselected with -k.
         shipped = [self.state.ship(result) for result in results]
         self.hevval_campaign = [payload for payload in shipped if payload is not None]
-        found = verdict(results)
-        self.user_properties.append(("pass_rate", f"{found.pass_rate:.6f}"))
-        if not found.passed:
-            raise ThresholdMissed("\n".join(verdict_lines(found)))
+        pass_rate, failure = judge_campaign(
+            {
+                name: o.result if isinstance(o, Evaluation) else o
+                for name, o in self.outcomes.items()
+            }
+        )
+        if pass_rate is not None:
+            self.user_properties.append(("pass_rate", f"{pass_rate:.6f}"))
+        if failure is not None:
+            raise ThresholdMissed(failure)
+
+
+def judge_campaign(
+    outcomes: Mapping[str, SpecResult | HevvalError],
+) -> tuple[float | None, str | None]:
+    """A campaign gate's (pass rate, failure text or None) from its recordings' outcomes, by
+    recording: what its item reports, in this process or, under xdist, on the controller."""
+    from ..report.terminal import verdict_lines
+    from ..results.campaign import verdict
+
+    results = [o for o in outcomes.values() if isinstance(o, SpecResult)]
+    if not results:
+        return None, "no recording of the campaign could be scored:\n" + "\n".join(
+            f"  {name}: {error}" for name, error in outcomes.items()
+        )
+    found = verdict(results)
+    return found.pass_rate, None if found.passed else "\n".join(verdict_lines(found))
+
+
+def defer_campaign_gates(items: list[pytest.Item], state: HevvalSession) -> list[pytest.Item]:
+    """On an xdist worker: the items without the campaign gates, which the controller judges
+    once every worker has scored its share of the recordings (``deferred_gate``)."""
+    kept: list[pytest.Item] = []
+    gates: list[dict[str, Any]] = []
+    for item in items:
+        if isinstance(item, CampaignItem):
+            fspath, lineno, domain = item.location
+            gates.append(
+                {
+                    "nodeid": item.nodeid,
+                    "location": [fspath, lineno, domain],
+                    "keywords": sorted(item.keywords),
+                    "recordings": [state.relative(r.key) for r in item.spec.per_recording()],
+                }
+            )
+        else:
+            kept.append(item)
+    if gates:
+        state.defer(gates)
+    return kept

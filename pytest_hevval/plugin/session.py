@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import pytest
 
@@ -26,6 +26,9 @@ from ..scoring.run import RunOptions, relative_to, run_specs
 from ..spec.model import Spec
 
 __all__ = ["HevvalSession"]
+
+#: The key of the campaign gates in an xdist worker's output to the controller.
+_GATES = "hevval_campaign_gates"
 
 
 # eq=False keeps identity hashing: pluggy (before 1.4) keeps registered plugins in a set.
@@ -45,6 +48,10 @@ class HevvalSession:
     #: Lines for the terminal summary (history, comparison, ratchet).
     notes: list[str] = field(default_factory=list)
     annotations: list[str] = field(default_factory=list)
+    #: The item that reported each spec's error first, by spec key.
+    error_shown: dict[str, str] = field(default_factory=dict)
+    #: Campaign gate items the xdist workers left to this controller, by node id.
+    gates: dict[str, dict[str, Any]] = field(default_factory=dict)
     _publisher: Publisher | None = None
     _run_options: RunOptions | None = None
 
@@ -99,11 +106,9 @@ class HevvalSession:
     # -- session start: the baseline --------------------------------------------------------
     def start(self) -> None:
         """Pick the baseline before this run records anything (every process reads it)."""
-        from ..core.kernel import cold_cache_note
+        from ..core.kernel import prepare
 
-        kernel_note = cold_cache_note() if self.is_controller else None
-        if kernel_note is not None:
-            self.notes.append(kernel_note)
+        prepare()
         try:
             self.notes.extend(self.publisher.start(controller=self.is_controller))
         except HevvalError as exc:
@@ -156,6 +161,14 @@ class HevvalSession:
             raise outcome
         return outcome
 
+    def error_once(self, key: str, nodeid: str, error: HevvalError) -> str:
+        """The text of a spec's error for the first of its items to report it; a pointer to
+        that item for the others, so one bad spec prints its error once."""
+        first = self.error_shown.setdefault(key, nodeid)
+        if first == nodeid:
+            return str(error)
+        return f"not scored: the error of {first} (above) stops this spec"
+
     def diagnosis_for(
         self, evaluation: Evaluation | None, signal: SignalResult
     ) -> Mapping[str, Any] | None:
@@ -202,6 +215,38 @@ class HevvalSession:
         for recording in getattr(report, "hevval_campaign", None) or ():
             self._receive(recording)
 
+    # -- campaign gates under xdist ------------------------------------------------------------
+    def defer(self, gates: list[dict[str, Any]]) -> None:
+        """On a worker: hand the campaign gates to the controller (with the worker's output)."""
+        output: dict[str, Any] = self.config.workeroutput  # type: ignore[attr-defined]
+        output[_GATES] = gates
+
+    def receive_gates(self, output: Mapping[str, Any]) -> None:
+        """On the controller: the gates a worker deferred (every worker defers the same)."""
+        for gate in output.get(_GATES, ()):
+            self.gates.setdefault(gate["nodeid"], gate)
+
+    def judge_gates(self, session: pytest.Session) -> None:
+        """Judge each deferred campaign gate on the results every worker sent, and report it
+        as its item's outcome. A recording no worker scored (deselected with -k, or its data
+        failed) is scored here, as the gate item does without xdist."""
+        from ..spec.load import load_specs
+        from .items import judge_campaign
+
+        for gate in self.gates.values():
+            outcomes: dict[str, SpecResult | HevvalError] = {}
+            for key in gate["recordings"]:
+                if key not in self.results:
+                    try:
+                        for spec in load_specs(str(self.rootdir / key)):
+                            self.ship(self.evaluate(spec).result)
+                    except HevvalError as exc:
+                        outcomes[key] = exc
+                        continue
+                outcomes[key] = self.results[key]
+            pass_rate, failure = judge_campaign(outcomes)
+            _log_gate(session, gate, pass_rate, failure)
+
     def _receive(self, payload: Mapping[str, Any]) -> None:
         self.results[payload["spec"]] = SpecResult.from_dict(payload)
 
@@ -213,9 +258,18 @@ class HevvalSession:
 
     # -- session end: controller only -------------------------------------------------------
     def finish(self, session: pytest.Session) -> None:
-        """Write reports, the comparison, the ratchet and the history record, once."""
+        """Judge deferred campaign gates; write reports, the comparison, the ratchet and the
+        history record, once."""
+        from ..core.kernel import compile_note
+
+        if self.gates and not (session.shouldfail or session.shouldstop):
+            self.judge_gates(session)
+
         published = self.publisher.publish(self.spec_results(), self.specs, self.diagnoses)
         self.notes.extend(published.notes)
+        kernel_note = compile_note()
+        if kernel_note is not None:
+            self.notes.append(kernel_note)
         self.annotations.extend(published.annotations)
         if published.failed and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
@@ -232,3 +286,37 @@ class HevvalSession:
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)
+
+
+def _log_gate(
+    session: pytest.Session, gate: Mapping[str, Any], pass_rate: float | None, failure: str | None
+) -> None:
+    """Report a campaign gate's outcome as pytest reports a run item: the terminal, JUnit XML
+    and ``--lf`` see it like any other."""
+    hook = session.config.hook
+    nodeid = str(gate["nodeid"])
+    fspath, lineno, domain = gate["location"]
+    location = (str(fspath), lineno, str(domain))
+    keywords: dict[str, Literal[1]] = {str(word): 1 for word in gate["keywords"]}
+    hook.pytest_runtest_logstart(nodeid=nodeid, location=location)
+    phases: tuple[Literal["setup", "call", "teardown"], ...] = ("setup", "call", "teardown")
+    for when in phases:
+        failed = when == "call" and failure is not None
+        hook.pytest_runtest_logreport(
+            report=pytest.TestReport(
+                nodeid,
+                location,
+                keywords,
+                "failed" if failed else "passed",
+                failure if failed else None,
+                when,
+                user_properties=(
+                    [("pass_rate", f"{pass_rate:.6f}")]
+                    if when == "call" and pass_rate is not None
+                    else []
+                ),
+            )
+        )
+    hook.pytest_runtest_logfinish(nodeid=nodeid, location=location)
+    if failure is not None:
+        session.testsfailed += 1

@@ -218,6 +218,8 @@ def verdict_lines(found: CampaignVerdict) -> list[str]:
     ]
     if found.excluded:
         lines.append("  excluded from the gate (calibration): " + ", ".join(found.excluded))
+    if found.unused_models:
+        lines.append("  model output files no recording uses: " + ", ".join(found.unused_models))
     phi = found.phi
     lines.append(
         f"  Φ over recordings: min {phi.minimum:.4f}, "

@@ -108,6 +108,12 @@ def _campaign_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
                 + ", ".join(_code(r) for r in found["excluded"]),
                 "",
             ]
+        if found.get("unused_models"):
+            lines += [
+                "Model output files no recording uses: "
+                + ", ".join(_code(r) for r in found["unused_models"]),
+                "",
+            ]
         lines += ["| recording | role | Φ | failing signals |", "|---|---|--:|---|"]
         for recording in found["recordings"]:
             failing = ", ".join(_code(s) for s in recording["failed_signals"]) or "—"

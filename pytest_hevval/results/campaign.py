@@ -126,6 +126,8 @@ class CampaignVerdict:
     #: u-pooling area per signal over the counted recordings (0 best, 0.5 worst).
     pooled_area: dict[str, float]
     failures: list[str] = field(default_factory=list)
+    #: Model output files that follow the campaign's pattern but no recording's id.
+    unused_models: list[str] = field(default_factory=list)
 
     @property
     def counted(self) -> list[RecordingOutcome]:
@@ -164,6 +166,7 @@ class CampaignVerdict:
             "phi_quantile": list(self.phi_quantile) if self.phi_quantile else None,
             "excluded": self.excluded,
             "missing": list(self.missing),
+            "unused_models": list(self.unused_models),
             "worst": [r.id for r in self.worst],
             "within_noise": [r.id for r in self.within_noise],
             "phi": self.phi.to_dict(),
@@ -241,6 +244,7 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
         lambdas={n: Distribution.of([_mean_lambda(r, n) for r in counted]) for n in names},
         signal_pass_rates={path: _pass_rate(counted, path) for path in paths},
         pooled_area=_pooled_areas(counted, paths),
+        unused_models=[str(p) for p in campaign.get("unused_models", ())],
     )
     found.failures = _gate_failures(found)
     return found

@@ -27,6 +27,7 @@ from ..data.align import AlignedData, align_records
 from ..data.digest import DEFAULT_HASH, file_digest
 from ..data.quality import assess, fail_on, mask_on_grid
 from ..data.record import Record, SourceOptions
+from ..data.remote import is_url
 from ..errors import (
     CharacteristicError,
     DataError,
@@ -197,6 +198,22 @@ class Evaluation:
     diagnoses: dict[str, SignalDiagnosis | HevvalError] = field(default_factory=dict)
 
 
+def _check_model_output(spec: Spec) -> None:
+    """A campaign recording whose exported model output is missing fails before its data are
+    read, naming both files."""
+    path = spec.model.path
+    if spec.recording is None or spec.model.kind != "file" or path is None or is_url(path):
+        return
+    if not os.path.exists(path):
+        raise DataError(
+            f"recording {spec.recording!r} has no model output: the file does not exist "
+            f"(its measured data: {spec.reference.path})",
+            file=path,
+            hint="export the model's run of this recording to that file, or drop the "
+            "recording from the campaign",
+        )
+
+
 def _load_model(
     spec: Spec, reference: Record, cache: DataCache, folders: list[Path]
 ) -> tuple[Record, dict[str, Any]]:
@@ -208,16 +225,20 @@ def _load_model(
         from ..data.models import run_callable
 
         inputs = list(model.inputs) or sorted(spec.reference_columns())
-        record = run_callable(
-            str(model.callable),
-            reference,
-            inputs=inputs,
-            params=dict(model.params),
-            reference_time=spec.reference.options.time or "time",
-            model_time=model.options.time or "time",
-            folders=folders,
-            spec_file=str(spec.path),
-        )
+        try:
+            record = run_callable(
+                str(model.callable),
+                reference,
+                inputs=inputs,
+                params=dict(model.params),
+                reference_time=spec.reference.options.time or "time",
+                model_time=model.options.time or "time",
+                folders=folders,
+                spec_file=str(spec.path),
+            )
+        except DataError as exc:
+            # The spec's `model:` line: where the inputs it names are given.
+            raise exc.with_context(line=model.line) from None
         return record, {
             "callable": model.callable,
             "params": dict(model.params),
@@ -362,6 +383,7 @@ def _evaluate(
     intervals: bool = True,
 ) -> Evaluation:
     folders = [spec.path.parent] + ([rootdir] if rootdir else [])
+    _check_model_output(spec)
     reference = cache.read(spec.reference, spec.reference_columns())
     model_record, model_info = _load_model(spec, reference, cache, folders)
     nodes = list(spec.walk())
@@ -896,6 +918,8 @@ def _add_campaign_facts(
         "phi_quantile": list(spec.campaign.phi_quantile) if spec.campaign.phi_quantile else None,
         "line": spec.campaign.line,
     }
+    if spec.campaign.unused_models:
+        result.campaign["unused_models"] = list(spec.campaign.unused_models)
     for signal in result.signals:
         ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
         finite = np.isfinite(ref)

@@ -66,6 +66,10 @@ def _relative_result(result: SpecResult, rootdir: Path) -> None:
     for side in result.data.values():
         if isinstance(side, dict) and side.get("path"):
             side["path"] = relative_to(rootdir, str(side["path"]))
+    if result.campaign and result.campaign.get("unused_models"):
+        result.campaign["unused_models"] = [
+            relative_to(rootdir, str(path)) for path in result.campaign["unused_models"]
+        ]
 
 
 def run_specs(

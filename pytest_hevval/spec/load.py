@@ -14,7 +14,7 @@ import math
 import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar, cast
+from typing import Any, NamedTuple, TypeVar, cast
 
 import yaml
 
@@ -39,6 +39,7 @@ from ..errors import ExpressionError, SpecError, did_you_mean
 from ..files import read_input
 from .expressions import Expression, parse_signal
 from .model import (
+    ID_FIELD,
     ROLES,
     AlignmentSpec,
     CampaignSpec,
@@ -54,6 +55,7 @@ from .model import (
     SignalSpec,
     SourceSpec,
     Spec,
+    model_output_path,
     split_key,
 )
 from .sidecar import load_sidecar
@@ -93,7 +95,7 @@ _TOP_KEYS = (
     "sets",
 )
 _DIAGNOSIS_KEYS = ("min_share", "responses", "causes", "groups")
-_RECORDING_KEYS = ("id", "path", "role", "params")
+_RECORDING_KEYS = ("id", "path", "model", "role", "params")
 _CAMPAIGN_KEYS = ("min_pass_rate", "phi_quantile")
 _SOURCE_KEYS = (
     "path",
@@ -405,7 +407,14 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     reference = _source(
         context, top["reference"], top.line_of("reference"), "reference", base, path_optional=table
     )
-    model = _source(context, top["model"], top.line_of("model"), "model", base)
+    model = _source(
+        context,
+        top["model"],
+        top.line_of("model"),
+        "model",
+        base,
+        path_optional=_rows_name_models(top),
+    )
     campaign = _campaign(context, top, reference, model, base)
     alignment = _alignment(context, top)
     metrics = _metrics(context, top)
@@ -530,6 +539,8 @@ def _source(
     allowed = _MODEL_KEYS if key == "model" else _SOURCE_KEYS
     context.check_keys(mapping, allowed, key)
     kinds = [k for k in ("path", "callable", "fmu") if k in mapping]
+    if key == "model" and not kinds and path_optional:
+        kinds = ["path"]  # each recording names its model output file
     if key == "model" and len(kinds) != 1:
         problem = "needs exactly one of path, callable or fmu"
         raise context.error(mapping.line, key, problem, got=kinds or None)
@@ -1314,6 +1325,15 @@ def _campaign(
     """The recordings of a campaign: the files a reference pattern matches, or a table."""
     pattern = _is_pattern(top["reference"])
     if not pattern and "recordings" not in top:
+        if model.kind == "file" and model.path is not None and ID_FIELD in model.path:
+            raise context.error(
+                model.line,
+                "model.path",
+                f"has {ID_FIELD}, which each recording of a campaign fills in, but the spec "
+                "names a single recording",
+                hint="give reference.path a pattern (data/Trip*.parquet) or list `recordings:`; "
+                f"or name the model's one file without {ID_FIELD}",
+            )
         if "campaign" in top:
             raise context.error(
                 top.line_of("campaign"),
@@ -1328,13 +1348,6 @@ def _campaign(
         if isinstance(reference_value, LineDict)
         else top.line_of("reference")
     )
-    if model.kind == "file":
-        raise context.error(
-            model.line,
-            "model.path",
-            "a campaign runs the model on each recording, so the model cannot be one file",
-            hint="name a callable or an FMU; each recording's `params` are passed to it",
-        )
     matched: dict[str, str] = {}
     if pattern:
         assert reference.path is not None
@@ -1360,13 +1373,15 @@ def _campaign(
     recordings = [
         RecordingSpec(
             id=recording_id,
-            path=entries[recording_id][0] if recording_id in entries else file,
-            role=entries[recording_id][1] if recording_id in entries else "validation",
-            params=entries[recording_id][2] if recording_id in entries else {},
-            line=entries[recording_id][3] if recording_id in entries else reference_line,
+            path=entries[recording_id].path if recording_id in entries else file,
+            role=entries[recording_id].role if recording_id in entries else "validation",
+            params=entries[recording_id].params if recording_id in entries else {},
+            line=entries[recording_id].line if recording_id in entries else reference_line,
+            model_path=entries[recording_id].model if recording_id in entries else None,
         )
-        for recording_id, file in {**matched, **{k: v[0] for k, v in entries.items()}}.items()
+        for recording_id, file in {**matched, **{k: v.path for k, v in entries.items()}}.items()
     ]
+    recordings, unused = _model_outputs(context, model, recordings, top)
     min_pass_rate: float | None = None
     phi_quantile: tuple[float, float] | None = None
     if top.get("campaign") is not None:
@@ -1376,6 +1391,7 @@ def _campaign(
         if "phi_quantile" in gate:
             phi_quantile = _phi_quantile(context, gate)
     return CampaignSpec(
+        unused_models=unused,
         recordings=tuple(recordings),
         line=top.line_of("campaign") if "campaign" in top else reference_line,
         min_pass_rate=min_pass_rate,
@@ -1395,10 +1411,77 @@ def _relative_pattern(path: str, base: Path) -> str:
         return path
 
 
+class _Row(NamedTuple):
+    """One row of `recordings:`."""
+
+    path: str
+    role: Role
+    params: dict[str, Any]
+    line: int
+    #: The row's own model output file (absolute, or a URL), if it names one.
+    model: str | None
+
+
+def _rows_name_models(top: LineDict) -> bool:
+    """Whether every row of a `recordings:` table names its own model output file."""
+    rows = top.get("recordings")
+    return (
+        isinstance(rows, LineList)
+        and bool(rows)
+        and all(isinstance(row, LineDict) and "model" in row for row in rows)
+    )
+
+
+def _model_outputs(
+    context: _Context, model: SourceSpec, recordings: list[RecordingSpec], top: LineDict
+) -> tuple[list[RecordingSpec], tuple[str, ...]]:
+    """Each recording's model output file, when the model is files rather than a callable or
+    an FMU, and the files that follow ``model.path``'s pattern but no recording's id."""
+    given = [r for r in recordings if r.model_path is not None]
+    if model.kind != "file":
+        if given:
+            raise context.error(
+                given[0].line,
+                "recordings.model",
+                f"names a model output file, but the spec's model is a {model.kind}",
+                hint="remove the row's `model:`, or make `model:` name files "
+                "(model: {path: sim/{id}.parquet}) instead of a callable or an FMU",
+            )
+        return recordings, ()
+    template = model.path if model.path is not None and ID_FIELD in model.path else None
+    if template is None and len(given) < len(recordings):
+        lacking = next(r for r in recordings if r.model_path is None)
+        raise context.error(
+            model.line,
+            "model.path",
+            "names one file, but a campaign needs the model's output for each recording "
+            f"(recording {lacking.id!r} has none)",
+            hint=f"put {ID_FIELD} in the path (sim/{ID_FIELD}.parquet) for one file per "
+            "recording, give each row of `recordings:` its `model:`, or name a callable or "
+            "an FMU that runs on each recording",
+        )
+    out = [
+        r
+        if r.model_path is not None
+        else dataclasses.replace(r, model_path=model_output_path(str(template), r.id))
+        for r in recordings
+    ]
+    unused: tuple[str, ...] = ()
+    if template is not None and not is_url(template):
+        head, _, tail = template.partition(ID_FIELD)
+        ids = {r.id for r in recordings}
+        unused = tuple(
+            found
+            for found in sorted(glob.glob(glob.escape(head) + "*" + glob.escape(tail)))
+            if found[len(head) : len(found) - len(tail)] not in ids
+        )
+    return out, unused
+
+
 def _recording_entries(
     context: _Context, top: LineDict, base: Path, matched: Mapping[str, str]
-) -> dict[str, tuple[str, Role, dict[str, Any], int]]:
-    """id → (path, role, params, line) of every row of `recordings:`."""
+) -> dict[str, _Row]:
+    """id → its row, for every row of `recordings:`."""
     if "recordings" not in top or top["recordings"] is None:
         return {}
     rows = top["recordings"]
@@ -1409,7 +1492,7 @@ def _recording_entries(
             "must be a non-empty list of recordings ({id, path, role, params})",
             got=rows,
         )
-    entries: dict[str, tuple[str, Role, dict[str, Any], int]] = {}
+    entries: dict[str, _Row] = {}
     for index, row in enumerate(rows):
         key = f"recordings[{index}]"
         line = rows.line_of(index)
@@ -1445,7 +1528,7 @@ def _recording_entries(
                 id_line,
                 _join(key, "id"),
                 f"duplicate recording id {recording_id!r} "
-                f"(first listed at line {entries[recording_id][3]})",
+                f"(first listed at line {entries[recording_id].line})",
                 hint="give each recording its own id",
             )
         if matched:
@@ -1462,7 +1545,16 @@ def _recording_entries(
         role = cast("Role", context.get(mapping, "role", key, context.choice(ROLES), "validation"))
         no_params: dict[str, Any] = {}
         params = context.get(mapping, "params", key, _plain_mapping(context), no_params)
-        entries[recording_id] = (path, role, params, mapping.line)
+        model: str | None = None
+        if "model" in mapping:
+            where = _join(key, "model")
+            raw_model = context.text(mapping["model"], mapping.line_of("model"), where)
+            model = (
+                raw_model
+                if is_url(raw_model)
+                else _resolve(context, base, raw_model, mapping.line_of("model"), where)
+            )
+        entries[recording_id] = _Row(path, role, params, mapping.line, model)
     return entries
 
 

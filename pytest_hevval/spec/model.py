@@ -15,6 +15,7 @@ from ..defaults import RECORDING_SEPARATOR, WITHIN_UNCERTAINTY, split_key
 from .expressions import Expression
 
 __all__ = [
+    "ID_FIELD",
     "ROLES",
     "AlignmentSpec",
     "CampaignSpec",
@@ -31,6 +32,7 @@ __all__ = [
     "SignalSpec",
     "SourceSpec",
     "Spec",
+    "model_output_path",
     "split_key",
 ]
 
@@ -210,6 +212,18 @@ class RecordingSpec:
     role: Role
     params: Mapping[str, Any]
     line: int
+    #: Absolute path (or URL) of the model's output for this recording, when the model is
+    #: exported files rather than a callable or an FMU.
+    model_path: str | None = None
+
+
+#: The placeholder of a campaign's ``model.path`` that each recording's id fills in.
+ID_FIELD = "{id}"
+
+
+def model_output_path(template: str, recording_id: str) -> str:
+    """The model output file of one recording: ``template`` with its id in place of ``{id}``."""
+    return template.replace(ID_FIELD, recording_id)
 
 
 @dataclass(frozen=True)
@@ -222,6 +236,8 @@ class CampaignSpec:
     min_pass_rate: float | None = None
     #: (q, minimum): the q-quantile of Φ over the validation recordings must reach the minimum.
     phi_quantile: tuple[float, float] | None = None
+    #: Files that follow ``model.path``'s pattern but whose id is no recording's.
+    unused_models: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -279,7 +295,11 @@ class Spec:
             replace(
                 self,
                 reference=replace(self.reference, path=recording.path),
-                model=replace(self.model, params={**self.model.params, **recording.params}),
+                model=replace(
+                    self.model,
+                    path=recording.model_path or self.model.path,
+                    params={**self.model.params, **recording.params},
+                ),
                 recording=recording.id,
                 role=recording.role,
             )
