@@ -7,12 +7,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 
-from pytest_hevval.data.align import align_records, nominal_rate
+from pytest_hevval.core.kernel import KERNEL_ENV
+from pytest_hevval.data.align import _Plan, align_records, nominal_rate
 from pytest_hevval.data.record import Channel, Record
 from pytest_hevval.errors import DataError
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
+from tests.conftest import _kernel_unavailable
 
 
 def record(name: str, time: np.ndarray, **columns: np.ndarray) -> Record:
@@ -209,3 +214,86 @@ def test_an_interpolation_plan_rounds_as_np_interp(kernel_path: str, n: int) -> 
         got = aligned.column("model", name, "linear")
         np.testing.assert_array_equal(got, np.interp(aligned.time, t, values))
     assert len(aligned.interpolated) == 3
+
+
+@st.composite
+def _time_bases(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Grid points and the time stamps of a logger on another clock: jittered, some exactly on
+    grid points, starting before or after the grid and ending before or after it; values with
+    zeros of both signs, so that a point which takes its sample as it is must keep its sign."""
+    n = draw(st.integers(2, 120))
+    jitter = draw(hnp.arrays(np.float64, n, elements=st.floats(-0.45, 0.45)))
+    exact = draw(hnp.arrays(np.bool_, n))
+    start = draw(st.sampled_from([-3, 0, 2]))
+    time = (np.arange(n) + start + np.where(exact, 0.0, jitter)) * 0.1
+    time = np.unique(time)
+    values = draw(
+        hnp.arrays(
+            np.float64,
+            time.shape[0],
+            elements=st.one_of(st.sampled_from([0.0, -0.0]), st.floats(-1e6, 1e6)),
+        )
+    )
+    grid = np.arange(draw(st.integers(3, 130))) * 0.1
+    return grid, time, values
+
+
+@given(_time_bases())
+@settings(max_examples=200, deadline=None)
+def test_a_plan_gives_np_interps_very_bits(case: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """Bit for bit, the sign of zero included, on the numpy path and the compiled one."""
+    grid, time, values = case
+    expected = np.interp(grid, time, values)
+    plan = _Plan.build(time, 0.0, grid, "linear")
+    paths = ["numpy"] + (["numba"] if _kernel_unavailable() is None else [])
+    for path in paths:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv(KERNEL_ENV, path)
+            single = plan.apply(values)
+            many = plan.apply_all([values, -values])
+        assert single.tobytes() == expected.tobytes(), path
+        assert many[0].tobytes() == expected.tobytes(), path
+        assert many[1].tobytes() == np.interp(grid, time, -values).tobytes(), path
+
+
+def test_columns_of_one_time_base_are_interpolated_together(kernel_path: str) -> None:
+    """Asking for one column interpolates the other declared columns of its time base with it;
+    each is served when asked for, only then counted as interpolated, and a column with NaN
+    still goes its own way (its error, or its gaps)."""
+    rng = np.random.default_rng(11)
+    n = 5000
+    t = np.arange(n) * 0.01 + rng.uniform(-0.003, 0.003, n)
+    columns = {f"c{i}": np.cumsum(rng.normal(size=n)) for i in range(4)}
+    columns["bad"] = np.ones(n)
+    columns["bad"][100] = np.nan
+    other_time = np.arange(n) * 0.01 + 0.004  # another time base: not interpolated with them
+    ref = record("ref.csv", np.arange(n) * 0.01, x=np.zeros(n))
+    sim = Record(
+        source="sim.csv",
+        channels={
+            **{k: Channel(time=t, values=v) for k, v in columns.items()},
+            "other": Channel(time=other_time, values=np.arange(n, dtype=np.float64)),
+        },
+        available=(*columns, "other"),
+    )
+    names = [*columns, "other"]
+    aligned = align_records(ref, sim, reference_columns=["x"], model_columns=names)
+    first = aligned.column("model", "c0", "linear")
+    np.testing.assert_array_equal(first, np.interp(aligned.time, t, columns["c0"]))
+    assert aligned.interpolated == [("model", "c0")]
+    assert sorted(key[1] for key in aligned._prepared) == ["c1", "c2", "c3"]
+    for name in ("c3", "c1", "c2"):
+        got = aligned.column("model", name, "linear")
+        np.testing.assert_array_equal(got, np.interp(aligned.time, t, columns[name]))
+    assert aligned._prepared == {}
+    assert aligned.interpolated == [("model", n) for n in ("c0", "c3", "c1", "c2")]
+    # The hold of another method is its own plan, over the same columns.
+    held = aligned.column("model", "c2", "previous")
+    index = np.clip(np.searchsorted(t, aligned.time, side="right") - 1, 0, n - 1)
+    np.testing.assert_array_equal(held, columns["c2"][index])
+    with pytest.raises(DataError, match="1 NaN or inf values"):
+        aligned.column("model", "bad", "linear")
+    np.testing.assert_array_equal(
+        aligned.column("model", "other", "linear"),
+        np.interp(aligned.time, other_time, sim.channels["other"].values),
+    )

@@ -18,6 +18,7 @@ from pytest_hevval.core.local import (
 from pytest_hevval.errors import SpecError
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
+from tests.conftest import needs_kernel
 from tests.strategies import signal_pairs
 
 pytest_plugins = ["pytester"]
@@ -263,6 +264,41 @@ def test_the_compiled_pass_matches_numpy() -> None:
     for name in ("n", "error_sum", "abs_error", "sq_error", "error_m2", "ref_sq", "cross"):
         np.testing.assert_allclose(getattr(fast, name), getattr(plain, name), rtol=1e-12)
     assert np.array_equal(fast.sign_matches, plain.sign_matches)
+
+
+@st.composite
+def _labelled_pairs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """A pair, labels in runs (with samples in no group) and the number of groups; the values
+    may need the power-of-two scale (beyond 2^±400) and may hold a NaN."""
+    ref, sim = draw(signal_pairs(min_size=1))
+    n = ref.shape[0]
+    groups = draw(st.integers(1, 8))
+    runs = draw(st.lists(st.tuples(st.integers(-1, groups - 1), st.integers(1, 9)), min_size=1))
+    labels = np.repeat([g for g, _ in runs], [k for _, k in runs])
+    labels = np.resize(labels, n).astype(np.int64)
+    factor = draw(st.sampled_from([1.0, 2.0**450, 2.0**-450, 2.0**-1000]))
+    ref, sim = ref * factor, sim * factor
+    if draw(st.booleans()):
+        where = draw(st.integers(0, n - 1))
+        (ref if draw(st.booleans()) else sim)[where] = np.nan
+    return ref, sim, labels, groups
+
+
+@needs_kernel
+@given(_labelled_pairs())
+@settings(max_examples=150, deadline=None)
+def test_the_compiled_pass_is_numpys_to_the_bit(
+    case: tuple[np.ndarray, np.ndarray, np.ndarray, int],
+) -> None:
+    """Sample by sample into each group's row, as np.bincount adds: the same table, shift and
+    scale on both paths, with the scale found by the pass itself (NaN included)."""
+    ref, sim, labels, groups = case
+    with np.errstate(invalid="ignore", over="ignore"):
+        fast = labelled_table(ref, sim, labels, groups, compiled=True)
+        plain = labelled_table(ref, sim, labels, groups, compiled=False)
+    assert fast.scale == plain.scale
+    assert fast.shift == plain.shift or (np.isnan(fast.shift) and np.isnan(plain.shift))
+    assert fast.values.tobytes() == plain.values.tobytes()
 
 
 # -- through pytest and the command line ----------------------------------------------------

@@ -346,9 +346,12 @@ def interpolate(values, index, offset, step, out, start, stop):  # type: ignore[
     """values at the grid points [start, stop) of a plan (data/align.py), as np.interp rounds
     them, written into out.
 
-    A zero offset marks a grid point that takes its left sample as it is; at any other the
-    right-hand neighbour is index + 1. Compiled without fast-math: the same operations in the
-    same order as np.interp, so the result is bit-identical to the numpy path.
+    A grid point that takes its left sample as it is carries offset −0.0 and step 1: its right
+    neighbour is then the left one, and (left − left) / 1 · −0.0 + left is left to the bit
+    (values are finite on this path). Every other point has a positive offset and reads the
+    sample after its left one. No branch on the data, which has none to mispredict where time
+    stamps fall on grid points at random; compiled without fast-math: the same operations in
+    the same order as np.interp, so the result is bit-identical to the numpy path.
     """
     part = out[start:stop]
     where = index[start:stop]
@@ -356,53 +359,84 @@ def interpolate(values, index, offset, step, out, start, stop):  # type: ignore[
     width = step[start:stop]
     for i in range(stop - start):
         j = where[i]
-        left = values[j]
         o = shift[i]
-        if o == 0.0:
-            part[i] = left
-        else:
-            part[i] = (values[j + 1] - left) / width[i] * o + left
+        left = values[j]
+        part[i] = (values[j + (o != 0.0)] - left) / width[i] * o + left
 
 
 # -- sums per group (windows, phases, conditions, region cells) ---------------------------
 
 
 @numba.njit(cache=True, inline="always")
-def _flush(out, row, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9):  # type: ignore[no-untyped-def]
-    """Adds one run's sums to its group's row."""
-    out[row, 0] += a0
-    out[row, 1] += a1
-    out[row, 2] += a2
-    out[row, 3] += a3
-    out[row, 4] += a4
-    out[row, 5] += a5
-    out[row, 6] += a6
-    out[row, 7] += a7
-    out[row, 8] += a8
-    out[row, 9] += a9
+def _store(out, row, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9):  # type: ignore[no-untyped-def]
+    """Writes one group's running sums back to its row."""
+    out[row, 0] = a0
+    out[row, 1] = a1
+    out[row, 2] = a2
+    out[row, 3] = a3
+    out[row, 4] = a4
+    out[row, 5] = a5
+    out[row, 6] = a6
+    out[row, 7] = a7
+    out[row, 8] = a8
+    out[row, 9] = a9
 
 
 @numba.njit(cache=True, nogil=True)
-def grouped_sums(r, s, labels, shift, out):  # type: ignore[no-untyped-def]
-    """Adds the ``core.local.SUM_COLUMNS`` of every labelled sample to its group's row."""
-    # Labels come in long runs (a window, a stretch in one cell), so the sums stay in
-    # registers for a run and go to the table when the label changes.
+def grouped_sums(r, s, labels, shift, out, extremes):  # type: ignore[no-untyped-def]
+    """Adds the ``core.local.SUM_COLUMNS`` of every labelled sample to its group's row, and
+    writes (min r, max r, min s, max s, NaN in r, NaN in s) over every sample to extremes.
+
+    Each row is added to in sample order, starting from its value in ``out``, exactly as
+    ``np.bincount`` adds its weights: the table is the numpy path's to the bit. Labels come in
+    runs (a window, a stretch in one cell), so a row is read into registers when its run starts
+    and written back when it ends. The extremes (NaN-free, plus whether a NaN was seen) let the
+    caller decide the power-of-two scale from this same pass instead of four more reads.
+    """
     n = r.shape[0]
-    if n == 0:
-        return
-    current = labels[0]
+    r_lo = s_lo = math.inf
+    r_hi = s_hi = -math.inf
+    r_nan = s_nan = False
+    current = labels[0] if n else -1
     a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
+    if current >= 0:
+        a0 = out[current, 0]
+        a1 = out[current, 1]
+        a2 = out[current, 2]
+        a3 = out[current, 3]
+        a4 = out[current, 4]
+        a5 = out[current, 5]
+        a6 = out[current, 6]
+        a7 = out[current, 7]
+        a8 = out[current, 8]
+        a9 = out[current, 9]
     for i in range(n):
+        ri = r[i]
+        si = s[i]
+        r_lo = _fmin(r_lo, ri)
+        r_hi = _fmax(r_hi, ri)
+        s_lo = _fmin(s_lo, si)
+        s_hi = _fmax(s_hi, si)
+        r_nan |= ri != ri
+        s_nan |= si != si
         g = labels[i]
         if g != current:
             if current >= 0:
-                _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
-            a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
+                _store(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
             current = g
+            if g >= 0:
+                a0 = out[g, 0]
+                a1 = out[g, 1]
+                a2 = out[g, 2]
+                a3 = out[g, 3]
+                a4 = out[g, 4]
+                a5 = out[g, 5]
+                a6 = out[g, 6]
+                a7 = out[g, 7]
+                a8 = out[g, 8]
+                a9 = out[g, 9]
         if g < 0:
             continue
-        ri = r[i]
-        si = s[i]
         e = ri - si
         d = e - shift
         a0 += 1.0
@@ -424,7 +458,13 @@ def grouped_sums(r, s, labels, shift, out):  # type: ignore[no-untyped-def]
         else:
             a9 += 1.0
     if current >= 0:
-        _flush(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
+        _store(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
+    extremes[0] = r_lo
+    extremes[1] = r_hi
+    extremes[2] = s_lo
+    extremes[3] = s_hi
+    extremes[4] = r_nan
+    extremes[5] = s_nan
 
 
 # -- bootstrap fine blocks ------------------------------------------------------------------

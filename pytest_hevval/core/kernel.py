@@ -39,7 +39,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
@@ -650,20 +650,51 @@ def interpolate(
     workers: int = 2,
 ) -> FloatArray:
     """One column through an interpolation plan: np.interp's arithmetic, compiled."""
+    return interpolate_columns(module, [values], index, offset, step, workers)[0]
+
+
+def interpolate_columns(
+    module: ModuleType,
+    columns: Sequence[AnyFloatArray],
+    index: npt.NDArray[np.intp],
+    offset: FloatArray,
+    step: FloatArray,
+    workers: int = 2,
+) -> list[FloatArray]:
+    """Columns of one time base through its interpolation plan, each into a new array.
+
+    Several columns go to the threads whole, in one hand-over for all of them: waking a
+    helper per column cost more than the column on a busy machine. One column is split into
+    chunks instead.
+    """
     n = index.shape[0]
-    out = np.empty(n, dtype=np.float64)
-    chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
-    bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
-    values, offset, step = (_read_only(a) for a in (values, offset, step))
     index = _read_only(index, np.intp)
+    offset, step = _read_only(offset), _read_only(step)
+    inputs = [_read_only(values) for values in columns]
+    outs = [np.empty(0, dtype=np.float64)] * len(inputs)
+    if len(inputs) == 1:
+        out = outs[0] = np.empty(n, dtype=np.float64)
+        chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
+        bounds = np.minimum(np.arange(chunks + 1) * KERNEL_CHUNK, n)
 
-    def run(first: int, last: int) -> None:
-        module.interpolate(values, index, offset, step, out, int(bounds[first]), int(bounds[last]))
+        def run_chunks(first: int, last: int) -> None:
+            module.interpolate(
+                inputs[0], index, offset, step, out, int(bounds[first]), int(bounds[last])
+            )
 
-    # A column costs several nanoseconds a sample (the first write to its fresh pages most of
-    # it), so a second thread pays off on far shorter loops than the main pass.
-    _spread(run, chunks, workers, n, INTERPOLATE_PARALLEL_MIN)
-    return out
+        _spread(run_chunks, chunks, workers, n, INTERPOLATE_PARALLEL_MIN)
+        return outs
+
+    def run_columns(first: int, last: int) -> None:
+        for k in range(first, last):
+            # Allocated on the thread that writes it: the first touch of its pages, most of a
+            # column's cost, is spread over the threads too.
+            out = np.empty(n, dtype=np.float64)
+            module.interpolate(inputs[k], index, offset, step, out, 0, n)
+            outs[k] = out
+
+    _spread(run_columns, len(inputs), workers, n * len(inputs), INTERPOLATE_PARALLEL_MIN)
+    return outs
 
 
 def grouped_sums(
@@ -673,21 +704,31 @@ def grouped_sums(
     labels: npt.NDArray[np.int64],
     groups: int,
     shift: float,
-) -> npt.NDArray[np.float64]:
-    """The (groups, 10) table of ``core.local.SUM_COLUMNS``, in one sequential compiled pass.
+) -> tuple[npt.NDArray[np.float64], tuple[float, float, float, float]]:
+    """The (groups, 10) table of ``core.local.SUM_COLUMNS``, in one sequential compiled pass,
+    and (max, min) of ``ref`` then of ``sim`` as numpy gives them (NaN where one is NaN).
 
-    Sequential per signal, so the table is bit-for-bit repeatable; signals run side by side on
-    the engine's threads (the loop releases the GIL).
+    Sequential per signal, so the table is bit-for-bit repeatable (and np.bincount's); signals
+    run side by side on the engine's threads (the loop releases the GIL).
     """
     out = np.zeros((groups, 10), dtype=np.float64)
+    extremes = np.empty(6, dtype=np.float64)
     module.grouped_sums(
         _read_only(ref),
         _read_only(sim),
         _read_only(labels, np.int64),
         float(shift),
         out,
+        extremes,
     )
-    return out
+    r_lo, r_hi, s_lo, s_hi, r_nan, s_nan = extremes.tolist()
+    nan = float("nan")
+    return out, (
+        nan if r_nan else r_hi,
+        nan if r_nan else r_lo,
+        nan if s_nan else s_hi,
+        nan if s_nan else s_lo,
+    )
 
 
 def fine_block_sums(

@@ -419,19 +419,26 @@ def labelled_table(
     """
     r, s = _check_pair(ref, sim)
     labels = np.asarray(labels, dtype=np.int64)
-    scale = _rescale(r, s)
-    if scale != 1.0:
-        r, s = r * scale, s * scale
-    # Any value near the mean error keeps the shifted sums exact enough; the first samples'
-    # mean costs nothing and is the same on both paths.
-    shift = float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
     module = None
     if compiled is None:
         module = kernel.kernel_for(r.shape[0], ("grouped_sums",))
     elif compiled:
         module = kernel.load_or_raise()
     if module is not None:
-        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift), shift, scale)
+        # The pass finds the extremes that decide the scale as it sums; values that need
+        # one (beyond 2^±400) are summed again, scaled, which ordinary magnitudes never are.
+        shift = _shift(r, s)
+        table, extremes = kernel.grouped_sums(module, r, s, labels, groups, shift)
+        scale = _scale_of(extremes) if r.shape[0] else 1.0
+        if scale == 1.0:
+            return SumTable(table, shift, scale)
+        r, s = r * scale, s * scale
+        shift = _shift(r, s)
+        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift)[0], shift, scale)
+    scale = _rescale(r, s)
+    if scale != 1.0:
+        r, s = r * scale, s * scale
+    shift = _shift(r, s)
     signs_match = (derivative_signs(r) == derivative_signs(s)).view(np.int8)
     if (labels < 0).any():  # samples in no group, as the compiled pass skips them
         keep = labels >= 0
@@ -457,10 +464,22 @@ def labelled_table(
     return SumTable(np.column_stack(columns), shift, scale)
 
 
+def _shift(r: FloatArray, s: FloatArray) -> float:
+    """The shift of the error sums: any value near the mean error keeps the shifted sums exact
+    enough, and the first samples' mean costs nothing and is the same on both paths."""
+    return float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
+
+
 def _rescale(ref: FloatArray, sim: FloatArray) -> float:
     """The power of two that keeps the squares of ``ref`` and ``sim`` finite (1 when they are)."""
     if ref.shape[0] == 0:
         return 1.0
     with np.errstate(invalid="ignore"):
-        peak = max(abs(float(a)) for a in (ref.max(), ref.min(), sim.max(), sim.min()))
+        return _scale_of((ref.max(), ref.min(), sim.max(), sim.min()))
+
+
+def _scale_of(extremes: Sequence[float | np.floating]) -> float:
+    """:func:`_rescale` from (max, min) of the reference then of the simulation, as numpy
+    gives them (NaN where a signal holds a NaN)."""
+    peak = max(abs(float(a)) for a in extremes)
     return power_of_two_scale(peak) if math.isfinite(peak) else 1.0

@@ -72,6 +72,11 @@ class AlignedData:
     _times: FloatArray | None = None
     _on_grid: dict[tuple[int, float], bool] = field(default_factory=dict)
     _plans: dict[tuple[int, float, Method], _Plan] = field(default_factory=dict)
+    #: The columns declared per side (align_records' arguments): those that share a time base
+    #: with a column being interpolated are interpolated with it, in one pass.
+    declared: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: Columns interpolated beside another one, until they are asked for.
+    _prepared: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
     #: Columns interpolated so far (those on the grid are used as they are).
     interpolated: list[tuple[str, str]] = field(default_factory=list)
     #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
@@ -104,11 +109,25 @@ class AlignedData:
         plan = None
         if not on_grid_channel:
             self.interpolated.append((side, name))
+            prepared = self._prepared.pop(key, None)
+            if prepared is not None:
+                self._cache[key] = prepared
+                return prepared
             plan_key = (id(channel.time), shift, method)
             plan = self._plans.get(plan_key)
             if plan is None:
                 # Channels that share a time array share one plan: the search is done once.
                 plan = self._plans[plan_key] = _Plan.build(channel.time, shift, self.time, method)
+            values = np.asarray(channel.values, dtype=np.float64)
+            if _all_finite(values):
+                # The other declared columns of this time base go through the plan in the same
+                # pass: one hand-over to the kernel's threads instead of one per column.
+                others = self._same_time_base(side, record, channel.time, name, method)
+                outputs = plan.apply_all([values, *others.values()])
+                for other, out in zip(others, outputs[1:], strict=True):
+                    self._prepared[(side, other, method)] = out
+                self._cache[key] = outputs[0]
+                return outputs[0]
         values, gaps = _interpolate(
             channel,
             self.time,
@@ -124,6 +143,25 @@ class AlignedData:
             self.gap_mask = gaps if self.gap_mask is None else (self.gap_mask | gaps)
         self._cache[key] = values
         return values
+
+    def _same_time_base(
+        self, side: str, record: Record, time: FloatArray, name: str, method: Method
+    ) -> dict[str, FloatArray]:
+        """The finite values of the declared columns of ``side`` that share ``time`` with
+        ``name`` and are not yet interpolated by ``method``."""
+        others: dict[str, FloatArray] = {}
+        for other in self.declared.get(side, ()):
+            key = (side, other, method)
+            if other == name or key in self._cache or key in self._prepared:
+                continue
+            channel = record.channel(other)
+            if channel.time is not time:
+                continue
+            values = np.asarray(channel.values, dtype=np.float64)
+            # A column with NaN or inf goes its own way when it is asked for (gaps, errors).
+            if _all_finite(values):
+                others[other] = values
+        return others
 
     def columns(
         self, side: Literal["reference", "model"], names: Iterable[str], method: Method
@@ -341,6 +379,7 @@ def align_records(
             hint="raise alignment.rate_hz or widen the window",
         )
     return AlignedData(
+        declared={"reference": tuple(ref_names), "model": tuple(model_names)},
         grid=Grid(start_s=float(start), rate_hz=float(rate_hz), n_samples=n),
         reference=reference,
         model=model,
@@ -375,6 +414,17 @@ def _range(record: Record, names: list[str], shift: float = 0.0) -> str:
     return f"{float(channel.time[0]) + shift:g}–{float(channel.time[-1]) + shift:g} s"
 
 
+def _all_finite(values: FloatArray) -> bool:
+    """Whether every value is finite, usually in one pass that allocates nothing.
+
+    A NaN or an infinity makes any sum that includes it non-finite, so a finite sum proves
+    every value finite; only a sum that overflows (or a bad value) needs the exact look.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = float(np.add.reduce(values))
+    return math.isfinite(total) or bool(np.isfinite(values).all())
+
+
 def _interpolate(
     channel: Channel,
     grid: FloatArray,
@@ -387,14 +437,17 @@ def _interpolate(
     on_grid: bool = False,
     plan: _Plan | None = None,
 ) -> tuple[FloatArray, npt.NDArray[np.bool_] | None]:
-    time = channel.time + shift if shift else channel.time
     values = np.asarray(channel.values, dtype=np.float64)
-    bad = ~np.isfinite(values)
-    gaps = None
-    if on_grid and not bad.any():
+    finite = _all_finite(values)
+    if finite and on_grid:
         # Already sampled on the grid: the channel's own values, not a copy of them.
         return values, None
-    if bad.any():
+    if finite and plan is not None:
+        return plan.apply(values), None
+    time = channel.time + shift if shift else channel.time
+    gaps = None
+    if not finite:
+        bad = ~np.isfinite(values)
         first = int(np.flatnonzero(bad)[0])
         if nan_policy == "raise":
             raise DataError(
@@ -415,8 +468,6 @@ def _interpolate(
         gaps[inside] = grid[inside] < gap_stop[idx[inside]]
         time = time[keep]
         values = values[keep]
-    if plan is not None and gaps is None:
-        return plan.apply(values), None
     if method == "previous":
         index = np.searchsorted(time, grid, side="right") - 1
         np.clip(index, 0, time.shape[0] - 1, out=index)
@@ -436,13 +487,15 @@ class _Plan:
     method: Method
     #: Index of the sample at or before each grid point (clipped to the record).
     index: npt.NDArray[np.intp]
-    #: Linear only: index of the sample after it (clipped), grid point minus that sample's
-    #: time, and the step to the next sample.
+    #: Linear only: index of the sample after it, grid point minus that sample's time, and
+    #: the step to the next sample. A grid point that takes its left sample as it is (on a
+    #: sample, or beyond either end of the record, as np.interp holds the end value) has its
+    #: left sample as right neighbour, offset −0.0 and step 1: (left − left) / 1 · −0.0 + left
+    #: is left to the bit for any finite value, −0.0 included, so no point needs a branch or
+    #: a mask.
     right: npt.NDArray[np.intp] | None = None
     offset: FloatArray | None = None
     step: FloatArray | None = None
-    #: Linear only: grid points at or outside the first/last sample take that sample's value.
-    exact: npt.NDArray[np.bool_] | None = None
 
     @classmethod
     def build(cls, time: FloatArray, shift: float, grid: FloatArray, method: Method) -> _Plan:
@@ -457,33 +510,61 @@ class _Plan:
         offset = grid - t[index]
         step = t[index + 1] - t[index]
         exact = below | above | (offset == 0.0)
-        # Points beyond either end hold the end value, as np.interp does.
         index = np.where(above, last, index)
-        right = np.minimum(index + 1, last)
-        return cls("linear", index, right, np.where(exact, 0.0, offset), step, exact)
+        right = index + ~exact
+        return cls(
+            "linear",
+            index,
+            right,
+            np.where(exact, -0.0, offset),
+            np.where(exact, 1.0, step),
+        )
 
     def apply(self, values: FloatArray) -> FloatArray:
+        return self.apply_all([values])[0]
+
+    def apply_all(self, columns: list[FloatArray]) -> list[FloatArray]:
+        """Every column (finite values of this time base) through the plan, in one go."""
         if self.method == "previous":
-            return np.take(values, self.index)
+            return [np.take(values, self.index) for values in columns]
         assert self.right is not None
         assert self.offset is not None
         assert self.step is not None
-        assert self.exact is not None
         compiled = (
             kernel.kernel_for(self.index.shape[0], ("interpolate",))
-            if kernel.accepts(values)
+            if kernel.accepts(*columns)
             else None
         )
         if compiled is not None:
-            return kernel.interpolate(compiled, values, self.index, self.offset, self.step)
-        # np.interp's arithmetic, (right − left) / step · offset + left, in place in one
-        # buffer: two gathers and four passes, no temporaries.
-        left = np.take(values, self.index)
-        out = np.take(values, self.right)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            np.subtract(out, left, out=out)
-            np.divide(out, self.step, out=out)
-            np.multiply(out, self.offset, out=out)
-            np.add(out, left, out=out)
-        np.copyto(out, left, where=self.exact)
+            return kernel.interpolate_columns(compiled, columns, self.index, self.offset, self.step)
+        return [self._numpy(values) for values in columns]
+
+    def _numpy(self, values: FloatArray) -> FloatArray:
+        """np.interp's arithmetic, (right − left) / step · offset + left, a block at a time:
+        two gathers and four in-place passes over buffers that stay in cache, each result
+        written once into the column."""
+        assert self.right is not None
+        assert self.offset is not None
+        assert self.step is not None
+        n = self.index.shape[0]
+        out = np.empty(n, dtype=np.float64)
+        width = min(n, _NUMPY_BLOCK)
+        left = np.empty(width, dtype=np.float64)
+        part = np.empty(width, dtype=np.float64)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            for a in range(0, n, width):
+                b = min(a + width, n)
+                m = b - a
+                # mode="clip" (indices are in range) writes into out= without a buffer.
+                np.take(values, self.index[a:b], out=left[:m], mode="clip")
+                np.take(values, self.right[a:b], out=part[:m], mode="clip")
+                np.subtract(part[:m], left[:m], out=part[:m])
+                np.divide(part[:m], self.step[a:b], out=part[:m])
+                np.multiply(part[:m], self.offset[a:b], out=part[:m])
+                np.add(part[:m], left[:m], out=out[a:b])
         return out
+
+
+#: Grid points per block of the numpy interpolation: its two scratch buffers stay in a 1 MiB
+#: L2 cache beside the plan's slices.
+_NUMPY_BLOCK = 1 << 14
