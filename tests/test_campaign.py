@@ -192,6 +192,18 @@ def test_recordings_spread_over_workers_and_the_gate_judges_them_all(
     assert "pass_rate" in xml
 
 
+def test_one_count_in_pytest_the_summary_and_the_reports(project: pytest.Pytester) -> None:
+    write_campaign(project.path, gain=1.4, rate=0.9)
+    result = project.runpytest("--hevval", "--hevval-no-history", "--hevval-report=md,json")
+    outcomes = result.parseoutcomes()
+    line = "1 spec file, 0 pass; 13 items, 3 fail: 1 of 8 signals, 1 of 4 Φ, 1 of 1 campaign gate"
+    assert outcomes == {"passed": 10, "failed": 3}
+    result.stdout.fnmatch_lines([line])
+    report = project.path / ".hevval" / "report"
+    assert (report / "report.md").read_text().startswith(f"### ❌ hevval: {line}\n")
+    assert json.loads((report / "report.json").read_text())["summary"]["outcome"] == line
+
+
 def test_cli_run_gives_the_campaign_verdict(project: pytest.Pytester) -> None:
     write_campaign(project.path, gain=1.4, rate=0.9)
     result = hevval_run(project, "--json", "out.json")

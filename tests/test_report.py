@@ -339,7 +339,9 @@ def test_markdown_summarises_each_spec_and_its_failing_signals(
     results: list[dict[str, Any]],
 ) -> None:
     text = render_markdown(results)
-    assert text.startswith("### ❌ hevval: 1 of 2 specs passed · 2 of 4 signals failing")
+    assert text.startswith(
+        "### ❌ hevval: 2 spec files, 1 pass; 6 items, 3 fail: 2 of 4 signals, 1 of 2 Φ\n"
+    )
     assert "| ❌ | i3 trip A01 | 0.8123 | 0.9000 | 2 / 3 |" in text
     assert "| ✅ | i3 trip A02 | 0.9700 | 0.9000 | 0 / 1 |" in text
     assert "**❌ i3 trip A01** — Φ 0.8123 < min Φ 0.9000" in text
@@ -364,7 +366,13 @@ def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> No
     compact = json.dumps(payload, sort_keys=True, ensure_ascii=False, separators=(",", ":"))
     assert text == compact + "\n"
     assert payload["report_schema_version"] == 1
-    assert payload["summary"] == {"signals": 4, "signals_failed": 2, "specs": 2, "specs_failed": 1}
+    assert payload["summary"] == {
+        "signals": 4,
+        "signals_failed": 2,
+        "specs": 2,
+        "specs_failed": 1,
+        "outcome": "2 spec files, 1 pass; 6 items, 3 fail: 2 of 4 signals, 1 of 2 Φ",
+    }
     assert payload["specs"][0]["signals"][0]["mae"] is None
     assert payload["specs"][0]["signals"][1]["figures"] == results[0]["signals"][1]["figures"]
     assert [w["path"] for w in payload["worst"][:2]] == ["E_batt/P_batt", "E_batt"]

@@ -16,7 +16,8 @@ from ..core.characteristics import CHARACTERISTICS
 from ..core.registry import describe, order_names, registered_characteristics
 from ..results.codec import is_finite_number, keyed_lambdas
 from ..results.measurement import ErrorCheck
-from .sentences import failure_sentence
+from ..results.spec_result import SpecResult
+from .sentences import failure_sentence, outcome_line
 
 __all__ = [
     "CHARACTERISTICS",
@@ -403,12 +404,23 @@ def worst_rows(spec_results: Sequence[Mapping[str, Any]], limit: int = 10) -> li
     return rows[:limit]
 
 
-def summary(spec_results: Iterable[Mapping[str, Any]]) -> dict[str, int]:
+def summary(spec_results: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
+    """Counts for the headers; ``outcome`` is the run's one-line count (as the terminal's)."""
     specs = list(spec_results)
     signals = [s for spec in specs for s in items(spec.get("signals"))]
-    return {
+    counts: dict[str, Any] = {
         "specs": len(specs),
         "specs_failed": sum(1 for spec in specs if spec.get("passed") is False),
         "signals": len(signals),
         "signals_failed": sum(1 for s in signals if s.get("passed") is False),
     }
+    try:
+        typed = [SpecResult.from_dict(spec) for spec in specs]
+    except (KeyError, TypeError, ValueError):  # a hand-made partial result: the plain counts
+        counts["outcome"] = (
+            f"{counts['specs']} specs, {counts['specs_failed']} fail; "
+            f"{counts['signals_failed']} of {counts['signals']} signals fail"
+        )
+    else:
+        counts["outcome"] = outcome_line(typed) if typed else "no specs scored"
+    return counts

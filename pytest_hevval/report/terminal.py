@@ -11,7 +11,13 @@ from collections.abc import Iterable, Sequence
 from ..core.registry import describe
 from ..results.campaign import CampaignVerdict, campaign_verdicts
 from ..results.spec_result import SignalResult, SpecResult
-from .sentences import failure_lines, failure_text, where_lines, within_uncertainty_lines
+from .sentences import (
+    failure_lines,
+    failure_text,
+    outcome_line,
+    where_lines,
+    within_uncertainty_lines,
+)
 
 __all__ = [
     "measurement_notes",
@@ -198,6 +204,8 @@ def run_summary(results: Sequence[SpecResult], *, details: bool = False) -> list
     lines = tree_summary(results, details=details)
     for found in campaign_verdicts(results):
         lines.extend(verdict_lines(found))
+    if results:
+        lines.append(outcome_line(results))
     return lines
 
 

@@ -261,8 +261,7 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
     ok = counts["specs_failed"] == 0
     mark = "✅" if ok else "❌"
     lines = [
-        f"### {mark} hevval: {counts['specs'] - counts['specs_failed']} of {counts['specs']} "
-        f"specs passed · {counts['signals_failed']} of {counts['signals']} signals failing",
+        f"### {mark} hevval: {counts['outcome']}",
         "",
         "| | spec | Φ | min Φ | failing signals |",
         "|:-:|---|--:|--:|--:|",

@@ -68,13 +68,17 @@ class GroupTable:
             rms = np.where(judged, np.sqrt(sums.sq_error / safe) / scale, np.nan)
             mean = np.where(judged, sums.error_sum / safe / scale, np.nan)
         share = sums.sq_error / total_sq if total_sq > 0 else np.zeros_like(n)
+        # tolist() makes Python numbers in one call (a float() per value costs a signal of
+        # many cells milliseconds).
         return cls(
             labels=tuple(labels),
-            n=tuple(int(v) for v in sums.n),
-            lambdas={name: tuple(float(v) for v in lambdas[name]) for name in lambdas},
-            error_share=tuple(float(v) for v in share),
-            rms=tuple(float(v) for v in rms),
-            mean_error=tuple(float(v) for v in mean),
+            n=tuple(np.asarray(sums.n, dtype=np.int64).tolist()),
+            lambdas={
+                name: tuple(np.asarray(v, dtype=np.float64).tolist()) for name, v in lambdas.items()
+            },
+            error_share=tuple(np.asarray(share, dtype=np.float64).tolist()),
+            rms=tuple(np.asarray(rms, dtype=np.float64).tolist()),
+            mean_error=tuple(np.asarray(mean, dtype=np.float64).tolist()),
         )
 
     def judged(self, index: int, min_samples: int = MIN_GROUP_SAMPLES) -> bool:
