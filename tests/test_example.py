@@ -93,3 +93,17 @@ def test_i3_campaign_scores_every_trip_and_excludes_the_fit_trip(
     validation = [r for r in recordings.values() if r["role"] == "validation"]
     assert campaign["pass_rate"] == sum(r["passed"] for r in validation) / 9
     assert set(campaign["worst"]) <= {r["id"] for r in validation}
+
+
+def test_the_readmes_say_the_count_the_example_gives(run_payload: dict[str, Any]) -> None:
+    """What a new user is told to expect is what the run says (pytest counts the same items)."""
+    from pytest_hevval.report.sentences import outcome_line
+    from pytest_hevval.results.spec_result import SpecResult
+
+    line = outcome_line([SpecResult.from_dict(spec) for spec in run_payload["specs"]])
+    for readme in (EXAMPLE.parent / "README.md", EXAMPLE / "README.md"):
+        assert line in readme.read_text(encoding="utf-8"), readme
+    failed = int(line.split(" items, ")[1].split(" fail")[0])
+    items = int(line.split("; ")[1].split(" items")[0])
+    top = (EXAMPLE.parent / "README.md").read_text(encoding="utf-8")
+    assert f"{failed} failed, {items - failed} passed" in top
