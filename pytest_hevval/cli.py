@@ -407,6 +407,7 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "details")
     _shared(run, "report")
     _shared(run, "report-dir")
+    _shared(run, "history")
     _shared(run, "no-history")
     _shared(run, "history-dir")
     _shared(run, "model-version")

@@ -60,7 +60,13 @@ OPTIONS: tuple[Option, ...] = (
     ),
     Option("report", "string", "write reports: comma-separated html,json,md", ""),
     Option("report-dir", "string", "folder for reports", REPORT_DIR),
-    Option("no-history", "bool", "do not record this run in the history", False),
+    Option(
+        "history",
+        "bool",
+        "record this run in the history folder (runs in CI are recorded without it)",
+        False,
+    ),
+    Option("no-history", "bool", "neither record this run nor read the history", False),
     Option("history-dir", "string", "folder of run records", HISTORY_DIR),
     Option("model-version", "string", "model version recorded in the history", None),
     Option(

@@ -27,6 +27,11 @@ __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
 #: The title of every report a run writes.
 REPORT_TITLE = "hevval validation report"
+#: The summary's line for a run that was not recorded, and how to record one.
+NOT_RECORDED = (
+    "history: not recorded (runs are recorded in CI, or when asked: --hevval-history, "
+    "hevval run --history, or hevval_history = true in the ini file)"
+)
 
 
 @dataclass(frozen=True)
@@ -39,7 +44,10 @@ class PublishOptions:
     report: str = ""
     report_dir: Path = Path(".hevval/report")
     history_dir: Path = Path(".hevval/history")
+    #: Write this run's record (see :func:`~pytest_hevval.history.records_this_run`).
     record: bool = True
+    #: Read the history at all (trends, baselines): False with ``no-history``.
+    use_history: bool = True
     #: The model version as given (``None``: from the environment or git).
     model_version: str | None = None
     #: The baseline to compare with (``latest`` or a model version), or ``None``.
@@ -54,6 +62,8 @@ class PublishOptions:
         """From an option getter that takes the names of :data:`~pytest_hevval.options.OPTIONS`
         (pytest's ``--hevval-NAME`` and ``hevval run --NAME`` share them)."""
 
+        from .history import records_this_run
+
         def text(name: str) -> str | None:
             value = option(name)
             return None if value in (None, "") else str(value)
@@ -63,7 +73,12 @@ class PublishOptions:
             report=text("report") or "",
             report_dir=rootdir / str(option("report-dir")),
             history_dir=rootdir / str(option("history-dir")),
-            record=not option("no-history"),
+            record=records_this_run(
+                asked=bool(option("history")) or bool(option("create-baseline")),
+                refused=bool(option("no-history")),
+                environ=os.environ,
+            ),
+            use_history=not option("no-history"),
             model_version=text("model-version"),
             compare=text("compare"),
             compare_fail=text("compare-fail"),
@@ -129,6 +144,7 @@ class Publisher:
             create_baseline=self.options.create_baseline,
             directory=self.options.history_dir,
             wanted=wanted,
+            recorded=self.options.record,
         )
         if decision.fails:
             raise HevvalError(decision.message)
@@ -214,7 +230,7 @@ class Publisher:
     ) -> list[dict[str, Any]]:
         """Report copies of the results with each signal's diagnosis and history trend."""
         trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
-        if self.options.record:
+        if self.options.use_history:
             from .history import HistoryStore
 
             for record in HistoryStore(self.options.history_dir).records():
@@ -301,6 +317,8 @@ class Publisher:
 
     def _record(self, dicts: list[dict[str, Any]], out: Publication) -> None:
         if not self.options.record:
+            if self.options.use_history:
+                out.notes.append(NOT_RECORDED)
             return
         from .history import HistoryStore, make_record
 

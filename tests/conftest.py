@@ -19,14 +19,26 @@ import pytest
 from hypothesis import settings
 
 from pytest_hevval.core import kernel
+from pytest_hevval.history.compare import CI_VARIABLES, is_ci
 from pytest_hevval.plugin import session
 from pytest_hevval.scoring import engine
 
 # In CI every run draws the same examples, so a pass or a failure can be reproduced; locally
 # hypothesis keeps drawing new ones (and replays the failures it saved in .hypothesis/).
 settings.register_profile("ci", derandomize=True)
-if os.environ.get("CI"):
+#: Whether this test run is a CI job; the tests themselves run as on a workstation (below).
+IN_CI = is_ci(os.environ)
+if IN_CI:
     settings.load_profile("ci")
+
+
+@pytest.fixture(autouse=True)
+def _outside_ci(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every test sees no CI variables: what a run records, and how a missing baseline ends,
+    depend on them; a test that needs CI sets them itself."""
+    for name in CI_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+
 
 _KEPT_LOADED = [engine, session, importlib.import_module("pandas")]
 with contextlib.suppress(ImportError):  # the parquet extra

@@ -628,7 +628,7 @@ def test_recordings_whose_interval_holds_min_phi_are_within_noise() -> None:
 
 def test_compare_names_the_recordings_that_changed(project: pytest.Pytester) -> None:
     write_campaign(project.path, gain=1.4)
-    project.runpytest("--hevval", "--hevval-model-version=v1")
+    project.runpytest("--hevval", "--hevval-history", "--hevval-model-version=v1")
     write_campaign(project.path, gain=1.0)
     result = project.runpytest("--hevval", "--hevval-model-version=v2", "--hevval-compare=latest")
     result.stdout.fnmatch_lines(

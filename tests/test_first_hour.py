@@ -84,3 +84,59 @@ def test_hevval_run_names_the_model_line_too(pytester: pytest.Pytester) -> None:
     assert line.startswith("hevval run: error: ")
     assert "usermodel.py:5" in line
     assert "add 'heater_kw' to `inputs:`" in line
+
+
+def _records(root: Path) -> list[Path]:
+    return sorted((root / ".hevval" / "history").glob("*.json"))
+
+
+def test_a_local_run_is_not_recorded_unless_asked_and_says_so(
+    pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A laptop's runs stay out of the team's history; CI's go in; asking records any."""
+    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    local = pytester.runpytest("--hevval")
+    local.assert_outcomes(passed=3)
+    local.stdout.fnmatch_lines(["history: not recorded (runs are recorded in CI, or when asked*"])
+    assert _records(pytester.path) == []
+    pytester.runpytest("--hevval", "--hevval-history").assert_outcomes(passed=3)
+    assert len(_records(pytester.path)) == 1
+    monkeypatch.setenv("CI", "true")
+    in_ci = pytester.runpytest("--hevval")
+    in_ci.stdout.fnmatch_lines(["history: recorded unknown in .hevval/history/*"])
+    assert len(_records(pytester.path)) == 2
+    monkeypatch.delenv("CI")
+    quiet = pytester.runpytest("--hevval", "--hevval-no-history")
+    quiet.stdout.no_fnmatch_line("history:*")
+    assert len(_records(pytester.path)) == 2
+
+
+def test_hevval_run_records_only_when_asked(pytester: pytest.Pytester) -> None:
+    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    plain = pytester.run(sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml")
+    assert plain.ret == 0
+    plain.stdout.fnmatch_lines(["history: not recorded*hevval run --history*"])
+    asked = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml", "--history"
+    )
+    assert asked.ret == 0
+    assert len(_records(pytester.path)) == 1
+
+
+@pytest.mark.parametrize(
+    ("asked", "refused", "environ", "expected"),
+    [
+        (False, False, {}, False),
+        (True, False, {}, True),
+        (False, False, {"CI": "true"}, True),
+        (False, False, {"GITHUB_ACTIONS": "true"}, True),
+        (True, True, {"CI": "true"}, False),
+        (False, False, {"CI": "false"}, False),
+    ],
+)
+def test_which_runs_are_recorded(
+    asked: bool, refused: bool, environ: dict[str, str], expected: bool
+) -> None:
+    from pytest_hevval.history import records_this_run
+
+    assert records_this_run(asked=asked, refused=refused, environ=environ) is expected

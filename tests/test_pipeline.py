@@ -41,12 +41,16 @@ def _only_record(folder: Path) -> dict:
 def test_cli_and_pytest_write_the_same_history_record(project: pytest.Pytester) -> None:
     """The spec scored by `hevval run` and by `pytest --hevval` gives one and the same record."""
     project.runpytest(
-        "--hevval", "--hevval-model-version=v1", "--hevval-history-dir=from-pytest"
+        "--hevval",
+        "--hevval-history",
+        "--hevval-model-version=v1",
+        "--hevval-history-dir=from-pytest",
     ).assert_outcomes(passed=6)
     code = cli.main(
         [
             "run",
             "pack.hevval.yaml",
+            "--history",
             "--model-version=v1",
             "--history-dir=from-cli",
             "--quiet",
@@ -181,6 +185,7 @@ def test_cli_and_pytest_publish_the_same(project: pytest.Pytester) -> None:
                 [
                     "run",
                     "pack.hevval.yaml",
+                    "--history",
                     "--model-version=v0",
                     f"--history-dir={side}",
                     "--quiet",
@@ -189,7 +194,13 @@ def test_cli_and_pytest_publish_the_same(project: pytest.Pytester) -> None:
             == 0
         )
     write_data(project.path, fault="middle")
-    shared = ["--model-version=v1", "--report=json,html", "--compare", "--compare-fail=phi:0.01"]
+    shared = [
+        "--history",
+        "--model-version=v1",
+        "--report=json,html",
+        "--compare",
+        "--compare-fail=phi:0.01",
+    ]
     result = project.runpytest(
         "--hevval",
         *(f"--hevval-{option.removeprefix('--')}" for option in shared),

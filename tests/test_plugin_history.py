@@ -21,6 +21,8 @@ def project(pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch) -> pytes
     monkeypatch.delenv("GITHUB_ACTIONS", raising=False)
     monkeypatch.delenv("HEVVAL_MODEL_VERSION", raising=False)
     pytester.makefile(".hevval.yaml", pack=TREE_SPEC)
+    # A team that records every run, not only those in CI.
+    pytester.makeini("[pytest]\nhevval_history = true\n")
     write_data(pytester.path)
     return pytester
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import html
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -19,6 +18,7 @@ import numpy as np
 import pytest
 
 from pytest_hevval.report import render_html
+from tests.conftest import IN_CI
 from tests.demo_results import demo_results
 
 pytestmark = pytest.mark.browser
@@ -46,7 +46,7 @@ def _chromium() -> str:
         if found:
             return found
     reason = f"no Chromium binary on PATH (looked for {', '.join(_NAMES)})"
-    if os.environ.get("CI"):
+    if IN_CI:
         pytest.fail(f"{reason}; CI is set, so the browser check must run: install chromium")
     pytest.skip(f"{reason}; install chromium to run the browser checks")
 

@@ -19,6 +19,7 @@ from .compare import (
     is_ci,
     missing_baseline,
     parse_compare_fail,
+    records_this_run,
     regressions,
     specs_of,
 )
@@ -103,6 +104,7 @@ __all__ = [
     "plot_history",
     "ratchet_spec",
     "ratchet_thresholds",
+    "records_this_run",
     "regressions",
     "render_history_table",
     "render_sidecar",

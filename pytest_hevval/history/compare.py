@@ -38,6 +38,7 @@ from ..results.codec import data_identity, json_number, keyed_lambdas
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
+    "CI_VARIABLES",
     "BaselineDecision",
     "CampaignChange",
     "Comparison",
@@ -53,6 +54,7 @@ __all__ = [
     "is_ci",
     "missing_baseline",
     "parse_compare_fail",
+    "records_this_run",
     "regressions",
     "specs_of",
 ]
@@ -875,16 +877,24 @@ def _worsened(
 
 # -- missing baseline -----------------------------------------------------------------------
 
-_CI_VARIABLES = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILDKITE", "JENKINS_URL", "TF_BUILD")
+#: Environment variables that mark a CI runner.
+CI_VARIABLES = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILDKITE", "JENKINS_URL", "TF_BUILD")
 
 
 def is_ci(env: Mapping[str, str]) -> bool:
     """Whether the environment looks like a CI runner (``CI=true`` and common vendor variables)."""
-    for name in _CI_VARIABLES:
+    for name in CI_VARIABLES:
         value = env.get(name, "").strip().lower()
         if value and value not in ("0", "false", "no", "off"):
             return True
     return False
+
+
+def records_this_run(*, asked: bool, refused: bool, environ: Mapping[str, str]) -> bool:
+    """Whether a run writes its history record: in CI (:func:`is_ci`) or when asked, never
+    when refused. A laptop's runs of half-finished work stay out of the trends and baselines
+    a team reads, as pytest-benchmark saves only when asked."""
+    return not refused and (asked or is_ci(environ))
 
 
 @dataclass(frozen=True)
@@ -904,7 +914,12 @@ class BaselineDecision:
 
 
 def missing_baseline(
-    *, ci: bool, create_baseline: bool, directory: Path | str, wanted: str = "latest"
+    *,
+    ci: bool,
+    create_baseline: bool,
+    directory: Path | str,
+    wanted: str = "latest",
+    recorded: bool = True,
 ) -> BaselineDecision:
     """Decide what a missing baseline means: a failure in CI, a note locally.
 
@@ -922,8 +937,13 @@ def missing_baseline(
             f"{where}; comparison needs one. Run once with --hevval-create-baseline to record "
             f"one, or commit the history folder ({directory}) or restore it from the CI cache",
         )
+    if not recorded:
+        return BaselineDecision(
+            "note",
+            f"{where}; nothing to compare against yet (this run is not recorded: record one "
+            "with --hevval-history, or compare in CI, where runs are recorded)",
+        )
     return BaselineDecision(
         "note",
-        f"{where}; nothing to compare against yet (the next run compares against this one "
-        "unless --hevval-no-history is set)",
+        f"{where}; nothing to compare against yet (the next run compares against this one)",
     )
