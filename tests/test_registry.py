@@ -82,12 +82,13 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
     pytester.makefile(".hevval.yaml", pack=SPEC.replace("PEAK", "0.5"))
     write_data(pytester.path, fault="leaf")
     extra = ["-p", "xdist", "-n", "2"] if xdist else []
-    loose = pytester.runpytest("--hevval", "--hevval-model-version=a", *extra)
+    loose = pytester.runpytest("--hevval", "--hevval-history", "--hevval-model-version=a", *extra)
     loose.assert_outcomes(passed=4)
 
     pytester.makefile(".hevval.yaml", pack=SPEC.replace("PEAK", "0.99"))
     gated = pytester.runpytest(
         "--hevval",
+        "--hevval-history",
         "--hevval-model-version=b",
         "--hevval-report=html,json,md",
         "--junitxml=junit.xml",

@@ -668,7 +668,7 @@ def test_reports_are_byte_identical_across_runs(tmp_path: Path) -> None:
 
 # Plugins the inner runs do not need; each xdist worker would import them again.
 QUIET = ("--hevval", "-p", "xdist", "-p", "no:hypothesispytest", "-p", "no:cacheprovider")
-QUIET = (*QUIET, "--continue-on-collection-errors")
+QUIET = ("--hevval-history", *QUIET, "--continue-on-collection-errors")
 
 DEGENERATE_SPEC = """\
 reference: {path: flat.parquet}
