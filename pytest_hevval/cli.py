@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -71,7 +72,7 @@ def _run(args: argparse.Namespace) -> int:
     from .spec.load import load_specs
 
     prepare()
-    rootdir = Path.cwd()
+    rootdir = project_root(args.specs)
     publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
@@ -160,6 +161,40 @@ def _run(args: argparse.Namespace) -> int:
     return EXIT_OK if passed and not published.failed else EXIT_FAILED
 
 
+#: Files that make a folder pytest's rootdir, with the section that must be in them (if any).
+_PYTEST_CONFIGS = (
+    ("pytest.ini", None),
+    (".pytest.ini", None),
+    ("pyproject.toml", b"[tool.pytest.ini_options]"),
+    ("tox.ini", b"[pytest]"),
+    ("setup.cfg", b"[tool:pytest]"),
+)
+
+
+def project_root(targets: Sequence[str]) -> Path:
+    """The folder ``pytest --hevval`` would take as its rootdir for these spec paths: the
+    nearest folder holding a pytest configuration, from the targets' common folder upwards;
+    else the current folder. Model modules are imported from it, and results name files
+    relative to it, as under pytest."""
+    from .defaults import split_key
+    from .files import read_input
+
+    folders = []
+    for target in targets or ["."]:
+        path = Path(split_key(str(target))[0]).resolve()
+        folders.append(str(path if path.is_dir() else path.parent))
+    common = Path(os.path.commonpath(folders))
+    for folder in (common, *common.parents):
+        for name, section in _PYTEST_CONFIGS:
+            try:
+                text = read_input(folder / name)
+            except (OSError, ValueError):
+                continue
+            if section is None or section in text:
+                return folder
+    return Path.cwd()
+
+
 def _arg(args: argparse.Namespace, name: str) -> Any:
     """The value of ``--NAME`` (an option of the shared table) as parsed."""
     return getattr(args, name.replace("-", "_"), None)
@@ -184,7 +219,7 @@ def _diagnose(args: argparse.Namespace) -> int:
             hint=f"name one: hevval diagnose '{args.spec}::{specs[0].recording}'",
         )
     (spec,) = specs
-    (outcome,) = run_specs([spec], RunOptions(rootdir=Path.cwd(), keep_arrays=True))
+    (outcome,) = run_specs([spec], RunOptions(rootdir=project_root([args.spec]), keep_arrays=True))
     if isinstance(outcome, HevvalError):
         raise outcome
     evaluation = outcome
@@ -568,6 +603,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # The reader went away (`hevval run … | head`): nothing more can be shown. Point
+        # stdout at the null device so that flushing it at exit cannot fail again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_FAILED
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ __all__ = [
     "REPORT_DIR",
     "SPEC_GLOBS",
     "UNCERTAINTY_SIGMA",
+    "UNKNOWN_MODEL_VERSION",
     "WITHIN_UNCERTAINTY",
     "split_key",
 ]
@@ -44,3 +45,7 @@ def split_key(key: str) -> tuple[str, str | None]:
     """(spec path, recording id or None) of a key such as ``specs/i3.hevval.yaml::TripB03``."""
     path, separator, recording = key.partition(RECORDING_SEPARATOR)
     return path, (recording if separator else None)
+
+
+#: The model version of a run that names none, outside a git checkout.
+UNKNOWN_MODEL_VERSION = "unknown"

@@ -16,6 +16,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
 from .results.spec_result import SpecResult
 from .spec.model import Spec
@@ -114,8 +115,14 @@ class Publisher:
         self.margin = parse_margin(options.ratchet) if options.ratchet else None
         self.baseline: dict[str, Any] | None = None
         self._regressions: dict[str, list[Regression]] = {}
-        self.model_version = "unknown"
+        self.model_version = UNKNOWN_MODEL_VERSION
         self.started = datetime.now(timezone.utc)
+
+    @property
+    def run_label(self) -> str:
+        """This run's name in comparisons and trends: its model version, or, when none could
+        be found (no git, no --hevval-model-version), ``this run``."""
+        return "this run" if self.model_version == UNKNOWN_MODEL_VERSION else self.model_version
 
     @property
     def wants_comparison(self) -> bool:
@@ -274,7 +281,7 @@ class Publisher:
         from .history import compare, comparison_table, regressions
         from .history.compare import campaign_change_lines
 
-        comparison = compare(dicts, self.baseline, after_label=self.model_version)
+        comparison = compare(dicts, self.baseline, after_label=self.run_label)
         found = regressions(comparison, self.rules) if self.rules else None
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))

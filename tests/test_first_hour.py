@@ -3,6 +3,7 @@ given, one bad spec, the messages they get."""
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from pathlib import Path
 
@@ -140,3 +141,103 @@ def test_which_runs_are_recorded(
     from pytest_hevval.history import records_this_run
 
     assert records_this_run(asked=asked, refused=refused, environ=environ) is expected
+
+
+def test_hevval_run_finds_the_project_root_as_pytest_does(pytester: pytest.Pytester) -> None:
+    """Run from the spec's folder, `hevval run` imports the model from the folder that holds
+    the pytest configuration, as `pytest --hevval` does."""
+    pytester.makeini("[pytest]\n")
+    (pytester.path / "models").mkdir()
+    (pytester.path / "models" / "__init__.py").write_text("")
+    (pytester.path / "models" / "user.py").write_text(MODEL)
+    folder = pytester.path / "validation"
+    folder.mkdir()
+    _write(folder, inputs=", inputs: [speed, heater_kw]")
+    text = (folder / "trip.hevval.yaml").read_text().replace("usermodel:", "models.user:")
+    (folder / "trip.hevval.yaml").write_text(text)
+    (folder / "usermodel.py").unlink()
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest_hevval", "run", ".", "--no-history"],
+        cwd=folder,
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    assert "[validation/trip.hevval.yaml]" in done.stdout
+
+
+def test_project_root(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pytest_hevval.cli import project_root
+
+    inner = tmp_path / "repo" / "validation"
+    inner.mkdir(parents=True)
+    (inner / "a.hevval.yaml").write_text("")
+    monkeypatch.chdir(inner)
+    assert project_root(["a.hevval.yaml"]) == inner  # nothing configured: here
+    (tmp_path / "repo" / "pyproject.toml").write_text("[project]\nname = 'x'\n")
+    assert project_root(["a.hevval.yaml"]) == inner  # a pyproject without pytest's section
+    (tmp_path / "repo" / "pyproject.toml").write_text("[tool.pytest.ini_options]\n")
+    assert project_root(["a.hevval.yaml::TripA"]) == tmp_path / "repo"
+    (inner / "pytest.ini").write_text("[pytest]\n")
+    assert project_root([str(inner / "a.hevval.yaml")]) == inner
+
+
+def test_a_closed_pipe_ends_hevval_run_without_a_traceback(pytester: pytest.Pytester) -> None:
+    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    child = subprocess.Popen(
+        [sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml", "--details"],
+        cwd=pytester.path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert child.stdout is not None
+    assert child.stderr is not None
+    child.stdout.close()  # the reader goes before the first line, as `| head -0` would
+    with child.stderr:
+        errors = child.stderr.read()
+    assert child.wait(timeout=120) == 1
+    assert "Traceback" not in errors
+    assert "BrokenPipeError" not in errors
+
+
+def test_a_column_the_model_does_not_return_names_the_spec_line(
+    pytester: pytest.Pytester,
+) -> None:
+    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    spec = pytester.path / "trip.hevval.yaml"
+    spec.write_text(spec.read_text().replace("sim: v}", "sim: vee}", 1))
+    done = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml", "--no-history"
+    )
+    assert done.ret == 2
+    assert (
+        "trip.hevval.yaml:5: sets[0].sim: column 'vee': model usermodel:simulate: no such column "
+        "in the model's output; it has 2 columns: 'time', 'v'"
+    ) in done.stderr.str()
+
+
+def test_an_unquoted_expression_gets_a_hint_to_quote_it(pytester: pytest.Pytester) -> None:
+    _write(pytester.path)
+    spec = pytester.path / "trip.hevval.yaml"
+    spec.write_text(spec.read_text().replace("ref: speed,", "ref: speed [km/h] * 1,", 1))
+    done = pytester.run(sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml")
+    assert done.ret == 2
+    assert "trip.hevval.yaml:5: invalid YAML" in done.stderr.str()
+    assert "quote a value that holds *, :, [, ], & or #" in done.stderr.str()
+
+
+def test_the_spec_line_says_phi_against_its_minimum_then_why_the_spec_fails(
+    pytester: pytest.Pytester,
+) -> None:
+    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    spec = pytester.path / "trip.hevval.yaml"
+    spec.write_text(
+        spec.read_text().replace("sim: v}", "sim: v * 1.3}", 1)
+        + "thresholds: {mae: 0.99}\nmin_phi: 0.5\n"
+    )
+    result = pytester.runpytest("--hevval")
+    result.stdout.fnmatch_lines(
+        ["trip: Φ = 0.* ≥ min 0.5, FAIL on its signals  *trip.hevval.yaml*"]
+    )
+    result.assert_outcomes(passed=2, failed=1)

@@ -88,7 +88,7 @@ def test_passing_spec(project: pytest.Pytester) -> None:
             "*pack.hevval.yaml::E/P/V PASSED*",
             "*pack.hevval.yaml::Phi PASSED*",
             "*hevval validation summary*",
-            "pack: Φ = 0.9* (min 0.5) PASS*",
+            "pack: Φ = 0.9* ≥ min 0.5, PASS*",
         ]
     )
 

@@ -96,7 +96,9 @@ def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
     if time_name not in frame.columns:
         from .record import missing_column
 
-        error = missing_column(source, time_name, [str(c) for c in frame.columns])
+        error = missing_column(
+            source, time_name, [str(c) for c in frame.columns], where="in the model's output"
+        )
         raise DataError(
             "the model output has no time column " + repr(time_name),
             file=source,
@@ -127,6 +129,7 @@ def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
         channels=channels,
         available=tuple(str(c) for c in frame.columns),
         numeric=tuple(numeric),
+        meta={"model_output": True},
     )
 
 

@@ -16,7 +16,7 @@ import numpy.typing as npt
 
 from ..errors import DataError, did_you_mean
 
-__all__ = ["Channel", "Reader", "Record", "SourceOptions", "missing_column"]
+__all__ = ["Channel", "Reader", "Record", "SourceOptions", "missing_column", "model_column_error"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -46,6 +46,8 @@ class Record:
         try:
             return self.channels[name]
         except KeyError:
+            if self.meta.get("model_output"):
+                raise model_column_error(self, name) from None
             raise missing_column(self.source, name, self.available or self.channels) from None
 
 
@@ -74,13 +76,24 @@ class Reader(Protocol):
     ) -> Record: ...
 
 
-def missing_column(source: str, name: str, available: Iterable[str]) -> DataError:
-    """The error for a column that is not in a file, with the nearest names as a suggestion."""
+def model_column_error(record: Record, name: str) -> DataError:
+    """The error for a column a model callable's output does not hold."""
+    return missing_column(
+        record.source, name, record.available or record.channels, where="in the model's output"
+    )
+
+
+def missing_column(
+    source: str, name: str, available: Iterable[str], *, where: str = "in this file"
+) -> DataError:
+    """The error for a column that is not in a file (or a model's output, ``where``), with the
+    nearest names as a suggestion."""
     names = list(available)
     suggestion = did_you_mean(name, names)
+    holder = "it" if where != "in this file" else "the file"
     hint = suggestion or (
-        f"the file has {len(names)} columns: " + ", ".join(repr(n) for n in names[:12])
+        f"{holder} has {len(names)} columns: " + ", ".join(repr(n) for n in names[:12])
         if names
-        else "the file has no columns"
+        else f"{holder} has no columns"
     )
-    return DataError("no such column in this file", file=source, column=name, hint=hint)
+    return DataError(f"no such column {where}", file=source, column=name, hint=hint)

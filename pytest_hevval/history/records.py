@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
+from ..defaults import UNKNOWN_MODEL_VERSION
 from ..results.codec import checked_number, plain_json
 from ..results.spec_result import ERROR_KEYS, MEASURED_NUMBERS
 from ._base import HistoryError
@@ -160,10 +161,10 @@ def resolve_model_version(cli_value: str | None, env: Mapping[str, str], cwd: Pa
             check=False,
         )
     except (OSError, subprocess.SubprocessError):
-        return "unknown"
+        return UNKNOWN_MODEL_VERSION
     described = completed.stdout.strip()
     if completed.returncode != 0 or not described:
-        return "unknown"
+        return UNKNOWN_MODEL_VERSION
     return described
 
 

@@ -112,14 +112,28 @@ def phi_report(result: SpecResult) -> str:
     return "\n".join(lines)
 
 
+def phi_verdict(result: SpecResult) -> str:
+    """``Φ = 0.9207 [0.9139, 0.9276] ≥ min 0.9, FAIL on its signals``: Φ against its own
+    minimum, then the spec's verdict, which says why it fails when Φ is not the reason."""
+    gate = ""
+    if result.min_phi is not None:
+        on = "" if result.min_phi_on == "value" else f" on the {result.min_phi_on} bound"
+        sign = "≥" if result.phi_passed else "<"
+        gate = f" {sign} min {result.min_phi:g}{on}"
+    if result.passed:
+        verdict = "PASS"
+    elif result.phi_passed:
+        verdict = "FAIL on its signals"
+    else:
+        verdict = "FAIL"
+    return f"Φ = {result.phi_text}{gate}, {verdict}"
+
+
 def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> list[str]:
     """The signal tree of every spec with its λ values and Φ."""
     lines: list[str] = []
     for result in results:
-        verdict = "PASS" if result.passed else "FAIL"
-        on = "" if result.min_phi_on == "value" else f" on the {result.min_phi_on} bound"
-        gate = "" if result.min_phi is None else f" (min {result.min_phi:g}{on})"
-        lines.append(f"{result.name}: Φ = {result.phi_text}{gate} {verdict}  [{result.spec}]")
+        lines.append(f"{result.name}: {phi_verdict(result)}  [{result.spec}]")
         names = list(result.signals[0].lambdas) if result.signals else []
         if details:
             lines.append("    " + " " * 28 + "  ".join(f"{describe(n).symbol:>6}" for n in names))
@@ -152,7 +166,8 @@ def tree_summary(results: Iterable[SpecResult], *, details: bool = False) -> lis
                 lines.append(f"  {label} [{signal.path}] {failed}{origin}")
                 lines.extend(f"      {indent}{text}" for text in measurement_notes(signal))
         if not details and result.passed:
-            lines.append(f"  all {len(result.signals)} signals pass")
+            count = len(result.signals)
+            lines.append(f"  all {count} signals pass" if count > 1 else "  its signal passes")
         lines.extend(quality_lines(result))
     return lines
 

@@ -26,7 +26,7 @@ from ..core.upooling import u_distribution_of
 from ..data.align import AlignedData, align_records
 from ..data.digest import DEFAULT_HASH, file_digest
 from ..data.quality import assess, fail_on, mask_on_grid
-from ..data.record import Record, SourceOptions
+from ..data.record import Record, SourceOptions, model_column_error
 from ..data.remote import is_url
 from ..errors import (
     CharacteristicError,
@@ -264,6 +264,24 @@ def _load_model(
     return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "fmu"}
 
 
+def _check_model_columns(node: SignalSpec, model: Record) -> tuple[str, ...]:
+    """The model columns a signal reads; one a model callable did not return is the spec
+    line's error (the output is no file to point at)."""
+    names = _columns_of(node.sim, model)
+    if model.meta.get("model_output"):
+        for name in names:
+            if name not in model.channels:
+                error = model_column_error(model, name)
+                raise DataError(
+                    f"{model.source}: {error.problem}",
+                    column=name,
+                    line=node.line,
+                    key=f"{node.key}.sim",
+                    hint=error.hint,
+                )
+    return names
+
+
 def _columns_of(expression: Expression, record: Record) -> tuple[str, ...]:
     """Columns an expression reads; a whole-string column name wins over a parse of it."""
     if not expression.is_column and expression.source in record.channels:
@@ -457,7 +475,7 @@ def _align(
     model_columns: set[str] = set()
     for _, _, node in nodes:
         ref_columns.update(_columns_of(node.ref, reference))
-        model_columns.update(_columns_of(node.sim, model_record))
+        model_columns.update(_check_model_columns(node, model_record))
     for expression in _local_expressions(spec):
         ref_columns.update(_columns_of(expression, reference))
     alignment = spec.alignment

@@ -379,7 +379,16 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark is not None else None
         problem = (exc.problem or "malformed YAML").strip()
-        raise SpecError(f"invalid YAML: {problem}", file=file, line=line) from None
+        # An unquoted expression or column name with `*`, `:`, `[` or `&` in it reads as YAML
+        # syntax; saying so is worth more than the parser's own words.
+        hint = (
+            'quote a value that holds *, :, [, ], & or # (ref: "`Motor Torque [Nm]` * 1")'
+            if "flow" in (exc.context or "")
+            or "alphabetic or numeric" in problem
+            or "mapping values are not allowed" in problem
+            else None
+        )
+        raise SpecError(f"invalid YAML: {problem}", file=file, line=line, hint=hint) from None
     except yaml.YAMLError as exc:
         raise SpecError(f"invalid YAML: {exc}", file=file) from None
     except RecursionError:
