@@ -11,6 +11,7 @@ import stat
 import subprocess
 import sys
 import time
+from html import escape
 from pathlib import Path
 from typing import Any
 
@@ -424,9 +425,8 @@ def test_html_is_one_self_contained_file(page: str) -> None:
     assert "<script" not in html.lower()
     assert "<link" not in html.lower()
     assert not re.search(r"url\((?!#)", html)  # CSS may only reference in-page ids
-    sources = re.findall(r'\ssrc="([^"]*)"', html)
-    assert sources
-    assert all(s.startswith("data:image/png;base64,") for s in sources)
+    # Every plot is inline SVG: not even an embedded bitmap.
+    assert not re.search(r"\ssrc=", html)
     hrefs = re.findall(r'\shref="([^"]*)"', html)
     assert hrefs
     assert all(h.startswith("#") for h in hrefs)
@@ -440,7 +440,7 @@ def test_html_shows_phi_tree_glyph_plot_and_every_signal_plot(page: str) -> None
     assert "Φ = 0.9700" in html
     assert 'class="phi fail"' in html
     assert 'class="phi pass"' in html
-    assert html.count("data:image/png;base64,") == 2  # one glyph plot per spec
+    assert html.count('<svg class="hv-glyph"') == 2  # one glyph plot per spec
     assert html.count('<svg class="hv-plot"') == 4  # one plot per signal
     assert html.count('class="badge origin"') >= 2
     # The failing MAE cell is red, the emergent one too; ungated ones are grey.
@@ -559,7 +559,7 @@ def test_html_survives_missing_optional_fields() -> None:
 
 
 @pytest.mark.slow
-def test_html_of_20_signals_one_hour_at_100_hz_stays_under_5_mb() -> None:
+def test_html_of_20_signals_one_hour_at_100_hz_stays_under_800_kb() -> None:
     n = 360_000
     signals = []
     for k in range(20):
@@ -571,7 +571,188 @@ def test_html_of_20_signals_one_hour_at_100_hz_stays_under_5_mb() -> None:
     html = render_html([_spec(signals)], title="one hour", generated_utc=STAMP)
     size = len(html.encode("utf-8"))
     assert html.count('<svg class="hv-plot"') == 20
-    assert 500_000 < size < 5_000_000
+    # One point per pixel column at whole pixels: noisy traces cost about 30 KB a plot.
+    assert 500_000 < size < 800_000
+
+
+# --------------------------------------------------------------------------- svg plots
+
+
+def _vertices(d: str) -> list[tuple[int, int]]:
+    """The vertices of path data written as ``M x y l dx dy …`` in whole units."""
+    found = re.fullmatch(r"M(-?\d+) (-?\d+)(?:l([-\d ]+))?Z?", d)
+    assert found, d
+    x, y = int(found[1]), int(found[2])
+    points = [(x, y)]
+    steps = [int(v) for v in re.findall(r"-?\d+", found[3] or "")]
+    for dx, dy in zip(steps[::2], steps[1::2], strict=True):
+        x, y = x + dx, y + dy
+        points.append((x, y))
+    return points
+
+
+def _band(plot: str, css: str) -> str:
+    """Path data of the one element of class ``css`` in ``plot``, drawn inline or shared."""
+    found = re.findall(
+        rf'<path class="{css}" d="([^"]*)"|<g class="{css}"><path id="[^"]+" d="([^"]*)"', plot
+    )
+    assert len(found) == 1, found
+    return found[0][0] or found[0][1]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    steps=st.lists(
+        st.tuples(st.sampled_from([-1, 0, 1, 2]), st.sampled_from([-2, 0, 0, 1, 3])),
+        min_size=0,
+        max_size=80,
+    ),
+    start=st.tuples(st.integers(-50, 900), st.integers(-50, 500)),
+    jitter=st.floats(min_value=-0.45, max_value=0.45),
+)
+def test_path_data_passes_through_every_point_in_order(
+    steps: list[tuple[int, int]], start: tuple[int, int], jitter: float
+) -> None:
+    exact = np.cumsum(np.array([start, *steps], dtype=np.int64), axis=0)
+    drawn = _vertices(svg._path(exact[:, 0] + jitter, exact[:, 1] - jitter))
+    given_points = [tuple(p) for p in exact.tolist()]
+    # Repeats of a point draw nothing; every other point must be a vertex or lie on the segment
+    # between two, in order and in the segment's direction.
+    wanted = [p for k, p in enumerate(given_points) if k == 0 or p != given_points[k - 1]]
+    assert drawn[0] == wanted[0]
+    assert set(drawn) <= set(wanted)
+    vertex, progress = 0, 0
+    for point in wanted[1:]:
+        if vertex + 1 < len(drawn) and point == drawn[vertex + 1]:
+            vertex, progress = vertex + 1, 0
+            continue
+        assert vertex + 1 < len(drawn), point
+        (ax, ay), (bx, by) = drawn[vertex], drawn[vertex + 1]
+        ux, uy = bx - ax, by - ay
+        px, py = point[0] - ax, point[1] - ay
+        along = ux * px + uy * py
+        assert ux * py - uy * px == 0, (point, drawn[vertex], drawn[vertex + 1])
+        assert progress < along < ux * ux + uy * uy
+        progress = along
+    assert vertex == len(drawn) - 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    n=st.integers(min_value=1, max_value=3000),
+    columns=st.integers(min_value=1, max_value=900),
+    seed=st.integers(min_value=0, max_value=2**31),
+)
+def test_column_envelope_holds_the_extremes_of_every_pixel_column(
+    n: int, columns: int, seed: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    column = np.sort(rng.integers(0, columns, n))
+    times = 3.0 + (column + rng.uniform(0.1, 0.9, n)) * (7.0 / columns)
+    lows = rng.standard_cauchy(n)
+    highs = lows + rng.exponential(1.0, n)
+    lows[rng.random(n) < 0.1] = np.nan  # a missing value leaves the rest of its column
+    centres, low, high = svg.column_envelope(times, lows, highs, 3.0, 10.0, columns)
+    assert centres.tolist() == [c + 0.5 for c in sorted(set(column.tolist()))]
+    for c, lo, hi in zip(centres, low, high, strict=True):
+        inside = column == int(c)
+        if np.isnan(lows[inside]).all():
+            assert np.isnan(lo)
+        else:
+            assert lo == np.nanmin(lows[inside])
+        assert hi == highs[inside].max()
+
+
+def test_a_spike_one_sample_wide_keeps_its_full_height_and_place() -> None:
+    n = 100_000
+    ref = np.zeros(n)
+    ref[31_337], ref[77_777] = 100.0, -100.0
+    data = figure_data(ref, np.zeros(n), dt=0.01, start_s=0.0, max_lag=10)
+    plot = svg.signal_svg({"path": "x", "name": "x", "figures": data}, "s")
+    assert plot is not None
+    for css in ("hv-ref", "hv-res"):
+        points = _vertices(_band(plot, css))
+        xs = [x for x, _ in points]
+        levels = sorted({y for _, y in points})
+        assert len(levels) == 3, levels
+        top, zero, bottom = levels
+        # Both spikes reach their full height, ±100 around the zero line, on a ±110 axis (the
+        # residual panel is 100 units tall).
+        assert zero - top > 40
+        assert abs((zero - top) - (bottom - zero)) <= 1
+        width = max(xs) - min(xs)
+        for level, index in ((top, 31_337), (bottom, 77_777)):
+            (x,) = {x for x, y in points if y == level}
+            assert abs((x - min(xs)) / width - index / (n - 1)) < 2 / width
+
+
+def test_path_data_the_page_already_holds_is_drawn_by_reference(
+    results: list[dict[str, Any]],
+) -> None:
+    twin = copy.deepcopy(results[1])
+    twin["name"] = "i3 trip A02 again"
+    overlay = twin["signals"][0]["figures"]["overlay"]
+    # A model input equal to its measurement: the two envelopes are the same path.
+    overlay["sim_min"], overlay["sim_max"] = list(overlay["ref_min"]), list(overlay["ref_max"])
+    html = render_html([*results, twin], title="t", generated_utc=STAMP)
+    assert html == render_html(copy.deepcopy([*results, twin]), title="t", generated_utc=STAMP)
+    long_data = re.findall(r'\sd="([^"]{200,})"', html)
+    assert long_data
+    assert len(long_data) == len(set(long_data))
+    ids = re.findall(r'<path id="([^"]+)"', html)
+    assert len(ids) == len(set(ids))
+    used = re.findall(r'<use class="[^"]+" href="#([^"]+)"/>', html)
+    assert used
+    assert set(used) <= set(ids)
+    plots = re.findall(r'<svg class="hv-plot".*?</svg>', html, re.S)
+    assert len(plots) == 5
+    for plot in plots:
+        for css in ("hv-ref", "hv-sim", "hv-res", "hv-match", "hv-xc", "hv-bar", "hv-cdf"):
+            assert len(re.findall(rf'<(?:path|g|use) class="{css}"', plot)) == 1, css
+    last = plots[-1]
+    (ref_id,) = re.findall(r'<use class="hv-ref" href="#([^"]+)"', last)
+    (sim_id,) = re.findall(r'<use class="hv-sim" href="#([^"]+)"', last)
+    assert ref_id == sim_id
+
+
+def test_glyph_plot_draws_every_lambda_and_rings_and_labels_the_worst(
+    results: list[dict[str, Any]],
+) -> None:
+    from pytest_hevval.report import plots
+
+    spec = copy.deepcopy(results[0])
+    spec["signals"][0]["path"] = "E_batt/<b>&U"
+    drawn = plots.glyph_plot(spec)
+    assert drawn is not None
+    assert drawn.startswith('<svg class="hv-glyph"')
+    assert "<b>" not in drawn
+    glyphs = re.findall(
+        r'<circle class="hv-gl( fail)?" cx="([-\d.]+)" cy="[-\d.]+" r="([\d.]+)" '
+        r'fill="(#\w+)"><title>([^<]*)</title></circle>',
+        drawn,
+    )
+    points = model.glyph_points(spec)
+    assert len(glyphs) == len(points) == 21
+    by_title = {title: (ring, float(x), float(r), fill) for ring, x, r, fill, title in glyphs}
+    assert len(by_title) == len(points)
+    seen = []
+    for p in points:
+        name = p.characteristic
+        title = f"{p.signal} · {model.SHORT_LABELS[name]} {model.LABELS[name]} {p.value:.4f}"
+        ring, x, radius, fill = by_title[escape(title, quote=True)]
+        assert ring == (" fail" if p.status == "fail" else "")
+        assert fill == model.CHARACTERISTIC_COLOURS[name]
+        seen.append((p.value, x, p.level, radius))
+    # x grows with λ; a glyph of level 1 is larger than one of level 2.
+    assert [x for _, x, _, _ in sorted(seen)] == sorted(x for _, x, _, _ in seen)
+    radii = {level: radius for _, _, level, radius in seen}
+    assert radii[1] > radii[2]
+    labels = re.findall(r'<text class="hv-tag( fail)?"[^>]*>([^<]*)</text>', drawn)
+    assert len(labels) == 6
+    assert (" fail", "E_batt/P_batt · λ3 0.850") in labels
+    assert (" fail", "E_batt · λ7 0.820") in labels
+    assert ("", "E_batt/&lt;b&gt;&amp;U · λ2 0.900") in labels
+    assert plots.glyph_plot({"name": "empty", "signals": []}) is None
 
 
 def test_html_needs_jinja2(monkeypatch: pytest.MonkeyPatch, results: list[dict]) -> None:
@@ -580,12 +761,12 @@ def test_html_needs_jinja2(monkeypatch: pytest.MonkeyPatch, results: list[dict])
         render_html(results, title="t", generated_utc=STAMP)
 
 
-def test_glyph_plot_needs_matplotlib(monkeypatch: pytest.MonkeyPatch, results: list[dict]) -> None:
-    from pytest_hevval.report import plots
-
+def test_html_report_draws_without_matplotlib(
+    monkeypatch: pytest.MonkeyPatch, results: list[dict]
+) -> None:
     monkeypatch.setitem(sys.modules, "matplotlib", None)
-    with pytest.raises(MissingExtraError, match=r"pytest-hevval\[html\]"):
-        plots.glyph_plot(results[0])
+    html = render_html(results, title="t", generated_utc=STAMP)
+    assert html.count('<svg class="hv-glyph"') == 2
 
 
 def test_importing_the_report_package_loads_no_plotting_or_templating() -> None:

@@ -6,6 +6,7 @@ environment variable set), where a missing browser must not pass silently.
 
 from __future__ import annotations
 
+import copy
 import html
 import json
 import re
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pytest_hevval.report import render_html
+from pytest_hevval.report import model, render_html
 from tests.conftest import IN_CI
 from tests.demo_results import demo_results
 
@@ -55,10 +56,11 @@ def _chromium() -> str:
 # which --dump-dom then prints, so the screenshot can be checked plot by plot.
 _PROBE = """<script>
 addEventListener("load", () => {
-  const boxes = [...document.querySelectorAll("img.plot, svg.hv-plot:not(.hv-small)")].map((e) => {
+  const plots = document.querySelectorAll("svg.hv-glyph, svg.hv-plot:not(.hv-small)");
+  const boxes = [...plots].map((e) => {
     const r = e.getBoundingClientRect();
-    return {kind: e.tagName.toLowerCase(), x: r.left + scrollX, y: r.top + scrollY,
-            w: r.width, h: r.height};
+    return {kind: e.classList.contains("hv-glyph") ? "glyph" : "plot", x: r.left + scrollX,
+            y: r.top + scrollY, w: r.width, h: r.height};
   });
   const pre = document.createElement("pre");
   pre.id = "hv-boxes";
@@ -145,12 +147,12 @@ def test_report_loads_without_console_errors_and_draws_its_plots(tmp_path: Path)
     assert pixels.shape[:2] == (_WINDOW[1], _WINDOW[0])
 
     boxes = _plot_boxes(chromium, page, tmp_path / "profile")
-    glyphs = [b for b in boxes if b["kind"] == "img"]
-    overlays = [b for b in boxes if b["kind"] == "svg"]
+    glyphs = [b for b in boxes if b["kind"] == "glyph"]
+    overlays = [b for b in boxes if b["kind"] == "plot"]
     assert len(glyphs) == 1
     assert len(overlays) == 7
     assert glyphs[0]["w"] > 1000
-    assert glyphs[0]["h"] > 300, "the glyph plot has no height: image not decoded?"
+    assert glyphs[0]["h"] > 300, "the glyph plot has no height"
     first = overlays[0]
     assert first["y"] + first["h"] < _WINDOW[1], "the first signal plot is below the screenshot"
 
@@ -159,11 +161,49 @@ def test_report_loads_without_console_errors_and_draws_its_plots(tmp_path: Path)
     for name, colour in (("λ2", "#E69F00"), ("λ3", "#009E73"), ("λ5", "#CC79A7")):
         assert _near(glyph, colour, 25, alpha=0.85) > 300, f"no {name} glyphs drawn"
 
-    # Signal plot: reference and simulated envelopes, residual beneath, derivative-match strip.
-    plot = _crop(pixels, first)
+    _assert_signal_plot_drawn(_crop(pixels, first))
+
+
+def _assert_signal_plot_drawn(plot: np.ndarray) -> None:
+    """Reference and simulated envelopes, the residual beneath, the derivative-match strip."""
     assert np.unique(plot.reshape(-1, 3) // 8, axis=0).shape[0] > 100, "signal plot looks blank"
     assert _near(plot, "#1f2328", 10, alpha=0.28) > 1000, "reference envelope not drawn"
     assert _near(plot, "#0969da", 40) > 600, "simulated trace not drawn"
     assert _near(plot, "#8250df", 12, alpha=0.35) > 300, "residual not drawn"
     red, green, blue = plot[..., 0], plot[..., 1], plot[..., 2]
     assert ((green > red + 40) & (green > blue + 30)).sum() > 2000, "derivative match not drawn"
+
+
+def test_a_plot_drawn_by_reference_to_a_closed_section_is_drawn(tmp_path: Path) -> None:
+    """A page draws path data it already holds by reference (``<use>``); the copy it refers to
+    may sit in a signal section that is closed, and must be drawn all the same."""
+    chromium = _chromium()
+    (spec,) = demo_results(specs=1, duration_s=300.0, rate_hz=10.0, seed=3)
+    closed = model.ordered_signals(spec)[-1]  # after the first three, and passing: closed
+    assert closed["passed"] is not False
+    twin = {**copy.deepcopy(spec), "name": "the same recording again"}
+    twin["signals"] = [copy.deepcopy(closed)]
+    text = render_html([spec, twin], title="shared plots", generated_utc="now")
+    plots = re.findall(r'<svg class="hv-plot".*?</svg>', text, re.S)
+    shared = re.findall(r'<use class="hv-(?:ref|sim|res|match)" href="#([^"]+)"', plots[-1])
+    assert len(shared) == 4
+    for ident in shared:
+        opening = text.rfind("<details", 0, text.index(f'id="{ident}"'))
+        assert " open>" not in text[opening : text.index(">", opening) + 1]
+    page = tmp_path / "report.html"
+    page.write_text(text, "utf-8")
+
+    box = _plot_boxes(chromium, page, tmp_path / "profile")[-1]
+    assert box["kind"] == "plot"
+    assert box["h"] > 300
+    png = tmp_path / "report.png"
+    height = int(box["y"] + box["h"]) + 40
+    done = _run(
+        chromium,
+        page,
+        tmp_path / "profile",
+        f"--screenshot={png}",
+        f"--window-size={_WINDOW[0]},{height}",
+    )
+    assert png.exists(), done.stderr
+    _assert_signal_plot_drawn(_crop(_pixels(png), box))

@@ -1,9 +1,11 @@
 """The self-contained HTML report: one file, CSS inline, no scripts, no external URLs.
 
-The glyph plot is a base64 PNG (matplotlib); the per-signal plots are inline SVG written
-directly from the figure data (:mod:`pytest_hevval.report.svg`).
+Every plot is inline SVG written directly from the result dicts: the glyph plot by
+:mod:`pytest_hevval.report.plots`, the per-signal plots from the figure data by
+:mod:`pytest_hevval.report.svg`, the local ones by :mod:`pytest_hevval.report.local_svg`.
+Path data is drawn once per page and referred to where it repeats (:class:`svg.PathShare`).
 
-jinja2 (autoescaping on) and matplotlib are imported on first use. Everything the page shows
+jinja2 (autoescaping on) is imported on first use. Everything the page shows
 comes from the result dicts via :mod:`pytest_hevval.report.model`, the same view-model as the
 JSON and Markdown reports.
 """
@@ -54,7 +56,10 @@ def _percent(value: object) -> float:
 
 
 def _signal_view(
-    spec_index: int, signal: Mapping[str, Any], anchors: Mapping[str, str]
+    spec_index: int,
+    signal: Mapping[str, Any],
+    anchors: Mapping[str, str],
+    share: svg.PathShare,
 ) -> dict[str, Any]:
     diagnosis = signal.get("diagnosis")
     history = signal.get("history")
@@ -72,7 +77,7 @@ def _signal_view(
         "is_origin": failed and bool(signal.get("origin")),
         "origins": [(o, anchors.get(o)) for o in origins if o != path],
         "margin": model.margin(signal),
-        "plot": svg.signal_svg(signal, f"{spec_index}-{anchors.get(path, path)}"),
+        "plot": svg.signal_svg(signal, f"{spec_index}-{anchors.get(path, path)}", share),
         "diagnosis": diagnosis if isinstance(diagnosis, Mapping) else None,
         "history": svg.history_svg(history) if isinstance(history, Sequence) else None,
         **_local_view(signal),
@@ -117,7 +122,7 @@ def _local_failure_sentence(failure: Mapping[str, Any]) -> str:
     return local_failure_text(parsed, describe(parsed.characteristic).title)
 
 
-def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
+def _spec_view(index: int, spec: Mapping[str, Any], share: svg.PathShare) -> dict[str, Any]:
     anchors: dict[str, str] = {}
     for j, signal in enumerate(model.items(spec.get("signals"))):
         path = str(signal.get("path") or signal.get("name") or "")
@@ -126,7 +131,7 @@ def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
     region_grid = local.get("regions") if local else None
     views = {
         id(s): _signal_view(
-            index, {**s, "_region_grid": region_grid} if region_grid else s, anchors
+            index, {**s, "_region_grid": region_grid} if region_grid else s, anchors, share
         )
         for s in model.ordered_signals(spec)
     }
@@ -153,7 +158,7 @@ def _spec_view(index: int, spec: Mapping[str, Any]) -> dict[str, Any]:
         if model.is_finite_number(phi) and model.is_finite_number(min_phi)
         else None,
         "alignment": spec.get("alignment") if isinstance(spec.get("alignment"), Mapping) else {},
-        "glyph": plots.glyph_plot(spec),
+        "glyph": plots.glyph_plot(spec, share),
         "tree": tree,
         "signals": signals,
         "failing": [v for v in signals if v["failed"]],
@@ -215,7 +220,8 @@ def render_html(
         Timestamp shown in the header; passed in so that rendering stays a pure function.
     """
     env = _environment()
-    specs = [_spec_view(i, spec) for i, spec in enumerate(spec_results)]
+    share = svg.PathShare()
+    specs = [_spec_view(i, spec, share) for i, spec in enumerate(spec_results)]
     anchors = {
         (view["index"], sv["path"]): sv["anchor"] for view in specs for sv in view["signals"]
     }

@@ -1,10 +1,16 @@
 """Per-signal plots as inline SVG, drawn straight from the figure data.
 
 A report can hold hundreds of signals. Drawing each through matplotlib costs a few tenths of a
-second; writing the few polygons of these plots as SVG text costs milliseconds, stays sharp at
-any zoom, and is no larger than a PNG once the envelope is merged down to one bucket per pixel
-(min of the minima, max of the maxima, so no spike is lost). Styling lives in the page's CSS
-(classes ``hv-*``), not in every element.
+second; writing the few polygons of these plots as SVG text costs milliseconds and stays sharp
+at any zoom. What makes the text small:
+
+* the time-axis plots hold one point per pixel column of the plot (the envelope of the buckets
+  that fall in it: min of the minima, max of the maxima, so no spike is lost);
+* coordinates are whole units of the viewBox, about one pixel each at the page's width, and a
+  run of equal steps is written as one step (the same line, drawn the same);
+* path data seen before on the page (a model input equal to its measurement, the same recording
+  in two specs) is drawn by reference to the first copy (:class:`PathShare`);
+* styling lives in the page's CSS (classes ``hv-*``), not in every element.
 """
 
 from __future__ import annotations
@@ -20,9 +26,18 @@ import numpy.typing as npt
 from ..core.registry import order_names
 from .model import CHARACTERISTIC_COLOURS, SHORT_LABELS, _lambdas, is_finite_number
 
-__all__ = ["history_svg", "nice_ticks", "signal_svg"]
+__all__ = ["Panel", "PathShare", "column_envelope", "history_svg", "nice_ticks", "signal_svg"]
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+# Shorter path data is cheaper written inline than as a shared element and a reference.
+_SHARED_MIN = 200
+
+# Writing numbers is most of a plot's time; the steps of a path are small integers, so their
+# text comes from a table (a sign or a space first, so the tokens join without separators).
+_TOKENS_MAX = 2048
+_TOKENS = tuple(str(v) if v < 0 else f" {v}" for v in range(-_TOKENS_MAX, _TOKENS_MAX + 1))
 
 
 def _esc(text: object) -> str:
@@ -74,36 +89,87 @@ def _array(values: object) -> FloatArray:
     return out if out.ndim == 1 else np.empty(0, dtype=np.float64)
 
 
-def _merge(
-    time: FloatArray, lows: FloatArray, highs: FloatArray, buckets: int
+def _column_runs(time: FloatArray, x0: float, x1: float, columns: int) -> tuple[IntArray, IntArray]:
+    """Pixel column of each run of buckets that fall in one column, and where each run starts.
+
+    ``time`` must be sorted; bucket ``i`` falls in the column of its mid time on [x0, x1].
+    """
+    scale = columns / (x1 - x0)
+    column = np.clip(np.floor((time - x0) * scale), 0, columns - 1).astype(np.int64)
+    starts = np.flatnonzero(np.concatenate([[True], column[1:] != column[:-1]]))
+    return column[starts], starts.astype(np.int64)
+
+
+def _sorted_finite(time: FloatArray, *series: FloatArray) -> tuple[FloatArray, ...]:
+    """``time`` and ``series`` without non-finite times, in time order (hand-written results
+    may hold either)."""
+    keep = np.isfinite(time)
+    if not keep.all():
+        time, series = time[keep], tuple(s[keep] for s in series)
+    if time.size > 1 and bool((np.diff(time) < 0).any()):
+        order = np.argsort(time, kind="stable")
+        time, series = time[order], tuple(s[order] for s in series)
+    return (time, *series)
+
+
+def column_envelope(
+    time: FloatArray, lows: FloatArray, highs: FloatArray, x0: float, x1: float, columns: int
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Envelope merged into at most ``buckets`` buckets (exact: min of minima, max of maxima)."""
-    n = time.shape[0]
-    if n <= buckets:
-        return time, lows, highs
-    starts = (np.arange(buckets, dtype=np.int64) * n // buckets).astype(np.intp)
-    ends = np.append(starts[1:], n) - 1
+    """The envelope of buckets on [x0, x1] merged into ``columns`` pixel columns.
+
+    Returns the centre of every column that holds a bucket (in columns from the left edge) and
+    the min of its minima and the max of its maxima, so a spike one sample wide keeps its
+    extreme. NaN in ``lows`` or ``highs`` is ignored unless a whole column is NaN.
+    """
+    time, lows, highs = _sorted_finite(time, lows, highs)
+    if time.size == 0:
+        empty = np.empty(0, dtype=np.float64)
+        return empty, empty, empty
+    column, starts = _column_runs(time, x0, x1, columns)
     return (
-        (time[starts] + time[ends]) / 2.0,
+        column.astype(np.float64) + 0.5,
         np.fmin.reduceat(lows, starts),
         np.fmax.reduceat(highs, starts),
     )
 
 
-def _merge_mean(
-    time: FloatArray, values: FloatArray, weights: FloatArray, buckets: int
+def _column_means(
+    time: FloatArray, values: FloatArray, weights: FloatArray, x0: float, x1: float, columns: int
 ) -> tuple[FloatArray, FloatArray]:
-    """Weighted means over at most ``buckets`` buckets, so drawn areas keep their fractions."""
-    n = time.shape[0]
-    if n <= buckets:
-        return time, values
-    starts = (np.arange(buckets, dtype=np.int64) * n // buckets).astype(np.intp)
-    ends = np.append(starts[1:], n) - 1
-    means = np.add.reduceat(values * weights, starts) / np.add.reduceat(weights, starts)
-    return (time[starts] + time[ends]) / 2.0, means
+    """Weighted means per pixel column, so drawn areas keep their fractions."""
+    time, values, weights = _sorted_finite(time, values, weights)
+    if time.size == 0:
+        empty = np.empty(0, dtype=np.float64)
+        return empty, empty
+    column, starts = _column_runs(time, x0, x1, columns)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.add.reduceat(values * weights, starts) / np.add.reduceat(weights, starts)
+    return column.astype(np.float64) + 0.5, means
 
 
-class _Panel:
+class PathShare:
+    """Path data drawn once per page: a later plot with the same data refers to the first copy.
+
+    The first copy carries an id and takes its style from a wrapping group, so that a ``<use>``
+    of another class styles its copy by inheritance (an element inside a ``<use>`` keeps the
+    classes of the original). Ids are numbered in drawing order, so equal input gives equal
+    pages.
+    """
+
+    def __init__(self) -> None:
+        self._ids: dict[str, str] = {}
+
+    def element(self, css: str, d: str) -> str:
+        if len(d) < _SHARED_MIN:
+            return f'<path class="{css}" d="{d}"/>'
+        found = self._ids.get(d)
+        if found is not None:
+            return f'<use class="{css}" href="#{found}"/>'
+        ident = self._ids[d] = f"hvp{len(self._ids)}"
+        return f'<g class="{css}"><path id="{ident}" d="{d}"/></g>'
+
+
+class Panel:
     """A rectangle of the SVG with linear data→pixel scales and its own axes."""
 
     def __init__(
@@ -120,14 +186,17 @@ class _Panel:
         self.y0, self.y1 = _widen(*y_range)
 
     def px(self, values: FloatArray | float) -> Any:
-        return self.x + (np.asarray(values) - self.x0) * (self.width / (self.x1 - self.x0))
+        # Plain floats (ticks, marks) skip numpy, whose per-call cost is many times the sum.
+        scale = self.width / (self.x1 - self.x0)
+        if isinstance(values, (float, int)):
+            return self.x + (values - self.x0) * scale
+        return self.x + (np.asarray(values) - self.x0) * scale
 
     def py(self, values: FloatArray | float) -> Any:
-        return (
-            self.y
-            + self.height
-            - (np.asarray(values) - self.y0) * (self.height / (self.y1 - self.y0))
-        )
+        scale = self.height / (self.y1 - self.y0)
+        if isinstance(values, (float, int)):
+            return self.y + self.height - (values - self.y0) * scale
+        return self.y + self.height - (np.asarray(values) - self.y0) * scale
 
     def frame(
         self,
@@ -137,6 +206,7 @@ class _Panel:
         y_label: str | None,
         x_ticks: bool = True,
         y_ticks: Sequence[float] | None = None,
+        share: PathShare | None = None,
     ) -> None:
         xt = nice_ticks(self.x0, self.x1, max(4, int(self.width // 110)))
         yt = list(y_ticks) if y_ticks is not None else nice_ticks(self.y0, self.y1, 4)
@@ -147,7 +217,7 @@ class _Panel:
         for t in yt:
             if self.y0 <= t <= self.y1:
                 grid.append(f"M{self.x:.1f} {float(self.py(t)):.1f}h{self.width:.1f}")
-        parts.append(f'<path class="hv-grid" d="{"".join(grid)}"/>')
+        parts.append(_draw("hv-grid", "".join(grid), share))
         parts.append(
             f'<rect class="hv-frame" x="{self.x:.1f}" y="{self.y:.1f}" '
             f'width="{self.width:.1f}" height="{self.height:.1f}"/>'
@@ -178,20 +248,32 @@ class _Panel:
                 f'transform="rotate(-90 {cx:.1f} {cy:.1f})">{_esc(y_label)}</text>'
             )
 
-    def band(self, time: FloatArray, lows: FloatArray, highs: FloatArray, css: str) -> str:
-        keep = np.isfinite(time) & np.isfinite(lows) & np.isfinite(highs)
-        time, lows, highs = time[keep], lows[keep], highs[keep]
-        if time.size == 0:
-            return ""
-        xs = self.px(np.concatenate([time, time[::-1]]))
-        ys = self.py(np.concatenate([highs, lows[::-1]]))
-        return f'<path class="{css}" d="{_path(xs, ys)}Z"/>'
+    @property
+    def columns(self) -> int:
+        """Pixel columns of the panel (one viewBox unit is about one pixel on the page)."""
+        return max(1, round(self.width))
 
-    def line(self, xs: FloatArray, ys: FloatArray, css: str) -> str:
+    def column_x(self, centres: FloatArray) -> FloatArray:
+        """x of column centres as :func:`column_envelope` gives them."""
+        return self.x + centres * (self.width / self.columns)
+
+    def band(self, xs: FloatArray, lows: FloatArray, highs: FloatArray) -> str | None:
+        """Path data of the area between ``lows`` and ``highs`` at pixel positions ``xs``."""
+        keep = np.isfinite(xs) & np.isfinite(lows) & np.isfinite(highs)
+        xs, lows, highs = xs[keep], lows[keep], highs[keep]
+        if xs.size == 0:
+            return None
+        return (
+            _path(np.concatenate([xs, xs[::-1]]), self.py(np.concatenate([highs, lows[::-1]])))
+            + "Z"
+        )
+
+    def line(self, xs: FloatArray, ys: FloatArray) -> str | None:
+        """Path data of the line through (``xs``, ``ys``) in data units."""
         keep = np.isfinite(xs) & np.isfinite(ys)
         if not keep.any():
-            return ""
-        return f'<path class="{css}" d="{_path(self.px(xs[keep]), self.py(ys[keep]))}"/>'
+            return None
+        return _path(self.px(xs[keep]), self.py(ys[keep]))
 
     def clip(self, ident: str) -> str:
         return (
@@ -210,20 +292,35 @@ def _widen(low: float, high: float) -> tuple[float, float]:
 
 
 def _path(xs: FloatArray, ys: FloatArray) -> str:
-    """Path data in tenths of a unit: an absolute moveto, then relative linetos.
+    """Path data in whole units: an absolute moveto, then relative linetos.
 
-    Rounding the absolute positions first and differencing the integers keeps the deltas exact,
-    so no error accumulates along the path; short deltas make the text about a third smaller
-    than absolute coordinates.
+    One unit is about one pixel of the page, which is what the plots resolve. Rounding the
+    absolute positions first and differencing the integers keeps the steps exact, so no error
+    accumulates along the path. A point that rounds onto the one before is left out, and a run
+    of steps in one direction becomes one step: the line drawn is the same, and a flat or
+    straight stretch costs a few characters however long it is.
     """
-    tenths = np.rint(np.column_stack([xs, ys]) * 10.0).astype(np.int64)
-    head = f"M{tenths[0, 0] / 10} {tenths[0, 1] / 10}"
-    if tenths.shape[0] == 1:
-        return head.replace(".0", "")
-    deltas = (np.diff(tenths, axis=0).ravel() / 10.0).tolist()
-    body = " ".join(map(str, deltas)) + " "
-    # "1.0 " → "1 " and "3 -2" → "3-2": both are valid SVG path syntax.
-    return f"{head.replace('.0', '')}l{body.replace('.0 ', ' ').replace(' -', '-').strip()}"
+    # floor(v + 0.5), not rint: rint rounds halves to even, and column centres sit on halves.
+    points = np.floor(np.column_stack([xs, ys]) + 0.5).astype(np.int64)
+    head = f"M{points[0, 0]} {points[0, 1]}"
+    steps = np.diff(points, axis=0)
+    steps = steps[(steps != 0).any(axis=1)]
+    if steps.shape[0] > 1:
+        before, after = steps[:-1], steps[1:]
+        onward = (before[:, 0] * after[:, 1] == before[:, 1] * after[:, 0]) & (
+            (before * after).sum(axis=1) > 0
+        )
+        starts = np.flatnonzero(np.concatenate([[True], ~onward]))
+        steps = np.add.reduceat(steps, starts, axis=0)
+    if steps.shape[0] == 0:
+        return head
+    flat = steps.ravel()
+    if int(np.abs(flat).max()) <= _TOKENS_MAX:
+        body = "".join(map(_TOKENS.__getitem__, (flat + _TOKENS_MAX).tolist()))
+    else:
+        body = " ".join(map(str, flat.tolist())).replace(" -", "-")
+    # "3-2" and "3 2" both separate two numbers in path syntax.
+    return f"{head}l{body.lstrip()}"
 
 
 def _range(*arrays: FloatArray, pad: float = 0.05) -> tuple[float, float]:
@@ -237,12 +334,23 @@ def _range(*arrays: FloatArray, pad: float = 0.05) -> tuple[float, float]:
     return low - pad * span, high + pad * span
 
 
-def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
+def _draw(css: str, d: str | None, share: PathShare | None = None) -> str:
+    """A path element of class ``css`` for path data ``d`` (nothing for ``None``)."""
+    if d is None:
+        return ""
+    if share is None:
+        return f'<path class="{css}" d="{d}"/>'
+    return share.element(css, d)
+
+
+def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = None) -> str | None:
     """Overlay, residual and derivative match along time; correlation curve; error histogram.
 
-    ``ident`` makes the SVG's clip-path ids unique within the page. Returns ``None`` when the
-    signal carries no figure data.
+    ``ident`` makes the SVG's clip-path ids unique within the page; ``share`` draws path data
+    the page already holds by reference (one per page; by default only within this plot).
+    Returns ``None`` when the signal carries no figure data.
     """
+    share = share if share is not None else PathShare()
     data = signal.get("figures")
     if not isinstance(data, Mapping) or not isinstance(data.get("overlay"), Mapping):
         return None
@@ -264,43 +372,56 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
     parts: list[str] = []
     defs: list[str] = []
 
-    # Overlay: reference and simulated envelopes.
-    buckets = int(right_of_time - left)
-    t_ref, ref_lo, ref_hi = _merge(time, series["ref_min"], series["ref_max"], buckets)
-    t_sim, sim_lo, sim_hi = _merge(time, series["sim_min"], series["sim_max"], buckets)
-    t_res, res_lo, res_hi = _merge(time, series["res_min"], series["res_max"], buckets)
-    ov = _Panel(
+    # Overlay: reference and simulated envelopes, one point per pixel column.
+    columns = right_of_time - left
+    x0, x1 = _widen(*time_range)
+    c_ref, ref_lo, ref_hi = column_envelope(
+        time, series["ref_min"], series["ref_max"], x0, x1, columns
+    )
+    c_sim, sim_lo, sim_hi = column_envelope(
+        time, series["sim_min"], series["sim_max"], x0, x1, columns
+    )
+    c_res, res_lo, res_hi = column_envelope(
+        time, series["res_min"], series["res_max"], x0, x1, columns
+    )
+    ov = Panel(
         left, 28, right_of_time - left, 222, time_range, _range(ref_lo, ref_hi, sim_lo, sim_hi)
     )
     defs.append(ov.clip(f"{ident}-ov"))
-    ov.frame(parts, x_label=None, y_label=f"{signal.get('name') or ''}{suffix}", x_ticks=False)
+    ov.frame(
+        parts,
+        x_label=None,
+        y_label=f"{signal.get('name') or ''}{suffix}",
+        x_ticks=False,
+        share=share,
+    )
     parts.append(f'<g clip-path="url(#{ident}-ov)">')
     parts.extend(_hot_spans(signal, ov))
-    parts.append(ov.band(t_ref, ref_lo, ref_hi, "hv-ref"))
-    parts.append(ov.band(t_sim, sim_lo, sim_hi, "hv-sim"))
+    parts.append(_draw("hv-ref", ov.band(ov.column_x(c_ref), ref_lo, ref_hi), share))
+    parts.append(_draw("hv-sim", ov.band(ov.column_x(c_sim), sim_lo, sim_hi), share))
     parts.append("</g>")
     parts.append(
         f'<g class="hv-legend"><rect class="hv-ref" x="{left + 8}" y="12" width="14" height="8"/>'
         f'<text x="{left + 27}" y="20">reference (measured)</text>'
         f'<rect class="hv-sim" x="{left + 168}" y="12" width="14" height="8"/>'
         f'<text x="{left + 187}" y="20">simulated</text>'
-        f'<text x="{right_of_time}" y="20" text-anchor="end" class="hv-note">min/max per '
-        f"bucket of {_esc(_bucket_note(data, time.size, t_ref.size))}</text></g>"
+        f'<text x="{right_of_time}" y="20" text-anchor="end" class="hv-note">min/max per pixel '
+        f"column of {_esc(_bucket_note(data, c_ref.size))}</text></g>"
     )
 
     # Residual beneath, on the same time axis.
-    res = _Panel(
+    res = Panel(
         left, 266, right_of_time - left, 100, time_range, _range(res_lo, res_hi, np.zeros(1))
     )
     defs.append(res.clip(f"{ident}-res"))
-    res.frame(parts, x_label=None, y_label=f"residual{suffix}", x_ticks=False)
+    res.frame(parts, x_label=None, y_label=f"residual{suffix}", x_ticks=False, share=share)
     parts.append(f'<g clip-path="url(#{ident}-res)">')
-    parts.append(res.line(np.array(time_range), np.zeros(2), "hv-zero"))
-    parts.append(res.band(t_res, res_lo, res_hi, "hv-res"))
+    parts.append(_draw("hv-zero", res.line(np.array(time_range), np.zeros(2)), share))
+    parts.append(_draw("hv-res", res.band(res.column_x(c_res), res_lo, res_hi), share))
     parts.append("</g>")
 
     # Derivative directionality match along time (paper Fig. 7).
-    der = _Panel(left, 382, right_of_time - left, 80, time_range, (0.0, 1.0))
+    der = Panel(left, 382, right_of_time - left, 80, time_range, (0.0, 1.0))
     derivative = data.get("derivative") if isinstance(data.get("derivative"), Mapping) else {}
     match = _array(derivative.get("match")) if derivative else np.empty(0)
     parts.append(
@@ -311,9 +432,11 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
         weights = _array(overlay.get("count"))
         if weights.shape != time.shape:
             weights = np.ones_like(time)
-        t_m, m_mean = _merge_mean(time, match, weights, buckets)
-        parts.append(der.band(t_m, np.zeros_like(m_mean), m_mean, "hv-match"))
-    der.frame(parts, x_label="time [s]", y_label="direction", y_ticks=[0.0, 0.5, 1.0])
+        c_m, m_mean = _column_means(time, match, weights, x0, x1, columns)
+        parts.append(
+            _draw("hv-match", der.band(der.column_x(c_m), np.zeros_like(m_mean), m_mean), share)
+        )
+    der.frame(parts, x_label="time [s]", y_label="direction", y_ticks=[0.0, 0.5, 1.0], share=share)
     fraction = derivative.get("fraction") if derivative else None
     if is_finite_number(fraction):
         y = float(der.py(float(fraction)))
@@ -332,15 +455,20 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
         if lags.size and lags.shape == values.shape:
             peak = correlation.get("peak")
             peak_lag = correlation.get("peak_lag_s")
-            xc = _Panel(
+            xc = Panel(
                 938, 46, 280, 170, _range(lags, pad=0.0), _range(values, np.array([1.0]), pad=0.08)
             )
             defs.append(xc.clip(f"{ident}-xc"))
-            xc.frame(parts, x_label="lag [s] (negative: model lags)", y_label="correlation")
+            xc.frame(
+                parts,
+                x_label="lag [s] (negative: model lags)",
+                y_label="correlation",
+                share=share,
+            )
             parts.append(f'<g clip-path="url(#{ident}-xc)">')
             if xc.x0 <= 0.0 <= xc.x1:
-                parts.append(xc.line(np.zeros(2), np.array([xc.y0, xc.y1]), "hv-zero"))
-            parts.append(xc.line(lags, values, "hv-xc"))
+                parts.append(_draw("hv-zero", xc.line(np.zeros(2), np.array([xc.y0, xc.y1]))))
+            parts.append(_draw("hv-xc", xc.line(lags, values), share))
             parts.append("</g>")
             if is_finite_number(peak) and is_finite_number(peak_lag):
                 px, py = float(xc.px(float(peak_lag))), float(xc.py(float(peak)))
@@ -366,22 +494,16 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
         cdf = _array(histogram.get("cdf"))
         if edges.size == counts.size + 1 and counts.size:
             hi_count = float(np.nanmax(counts)) if counts.size else 1.0
-            hs = _Panel(938, 292, 250, 170, _range(edges, pad=0.0), (0.0, hi_count * 1.08 or 1.0))
-            hs.frame(parts, x_label=f"error y_ref − y_sim{suffix}", y_label="samples")
-            bars = []
-            for a, b, c in zip(edges[:-1], edges[1:], counts, strict=True):
-                if c > 0:
-                    x0, x1 = float(hs.px(a)), float(hs.px(b))
-                    top, base = float(hs.py(c)), hs.y + hs.height
-                    bars.append(f"M{x0:.1f} {base:.1f}V{top:.1f}H{x1:.1f}V{base:.1f}Z")
-            parts.append(f'<path class="hv-bar" d="{"".join(bars)}"/>')
+            hs = Panel(938, 292, 250, 170, _range(edges, pad=0.0), (0.0, hi_count * 1.08 or 1.0))
+            hs.frame(parts, x_label=f"error y_ref − y_sim{suffix}", y_label="samples", share=share)
+            parts.append(_draw("hv-bar", _bars(hs, edges, counts), share))
             if hs.x0 <= 0.0 <= hs.x1:
-                parts.append(hs.line(np.zeros(2), np.array([hs.y0, hs.y1]), "hv-zero"))
+                parts.append(_draw("hv-zero", hs.line(np.zeros(2), np.array([hs.y0, hs.y1]))))
             if cdf.shape == counts.shape:
-                cdf_panel = _Panel(hs.x, hs.y, hs.width, hs.height, (hs.x0, hs.x1), (0.0, 1.0))
+                cdf_panel = Panel(hs.x, hs.y, hs.width, hs.height, (hs.x0, hs.x1), (0.0, 1.0))
                 steps_x = np.repeat(edges, 2)[1:-1]
                 steps_y = np.repeat(cdf, 2)
-                parts.append(cdf_panel.line(steps_x, steps_y, "hv-cdf"))
+                parts.append(_draw("hv-cdf", cdf_panel.line(steps_x, steps_y), share))
                 for t in (0.0, 0.5, 1.0):
                     parts.append(
                         f'<text class="hv-tick" x="{hs.x + hs.width + 5:.1f}" '
@@ -405,7 +527,26 @@ def signal_svg(signal: Mapping[str, Any], ident: str) -> str | None:
     )
 
 
-def _hot_spans(signal: Mapping[str, Any], panel: _Panel) -> list[str]:
+def _bars(panel: Panel, edges: FloatArray, counts: FloatArray) -> str | None:
+    """Path data of the histogram's bars in whole units, each bin with samples at least one
+    unit tall: a tail bin of a few samples among thousands is an extreme worth seeing."""
+    if not np.isfinite(edges).all():
+        return None
+    counts = np.where(np.isfinite(counts) & (counts > 0), counts, 0.0)
+    x = np.floor(panel.px(edges) + 0.5).astype(np.int64)
+    base = math.floor(panel.y + panel.height + 0.5)
+    heights = np.maximum(base - np.floor(panel.py(counts) + 0.5).astype(np.int64), 1)
+    drawn = "".join(
+        f"M{x0} {base}v-{h}h{x1 - x0}v{h}Z"
+        for x0, x1, h, c in zip(
+            x[:-1].tolist(), x[1:].tolist(), heights.tolist(), counts.tolist(), strict=True
+        )
+        if c > 0
+    )
+    return drawn or None
+
+
+def _hot_spans(signal: Mapping[str, Any], panel: Panel) -> list[str]:
     """The windows where the error concentrates (``local:``), shaded behind the overlay."""
     local = signal.get("local")
     if not isinstance(local, Mapping):
@@ -431,9 +572,9 @@ def _time_range(data: Mapping[str, Any], time: FloatArray) -> tuple[float, float
     return float(np.nanmin(time)), float(np.nanmax(time))
 
 
-def _bucket_note(data: Mapping[str, Any], buckets: int, drawn: int) -> str:
+def _bucket_note(data: Mapping[str, Any], drawn: int) -> str:
     n = data.get("n_samples")
-    if is_finite_number(n) and int(n) > drawn:
+    if is_finite_number(n) and int(n) > drawn > 0:
         return f"{int(n) / drawn:.3g} samples ({int(n)} in all)"
     return "1 sample"
 
@@ -456,7 +597,7 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
     )
     x = np.arange(len(entries), dtype=np.float64)
     width, height = 720, 230
-    panel = _Panel(
+    panel = Panel(
         64, 16, 520, 170, (-0.3, max(len(entries) - 0.7, 0.3)), _range(phi, *lines.values())
     )
     parts: list[str] = []
