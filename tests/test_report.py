@@ -860,3 +860,31 @@ def test_an_origin_with_failing_descendants_names_both(results: list[dict[str, A
     assert "| here, E_batt/P_batt/I_cell |" in render_markdown(results)
     annotation = github_annotations(results, ".")[1]
     assert annotation.endswith("(the error appears in this signal and E_batt/P_batt/I_cell)")
+
+
+def test_only_this_runs_reports_stay_and_the_footer_names_what_was_written(
+    results: list[dict[str, Any]], tmp_path: Path
+) -> None:
+    write_reports(results, {"html", "json", "md"}, tmp_path, generated_utc=STAMP)
+    (tmp_path / "notes.txt").write_text("mine")
+    written = write_reports(results, {"html"}, tmp_path, generated_utc=STAMP)
+    assert [p.name for p in written] == ["report.html"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "report.html"]
+    page = (tmp_path / "report.html").read_text("utf-8")
+    assert "report.json" not in page
+    write_reports(results, {"html", "json"}, tmp_path, generated_utc=STAMP)
+    assert "the same data is in report.json" in (tmp_path / "report.html").read_text("utf-8")
+
+
+def test_a_spec_that_fails_on_its_signals_says_so_under_its_phi(
+    results: list[dict[str, Any]],
+) -> None:
+    passing_phi = copy.deepcopy(results[0])
+    passing_phi["phi"] = 0.95
+    passing_phi["min_phi"] = 0.9
+    passing_phi["phi_passed"] = True
+    passing_phi["passed"] = False
+    page = render_html([passing_phi], title="t", generated_utc=STAMP)
+    assert "✘ FAIL on its signals" in page
+    assert "2 spec files" not in page
+    assert "1 spec file, 0 pass;" in page

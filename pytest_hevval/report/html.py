@@ -13,7 +13,7 @@ JSON and Markdown reports.
 from __future__ import annotations
 
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import Any
 
 from .. import __version__
@@ -206,7 +206,11 @@ def _environment() -> Any:
 
 
 def render_html(
-    spec_results: Sequence[Mapping[str, Any]], *, title: str, generated_utc: str
+    spec_results: Sequence[Mapping[str, Any]],
+    *,
+    title: str,
+    generated_utc: str,
+    formats: Collection[str] = ("html", "json"),
 ) -> str:
     """The HTML report of ``spec_results`` as one self-contained page.
 
@@ -218,6 +222,9 @@ def render_html(
         Page title and heading.
     generated_utc:
         Timestamp shown in the header; passed in so that rendering stays a pure function.
+    formats:
+        The reports written beside this page (the footer points to ``report.json`` only when
+        it is one of them).
     """
     env = _environment()
     share = svg.PathShare()
@@ -248,5 +255,6 @@ def render_html(
         short_labels=model.SHORT_LABELS,
         colours=model.CHARACTERISTIC_COLOURS,
         isfinite=model.is_finite_number,
+        formats=set(formats),
     )
     return text

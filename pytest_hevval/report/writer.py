@@ -82,7 +82,7 @@ def write_reports(
         if name == "html":
             from .html import render_html
 
-            text = render_html(spec_results, title=title, generated_utc=stamp)
+            text = render_html(spec_results, title=title, generated_utc=stamp, formats=formats)
         elif name == "json":
             from .text import render_json
 
@@ -94,4 +94,14 @@ def write_reports(
         path = directory / FILE_NAMES[name]
         write_atomic(path, text)
         written.append(path)
+    # A report of an earlier run beside this run's would be read as this run's: only this
+    # run's reports stay (the report files' own names only; nothing else is touched).
+    for name, file_name in FILE_NAMES.items():
+        if name not in formats:
+            stale = directory / file_name
+            try:
+                if stale.is_file() and not stale.is_symlink():
+                    stale.unlink()
+            except OSError as exc:
+                raise output_error(stale, exc) from None
     return written
