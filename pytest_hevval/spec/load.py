@@ -383,9 +383,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         # syntax; saying so is worth more than the parser's own words.
         hint = (
             'quote a value that holds *, :, [, ], & or # (ref: "`Motor Torque [Nm]` * 1")'
-            if "flow" in (exc.context or "")
-            or "alphabetic or numeric" in problem
-            or "mapping values are not allowed" in problem
+            if "alphabetic or numeric" in problem or "mapping values are not allowed" in problem
             else None
         )
         raise SpecError(f"invalid YAML: {problem}", file=file, line=line, hint=hint) from None
