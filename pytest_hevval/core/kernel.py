@@ -142,6 +142,9 @@ COMPILED = (
     "dtw_path",
 )
 
+#: The order a background compile takes: what a run needs soonest and most often first.
+FIRST_COMPILED = ("main_pass", "lag_window", "fine_block_sums", "dtw_path")
+
 _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
@@ -366,7 +369,8 @@ def prepare() -> None:
     except HevvalError:  # a bad value: the scoring itself reports it, with its hint
         return
     if _numba_installed() and not cache_warm(COMPILED):
-        start_background_compile()
+        # What every spec scores first, then the intervals (on by default), then the options.
+        start_background_compile(FIRST_COMPILED)
 
 
 def start_background_compile(first: tuple[str, ...] = ()) -> bool:
