@@ -1,6 +1,6 @@
 """Reports of validation results: HTML, JSON, Markdown, CI annotations, figure data.
 
-Importing this package is cheap: matplotlib and jinja2 load only when an HTML report is
+Importing this package is cheap: jinja2 loads only when an HTML report is
 rendered, and scipy only when :func:`figure_data` first runs.
 """
 
