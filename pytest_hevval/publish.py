@@ -235,22 +235,17 @@ class Publisher:
         dicts: list[dict[str, Any]],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
     ) -> list[dict[str, Any]]:
-        """Report copies of the results with each signal's diagnosis and history trend."""
+        """Report copies of the results with each signal's diagnosis and history trend.
+
+        A trend shows the newest recorded runs that hold the signal (``TREND_RUNS``, from the
+        history's index, so that a long history costs a run no more than a short one), then
+        this run.
+        """
         trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
         if self.options.use_history:
             from .history import HistoryStore
 
-            for record in HistoryStore(self.options.history_dir).records():
-                version = str(record.get("model_version", "?"))
-                for spec in record.get("specs", []):
-                    for signal in spec.get("signals", []):
-                        trends.setdefault((spec.get("spec", ""), signal["path"]), []).append(
-                            {
-                                "version": version,
-                                "phi": spec.get("phi"),
-                                "lambdas": signal.get("lambdas"),
-                            }
-                        )
+            trends = HistoryStore(self.options.history_dir).trends()
         decorated = []
         for result in dicts:
             signals = []

@@ -6,16 +6,19 @@ import json
 import math
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tempfile
 import uuid
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval import history as h
@@ -398,6 +401,544 @@ def test_two_concurrent_writers_lose_nothing(tmp_path: Path) -> None:
         for r in records
     )
     assert written == sorted((w, i) for w in ("w1", "w2") for i in range(20))
+
+
+# -- the index ------------------------------------------------------------------------------
+#
+# The answers a run takes from the index (baseline, trends, versions, problems) must be those a
+# full read of every record gives; the reads it saves are counted through the one function
+# that reads a file.
+
+
+TREND = 3  # short trends, so that a few records already trim and refill them
+
+
+def full_trends(directory: Path, limit: int) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    """Each signal's trend as the report built it from a full read, kept to its newest runs."""
+    trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for rec in h.HistoryStore(directory).records():
+        version = str(rec.get("model_version", "?"))
+        for spec_result in rec.get("specs", []):
+            for sig in spec_result.get("signals", []):
+                trends.setdefault((spec_result.get("spec", ""), sig["path"]), []).append(
+                    {"version": version, "phi": spec_result.get("phi"), "lambdas": sig["lambdas"]}
+                )
+    return {key: points[-limit:] for key, points in trends.items()}
+
+
+def full_answers(directory: Path, limit: int, versions: list[str]) -> dict[str, Any]:
+    """Everything the index serves, from a full read of every record."""
+    store = h.HistoryStore(directory)
+    entries = store.entries()
+    newest = entries[::-1]
+    middle = entries[len(entries) // 2].started_utc if entries else T0
+    return {
+        "trends": full_trends(directory, limit),
+        "latest": entries[-1].record if entries else None,
+        "before": next((e.record for e in newest if e.started_utc < middle), None),
+        "newest2": [e.path.name for e in newest[:2]],
+        "found": {
+            v: next((e.record for e in newest if e.record["model_version"] == v), None)
+            for v in versions
+        },
+        "versions": list(dict.fromkeys(e.record["model_version"] for e in entries)),
+        "problems": [(p.path.name, p.message) for p in store.problems],
+        "middle": middle,
+    }
+
+
+QUERIES = ("trends", "latest", "before", "newest2", "found", "versions")
+
+
+def index_answers(
+    directory: Path,
+    limit: int,
+    versions: list[str],
+    middle: datetime,
+    first: str = "trends",
+) -> dict[str, Any]:
+    """The same answers through the index, each from a store of its own (a run of its own).
+
+    ``first`` is asked first: it alone sees the folder as the last change left it, with the
+    index brought up to date in the same call; the others find that index saved.
+    """
+
+    def ask(query: str) -> Any:
+        store = h.HistoryStore(directory, trend_runs=limit)
+        if query == "trends":
+            return store.trends(), store.problems
+        if query == "latest":
+            return store.latest(), store.problems
+        if query == "before":
+            return store.latest(before=middle), store.problems
+        if query == "newest2":
+            return [e.path.name for e in store.newest(2)], store.problems
+        if query == "found":
+            return {v: store.find(v) for v in versions}, store.problems
+        return store.versions(), store.problems
+
+    answers: dict[str, Any] = {"middle": middle}
+    for query in (first, *(q for q in QUERIES if q != first)):
+        answers[query], problems = ask(query)
+        listed = [(p.path.name, p.message) for p in problems]
+        assert answers.setdefault("problems", listed) == listed, query
+    return answers
+
+
+def assert_same_as_full_read(
+    directory: Path, limit: int = TREND, versions: list[str] | None = None
+) -> None:
+    expected = full_answers(directory, limit, versions or ["v0", "v1", "v2", "nope"])
+    assert (
+        index_answers(directory, limit, versions or ["v0", "v1", "v2", "nope"], expected["middle"])
+        == expected
+    )
+
+
+@pytest.fixture
+def reads(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """Names of the files the store reads, in order."""
+    from pytest_hevval.history import store as store_module
+
+    seen: list[str] = []
+    real = store_module.read_json
+
+    def counting(path: Path | str, *args: Any, **kwargs: Any) -> Any:
+        seen.append(Path(path).name)
+        return real(path, *args, **kwargs)
+
+    monkeypatch.setattr(store_module, "read_json", counting)
+    return seen
+
+
+def two_signal_record(
+    version: str, when: datetime, phi: float, extra: bool = False
+) -> dict[str, Any]:
+    signals = [signal("E_batt/P_batt", lambdas=[phi] * 7), signal("E_batt/U_batt")]
+    if extra:
+        signals.append(signal("E_batt/I_batt", lambdas=[phi / 2] * 7))
+    return record(version, when, [spec(phi=phi, signals=signals), spec("B", path="b.hevval.yaml")])
+
+
+def fill(directory: Path, count: int, start: int = 0) -> list[Path]:
+    store = h.HistoryStore(directory, trend_runs=TREND)
+    return [
+        store.append(two_signal_record(f"v{i % 3}", T0 + timedelta(hours=i), 0.5 + i / 100))
+        for i in range(start, start + count)
+    ]
+
+
+def test_index_is_built_once_then_read_instead_of_the_records(
+    tmp_path: Path, reads: list[str]
+) -> None:
+    fill(tmp_path, 6)
+    assert not (tmp_path / ".index").exists()  # appending alone builds no index
+    store = h.HistoryStore(tmp_path, trend_runs=TREND)
+    trends = store.trends()
+    assert len(reads) == 6
+    assert (tmp_path / ".index" / "index").is_file()
+    assert (tmp_path / ".index" / ".gitignore").read_text().splitlines()[-1] == "*"
+    assert [p["version"] for p in trends[("specs/trip_a01.hevval.yaml", "E_batt/P_batt")]] == [
+        "v0",
+        "v1",
+        "v2",
+    ]
+    reads.clear()
+    assert h.HistoryStore(tmp_path, trend_runs=TREND).trends() == trends
+    assert reads == []
+    latest = h.HistoryStore(tmp_path, trend_runs=TREND).latest()
+    assert latest is not None
+    assert reads == [sorted(p.name for p in tmp_path.glob("*.json"))[-1]]
+    reads.clear()
+    found = h.HistoryStore(tmp_path, trend_runs=TREND).find("v0")
+    assert found is not None
+    assert found["started_utc"].startswith("2024-05-01T15")
+    assert len(reads) == 1
+    reads.clear()
+    assert h.HistoryStore(tmp_path, trend_runs=TREND).versions() == ["v0", "v1", "v2"]
+    assert reads == []
+    assert_same_as_full_read(tmp_path)
+
+
+def test_index_is_extended_by_appends_and_by_records_merged_in_with_older_names(
+    tmp_path: Path, reads: list[str]
+) -> None:
+    main = tmp_path / "main"
+    fill(main, 5, start=10)
+    h.HistoryStore(main, trend_runs=TREND).trends()
+    fill(main, 2, start=20)  # a run appends and adds its record to the index
+    reads.clear()
+    h.HistoryStore(main, trend_runs=TREND).trends()
+    assert reads == []
+    # A branch recorded runs before the newest ones on main; merging brings their files.
+    branch = tmp_path / "branch"
+    merged = fill(branch, 3, start=12) + fill(branch, 1, start=30)
+    for path in merged:
+        (main / path.name).write_bytes(path.read_bytes())
+    reads.clear()
+    h.HistoryStore(main, trend_runs=TREND).trends()
+    assert sorted(reads) == sorted(p.name for p in merged)
+    reads.clear()
+    assert_same_as_full_read(main)
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        "garbage",
+        "truncated",
+        "a list",
+        "another version",
+        "another trend length",
+        "a point of an unknown record",
+        "a record listed twice",
+        "a short trend not complete",
+        "a trend out of order",
+        "NaN",
+        "deep",
+        "a folder",
+        "a named pipe",
+        "deleted",
+    ],
+)
+def test_index_damaged_stale_or_deleted_is_rebuilt(
+    tmp_path: Path, reads: list[str], damage: str
+) -> None:
+    fill(tmp_path, 5)
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    index_file = tmp_path / ".index" / "index"
+    good = json.loads(index_file.read_text())
+    bad = json.loads(index_file.read_text())
+    if damage == "another version":
+        bad["pytest_hevval"] = "0.0.0-other"
+    elif damage == "a point of an unknown record":
+        bad["trends"][0][3][0][0] = "nope.json"
+    elif damage == "a record listed twice":
+        for column in bad["records"].values():
+            column.append(column[0])
+    elif damage == "a short trend not complete":
+        bad["trends"][0][2] = False
+        bad["trends"][0][3] = bad["trends"][0][3][:1]
+    elif damage == "another trend length":
+        bad["trend_runs"] = TREND + 1
+    elif damage == "a trend out of order":
+        bad["trends"][0][3].reverse()
+    elif damage == "NaN":
+        bad["trends"][0][3][0][1] = float("nan")
+    text = {
+        "garbage": b"\x00\xff not json",
+        "truncated": index_file.read_bytes()[:200],
+        "a list": b"[]",
+        "deep": b"[" * 100_000 + b"]" * 100_000,
+    }.get(damage, json.dumps(bad).encode())
+    index_file.unlink()
+    if damage == "a folder":
+        index_file.mkdir()
+    elif damage == "a named pipe":
+        os.mkfifo(index_file)
+    elif damage != "deleted":
+        index_file.write_bytes(text)
+    reads.clear()
+    assert_same_as_full_read(tmp_path)
+    if damage == "a folder":
+        assert index_file.is_dir()  # left alone; each run reads every record, as before
+        return
+    rewritten = json.loads(index_file.read_text())["records"]
+    assert sorted(rewritten["name"]) == sorted(good["records"]["name"])
+    reads.clear()
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    assert reads == []
+
+
+def test_index_that_cannot_be_written_costs_time_only(tmp_path: Path) -> None:
+    fill(tmp_path, 4)
+    (tmp_path / ".index").write_text("in the way")
+    assert_same_as_full_read(tmp_path)
+    fill(tmp_path, 1, start=4)
+    assert (tmp_path / ".index").read_text() == "in the way"
+    assert_same_as_full_read(tmp_path)
+
+
+def test_removed_record_rereads_only_what_its_trends_lost(tmp_path: Path, reads: list[str]) -> None:
+    paths = fill(tmp_path, 12)
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    paths[2].unlink()  # in no trend: nothing to read again
+    reads.clear()
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    assert reads == []
+    assert_same_as_full_read(tmp_path)
+    paths[-1].unlink()  # the newest: each trend needs one older point again
+    reads.clear()
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    # The oldest run kept is read again with the one before it, and nothing else.
+    assert reads == [paths[-3].name, paths[-4].name]
+    assert_same_as_full_read(tmp_path)
+
+
+@pytest.mark.parametrize(("kept", "points"), [(3, 3), (2, 2)])
+def test_a_signal_only_old_records_hold_keeps_its_points(
+    tmp_path: Path, reads: list[str], kept: int, points: int
+) -> None:
+    store = h.HistoryStore(tmp_path, trend_runs=TREND)
+    old = [
+        store.append(two_signal_record("v0", T0 + timedelta(hours=i), 0.6, extra=True))
+        for i in range(kept + 2)
+    ]
+    fill(tmp_path, 4, start=10)
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    for path in old[-2:]:
+        path.unlink()
+    key = ("specs/trip_a01.hevval.yaml", "E_batt/I_batt")
+    reads.clear()
+    assert len(h.HistoryStore(tmp_path, trend_runs=TREND).trends()[key]) == points
+    assert reads == [path.name for path in reversed(old[:kept])]
+    # Read back to the first record: the trend now knows it has every point, and says so.
+    reads.clear()
+    assert len(h.HistoryStore(tmp_path, trend_runs=TREND).trends()[key]) == points
+    assert reads == []
+    assert_same_as_full_read(tmp_path)
+
+
+def test_record_changed_by_hand_is_read_again(tmp_path: Path, reads: list[str]) -> None:
+    paths = fill(tmp_path, 4)
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    text = paths[-1].read_text()
+    paths[-1].write_text(text.replace('"v0"', '"v0-edited"'))  # another size
+    reads.clear()
+    trends = h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    # A changed record is one gone and one new: the trends it leaves get their oldest points
+    # back first (the oldest kept run, then the one before), then it is read as new.
+    assert reads == [paths[1].name, paths[0].name, paths[-1].name]
+    assert trends[("b.hevval.yaml", "E_batt/P_batt")][-1]["version"] == "v0-edited"
+    assert_same_as_full_read(tmp_path, versions=["v0", "v0-edited", "v1"])
+
+
+def test_record_changed_to_the_same_size_is_caught_when_read_as_baseline(tmp_path: Path) -> None:
+    paths = fill(tmp_path, 4)
+    h.HistoryStore(tmp_path, trend_runs=TREND).trends()
+    # Same size: the index cannot see it, but the baseline is read and checked against it.
+    paths[-1].write_text(paths[-1].read_text().replace('"v0"', '"w0"'))
+    latest = h.HistoryStore(tmp_path, trend_runs=TREND).latest()
+    assert latest is not None
+    assert latest["model_version"] == "w0"
+    assert_same_as_full_read(tmp_path, versions=["v0", "w0"])
+
+
+def test_bad_files_are_listed_as_a_full_read_lists_them(tmp_path: Path, reads: list[str]) -> None:
+    fill(tmp_path, 3)
+    (tmp_path / "partial.json").write_text('{"schema_version": 2, "model_')
+    (tmp_path / "empty.json").write_text("")
+    (tmp_path / "other.json").write_text('{"hello": 1}')
+    (tmp_path / "binary.json").write_bytes(b"\xff\xfe\x00")
+    (tmp_path / "future.json").write_text(json.dumps({"schema_version": 99}))
+    (tmp_path / "folder.json").mkdir()
+    os.mkfifo(tmp_path / "pipe.json")  # never opened: a read would wait for a writer
+    (tmp_path / "v1.json").write_text(json.dumps(v1_record()))
+    for name in ("schema1_camry_hwfet.json", "schema2_camry_hwfet.json"):
+        stored = Path(__file__).parent / "data" / "history" / name
+        (tmp_path / name).write_bytes(stored.read_bytes())
+    assert_same_as_full_read(tmp_path, versions=["v0", "v0.9"])
+    store = h.HistoryStore(tmp_path, trend_runs=TREND)
+    reads.clear()
+    store.trends()
+    # Bad content is remembered; a folder or a pipe may be replaced by a file of the same
+    # size, so they are looked at again (and refused before anything is read).
+    assert reads == ["folder.json", "pipe.json"]
+    assert {p.path.name for p in store.problems} == {
+        "partial.json",
+        "empty.json",
+        "other.json",
+        "binary.json",
+        "future.json",
+        "folder.json",
+        "pipe.json",
+    }
+    assert "newer than this pytest-hevval" in str(
+        next(p for p in store.problems if p.path.name == "future.json")
+    )
+    (tmp_path / "partial.json").write_text(json.dumps(record("v9", T0 + timedelta(days=9))))
+    reads.clear()
+    found = store.find("v9")
+    assert found is not None
+    assert found["started_utc"].startswith("2024-05-10")
+    assert sorted(reads) == ["folder.json", "partial.json", "partial.json", "pipe.json"]
+    assert_same_as_full_read(tmp_path, versions=["v9", "v0.9"])
+
+
+def test_index_is_never_taken_for_a_record(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    fill(tmp_path, 3)
+    h.HistoryStore(tmp_path).trends()
+    assert (tmp_path / ".index" / "index").is_file()
+    store = h.HistoryStore(tmp_path)
+    assert len(store.records()) == 3
+    assert store.problems == []
+    assert cli_main(["history", "--history-dir", str(tmp_path)]) == 0
+    assert "skipped" not in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which("git") is None, reason="needs git")
+def test_index_stays_out_of_a_committed_history(tmp_path: Path) -> None:
+    history = tmp_path / ".hevval" / "history"
+    fill(history, 2)
+    h.HistoryStore(history).trends()
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    status = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=all"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    listed = sorted(line[3:] for line in status.splitlines())
+    assert listed == sorted(f".hevval/history/{p.name}" for p in history.glob("*.json"))
+
+
+RUN = """
+import sys
+from datetime import datetime, timedelta, timezone
+from pytest_hevval.history import HistoryStore, make_record
+folder, name = sys.argv[1], sys.argv[2]
+when = datetime(2024, 5, 1, tzinfo=timezone.utc)
+for i in range(12):
+    store = HistoryStore(folder, trend_runs=100)
+    store.trends()  # reads and updates the index, as a run's report does
+    spec = {"name": "s", "spec": "s.hevval.yaml", "phi": i / 100, "signals": [
+        {"path": "a", "lambdas": [i / 100] * 7}, {"path": name, "lambdas": [0.5] * 7}]}
+    store.append(make_record([spec], model_version=f"{name}-{i}",
+                             started_utc=when + timedelta(minutes=i)))
+"""
+
+
+def test_concurrent_runs_lose_no_record_and_leave_a_sound_index(tmp_path: Path) -> None:
+    # One index to start from, so that every run also extends it when it appends.
+    h.HistoryStore(tmp_path, trend_runs=100).append(record("seed", T0 - timedelta(days=1)))
+    h.HistoryStore(tmp_path, trend_runs=100).trends()
+    runs = [subprocess.Popen([sys.executable, "-c", RUN, str(tmp_path), f"p{k}"]) for k in range(3)]
+    assert [run.wait(timeout=300) for run in runs] == [0, 0, 0]
+    from pytest_hevval.history.index import load_index
+
+    assert load_index(tmp_path, 100) is not None  # whole after every race
+    trends = h.HistoryStore(tmp_path, trend_runs=100).trends()
+    versions = sorted(point["version"] for point in trends[("s.hevval.yaml", "a")])
+    assert versions == sorted(f"p{k}-{i}" for k in range(3) for i in range(12))
+    assert_same_as_full_read(tmp_path, limit=100, versions=["p0-11", "p1-0", "seed"])
+
+
+def test_threads_appending_and_reading_at_once_lose_nothing(tmp_path: Path) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    h.HistoryStore(tmp_path, trend_runs=100).append(record("seed", T0 - timedelta(days=1)))
+    h.HistoryStore(tmp_path, trend_runs=100).trends()
+
+    def run(k: int) -> None:
+        for i in range(8):
+            store = h.HistoryStore(tmp_path, trend_runs=100)
+            store.trends()
+            store.append(record(f"t{k}-{i}", T0 + timedelta(minutes=i)))
+
+    with ThreadPoolExecutor(4) as pool:
+        list(pool.map(run, range(4)))
+    trends = h.HistoryStore(tmp_path, trend_runs=100).trends()
+    assert len(trends[("specs/trip_a01.hevval.yaml", "E_batt/P_batt")]) == 33
+    assert_same_as_full_read(tmp_path, limit=100, versions=["t0-0", "t3-7"])
+
+
+# Steps of a history's life, checked against a full read after each one.
+# Steps of a history's life, checked against a full read after each one. Runs come most
+# often, so that trends fill up, get trimmed, and lose points to the deletions that follow.
+_KINDS = [
+    "run",
+    "run",
+    "run",
+    "merge",
+    "hand-named",
+    "rewrite",
+    "bad",
+    "folder",
+    "delete",
+    "delete newest",
+    "drop index",
+    "read",
+]
+_STEP = st.tuples(
+    st.sampled_from(_KINDS),
+    st.integers(0, 3),
+    st.integers(0, 40),
+    st.booleans(),
+    st.sampled_from(QUERIES),
+)
+
+
+@settings(max_examples=80, deadline=None)
+@given(steps=st.lists(_STEP, min_size=1, max_size=14), limit=st.integers(1, 4))
+def test_index_answers_equal_a_full_read_whatever_happens(
+    steps: list[tuple[str, int, int, bool, str]], limit: int
+) -> None:
+    from pytest_hevval.history import store as store_module
+
+    real_read = store_module.read_json
+    reads: list[str] = []
+
+    def counting(path: Path | str, *args: Any, **kwargs: Any) -> Any:
+        reads.append(Path(path).name)
+        return real_read(path, *args, **kwargs)
+
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        mock.patch.object(store_module, "read_json", counting),
+    ):
+        folder = Path(tmp)
+        for number, (kind, version, hour, extra, first) in enumerate(steps):
+            # Equal start times happen (hours repeat); the file name then decides the order.
+            when = T0 + timedelta(hours=hour)
+            rec = two_signal_record(f"v{version}", when, 0.4 + number / 50, extra=extra)
+            store = h.HistoryStore(folder, trend_runs=limit)
+            files = sorted(folder.glob("*.json"))
+            if kind == "run":
+                store.append(rec)
+            elif kind == "merge":  # written elsewhere, copied in later
+                elsewhere = h.HistoryStore(folder / "elsewhere").append(rec)
+                (folder / elsewhere.name).write_bytes(elsewhere.read_bytes())
+            elif kind == "hand-named":  # a name whose order is not its record's
+                (folder / f"00-{number}-copy.json").write_text(json.dumps(rec))
+            elif kind == "rewrite" and files:  # by hand, to another size
+                target = files[hour % len(files)]
+                old_size = target.stat().st_size if target.is_file() else -1
+                text = json.dumps(rec)
+                text += " " * (len(text.encode()) == old_size)
+                if target.is_dir():
+                    target.rmdir()
+                target.write_text(text)
+            elif kind == "bad":
+                (folder / f"bad-{number}.json").write_text(["", "{", '{"a": 1}'][version % 3])
+            elif kind == "folder":
+                (folder / f"folder-{number}.json").mkdir()
+            elif kind == "delete newest":
+                entries = h.HistoryStore(folder).entries()
+                if entries:
+                    entries[-1].path.unlink()
+            elif kind == "delete" and files:
+                target = files[hour % len(files)]
+                if target.is_dir():
+                    target.rmdir()
+                else:
+                    target.unlink()
+            elif kind == "drop index":
+                shutil.rmtree(folder / ".index", ignore_errors=True)
+            elif kind == "read":
+                store.trends()
+            expected = full_answers(folder, limit, ["v0", "v1", "v2", "v3"])
+            middle = expected["middle"]
+            assert index_answers(folder, limit, ["v0", "v1", "v2", "v3"], middle, first) == (
+                expected
+            )
+            # Once up to date, the index is read alone: only files that cannot be remembered
+            # (folders named *.json here) are looked at again.
+            reads.clear()
+            h.HistoryStore(folder, trend_runs=limit).trends()
+            assert all(name.startswith("folder-") for name in reads)
 
 
 # -- compare grammar ------------------------------------------------------------------------

@@ -159,3 +159,55 @@ def test_two_processes_at_once_lose_nothing(project: pytest.Pytester) -> None:
     ]
     assert [run.wait(timeout=120) for run in runs] == [0, 0]
     assert sorted(r["model_version"] for r in records(project.path)) == ["p0", "p1"]
+
+
+def report_trends(root: Path) -> dict[str, list[dict]]:
+    """Each signal's trend as the JSON report carries it (the HTML report draws the same)."""
+    report = json.loads((root / ".hevval" / "report" / "report.json").read_text())
+    (spec,) = report["specs"]
+    return {signal["path"]: signal.get("history") for signal in spec["signals"]}
+
+
+def test_report_trends_show_earlier_runs_then_this_one(project: pytest.Pytester) -> None:
+    for version in ("v1", "v2", "v3"):
+        project.runpytest(
+            "--hevval", f"--hevval-model-version={version}", "--hevval-report=json"
+        ).assert_outcomes(passed=6)
+    last = records(project.path)[-1]["specs"][0]
+    trends = report_trends(project.path)
+    assert set(trends) == {signal["path"] for signal in last["signals"]}
+    for signal in last["signals"]:
+        trend = trends[signal["path"]]
+        assert [point["version"] for point in trend] == ["v1", "v2", "v3"]
+        assert all(set(point) == {"version", "phi", "lambdas"} for point in trend)
+        # This run comes last, as scored; the runs before it as recorded.
+        assert trend[-1] == {"version": "v3", "phi": last["phi"], "lambdas": signal["lambdas"]}
+    first = records(project.path)[0]["specs"][0]
+    assert trends["E/P/I"][0]["phi"] == first["phi"]
+
+
+def test_report_trends_show_the_newest_recorded_runs_of_a_long_history(
+    project: pytest.Pytester,
+) -> None:
+    from datetime import datetime, timedelta, timezone
+
+    from pytest_hevval.history import TREND_RUNS, HistoryStore, make_record
+
+    project.runpytest("--hevval", "--hevval-model-version=seed").assert_outcomes(passed=6)
+    seed = records(project.path)[0]
+    store = HistoryStore(project.path / ".hevval" / "history")
+    start = datetime(2024, 1, 1, tzinfo=timezone.utc)
+    for i in range(TREND_RUNS + 5):
+        store.append(
+            make_record(
+                seed["specs"], model_version=f"old-{i}", started_utc=start + timedelta(days=i)
+            )
+        )
+    project.runpytest(
+        "--hevval", "--hevval-model-version=now", "--hevval-report=json"
+    ).assert_outcomes(passed=6)
+    assert (project.path / ".hevval" / "history" / ".index" / "index").is_file()
+    expected = [f"old-{i}" for i in range(6, TREND_RUNS + 5)] + ["seed", "now"]
+    assert len(expected) == TREND_RUNS + 1
+    for trend in report_trends(project.path).values():
+        assert [point["version"] for point in trend] == expected

@@ -23,6 +23,7 @@ from .compare import (
     regressions,
     specs_of,
 )
+from .index import TREND_RUNS
 from .load import load_side, report_problems
 from .ratchet import (
     DEFAULT_MARGIN,
@@ -67,6 +68,7 @@ __all__ = [
     "MODEL_VERSION_ENV",
     "RULE_FIELDS",
     "SCHEMA_VERSION",
+    "TREND_RUNS",
     "BaselineDecision",
     "Comparison",
     "FieldDelta",

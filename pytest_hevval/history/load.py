@@ -39,9 +39,9 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
         wanted = ref[len(HISTORY_PREFIX) :]
         store = HistoryStore(directory)
         if wanted in ("latest", "previous"):
-            entries = store.entries()
-            position = -1 if wanted == "latest" else -2
-            record = entries[position].record if len(entries) >= -position else None
+            count = 1 if wanted == "latest" else 2
+            newest = store.newest(count)
+            record = newest[-1].record if len(newest) == count else None
         else:
             record = store.find(wanted)
         report_problems(store)

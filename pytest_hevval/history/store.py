@@ -8,12 +8,17 @@ sequential numbers cannot promise.
 Writes are atomic: the JSON goes to a hidden temporary file in the same folder, is fsync'ed,
 then hard-linked to its final name. ``os.link`` fails instead of replacing an existing file, so
 a record is never overwritten; readers never see a half-written ``*.json``.
+
+The baseline and the report's trends come through an index (:mod:`.index`), a cache kept in
+the ``.index`` subfolder: a run reads it, the records it does not know yet and the one record
+it compares with, not every record. :meth:`HistoryStore.entries` still reads them all.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import os
 import re
 import uuid
 from collections.abc import Mapping
@@ -25,6 +30,7 @@ from typing import Any
 from ..defaults import HISTORY_DIR
 from ..files import fsync_directory, publish, read_json, write_temporary
 from ._base import HistoryError
+from .index import TREND_RUNS, HistoryIndex, IndexStale, load_index, micros, save_index
 from .records import migrate_record, parse_utc, validate_record
 
 __all__ = ["DEFAULT_HISTORY_DIR", "HistoryStore", "StoreProblem", "StoredRecord", "slugify"]
@@ -67,9 +73,11 @@ class HistoryStore:
     record), so that a bad file never hides the good ones and never raises.
     """
 
-    def __init__(self, directory: Path | str) -> None:
+    def __init__(self, directory: Path | str, *, trend_runs: int = TREND_RUNS) -> None:
         self.directory = Path(directory)
         self.problems: list[StoreProblem] = []
+        #: Recorded runs kept per signal for :meth:`trends`.
+        self.trend_runs = trend_runs
 
     def __repr__(self) -> str:
         return f"HistoryStore({str(self.directory)!r})"
@@ -96,16 +104,27 @@ class HistoryStore:
                 final = self.directory / f"{stem}_{uuid.uuid4().hex[:8]}.json"
                 if publish(temp, final, replace=False):
                     fsync_directory(self.directory)
-                    return final
+                    break
+            else:
+                raise HistoryError(  # pragma: no cover - 20 uuid4 collisions in a row
+                    "could not find a free file name for the record",
+                    file=str(self.directory),
+                )
         except OSError as exc:
             raise _write_error(self.directory, exc) from None
         finally:
             with contextlib.suppress(FileNotFoundError):
                 temp.unlink()
-        raise HistoryError(  # pragma: no cover - 20 uuid4 collisions in a row
-            "could not find a free file name for the record",
-            file=str(self.directory),
-        )
+        self._index_new(final, len(payload), checked)
+        return final
+
+    def _index_new(self, path: Path, size: int, record: Mapping[str, Any]) -> None:
+        """Add a record just written to an existing index, so that the next run need not read
+        it. Without an index nothing is done: building one is for the runs that read."""
+        index = load_index(self.directory, self.trend_runs)
+        if index is not None and path.name not in index.records:
+            index.add(path.name, size, record)
+            save_index(self.directory, index)
 
     def _write_temp(self, payload: bytes) -> Path:
         try:
@@ -120,34 +139,20 @@ class HistoryStore:
     # -- reading ---------------------------------------------------------------------------
 
     def entries(self) -> list[StoredRecord]:
-        """Every readable record with its path, oldest first; fills :attr:`problems`."""
+        """Every readable record with its path, oldest first; fills :attr:`problems`.
+
+        Reads every file; the other readers below go through the index instead.
+        """
         self.problems = []
         if not self.directory.is_dir():
             return []
         found: list[StoredRecord] = []
-        for path in sorted(self.directory.glob("*.json")):
-            try:
-                document = read_json(path)
-            except OSError as exc:
-                self.problems.append(StoreProblem(path, f"unreadable: {exc.strerror or exc}"))
-                continue
-            except json.JSONDecodeError as exc:
-                problem = (
-                    "empty file (a write may be in progress)"
-                    if not exc.doc.strip()
-                    else f"not valid JSON at line {exc.lineno}: {exc.msg}"
-                )
-                self.problems.append(StoreProblem(path, problem))
-                continue
-            except ValueError as exc:  # not UTF-8, or nested too deep
-                self.problems.append(StoreProblem(path, f"unreadable: {exc}"))
-                continue
-            try:
-                record = migrate_record(document, file=str(path))
-            except HistoryError as exc:
-                self.problems.append(StoreProblem(path, exc.problem))
-                continue
-            found.append(StoredRecord(path, record, parse_utc(record["started_utc"])))
+        for name in sorted(_listing(self.directory)):
+            read = _read(self.directory / name)
+            if isinstance(read, StoredRecord):
+                found.append(read)
+            else:
+                self.problems.append(read.problem)
         found.sort(key=lambda entry: (entry.started_utc, entry.path.name))
         return found
 
@@ -157,27 +162,191 @@ class HistoryStore:
 
     def latest(self, before: datetime | None = None) -> dict[str, Any] | None:
         """The newest record, or the newest one started strictly before ``before``."""
-        entries = self.entries()
-        if before is not None:
-            if before.tzinfo is None:
-                raise HistoryError(
-                    "latest(before=...) needs a timezone-aware datetime",
-                    hint="pass datetime.now(timezone.utc)",
-                )
-            entries = [entry for entry in entries if entry.started_utc < before]
-        return entries[-1].record if entries else None
+        found = self.newest(1, before=before)
+        return found[0].record if found else None
 
     def find(self, version: str) -> dict[str, Any] | None:
         """The newest record of model version ``version``, or ``None``."""
-        matches = [entry for entry in self.entries() if entry.record["model_version"] == version]
-        return matches[-1].record if matches else None
+        found = self.newest(1, version=version)
+        return found[0].record if found else None
+
+    def newest(
+        self, count: int, *, version: str | None = None, before: datetime | None = None
+    ) -> list[StoredRecord]:
+        """Up to ``count`` records, newest first: of model version ``version`` when given,
+        started strictly before ``before`` when given. Only these records are read."""
+        if before is not None and before.tzinfo is None:
+            raise HistoryError(
+                "latest(before=...) needs a timezone-aware datetime",
+                hint="pass datetime.now(timezone.utc)",
+            )
+        limit = None if before is None else micros(before)
+        found = self._pick(self._catalogue(), count, version, limit, strict=True)
+        if found is None:  # a file changed behind the index's back: read every record again
+            found = self._pick(self._catalogue(rebuild=True), count, version, limit, strict=False)
+        return found or []
+
+    def _pick(
+        self,
+        index: HistoryIndex,
+        count: int,
+        version: str | None,
+        limit: int | None,
+        *,
+        strict: bool,
+    ) -> list[StoredRecord] | None:
+        """The newest ``count`` matching records, read and validated; ``None`` when ``strict``
+        and a file does not hold what the index says."""
+        found: list[StoredRecord] = []
+        for entry in reversed(index.ordered()):
+            if len(found) == count:
+                break
+            if version is not None and entry.model_version != version:
+                continue
+            if limit is not None and entry.started_us >= limit:
+                continue
+            read = _read(self.directory / entry.name)
+            if isinstance(read, StoredRecord) and entry.describes(read.record):
+                found.append(read)
+            elif strict:
+                return None
+            elif isinstance(read, _Problem):
+                # Unreadable since the index was rebuilt a moment ago: skipped and named, as
+                # a full read would do. A file changed again in that moment is skipped too.
+                self.problems.append(read.problem)
+        return found
 
     def versions(self) -> list[str]:
         """Distinct recorded model versions, oldest first."""
         seen: dict[str, None] = {}
-        for entry in self.entries():
-            seen.setdefault(entry.record["model_version"], None)
+        for entry in self._catalogue().ordered():
+            seen.setdefault(entry.model_version, None)
         return list(seen)
+
+    def trends(self) -> dict[tuple[str, str], list[dict[str, Any]]]:
+        """The recorded points of each (spec path, signal path), oldest first: the newest
+        :attr:`trend_runs` runs that hold the signal, each as ``{"version", "phi",
+        "lambdas"}``. No record the index already knows is read."""
+        index = self._catalogue()
+        return {
+            key: [
+                {
+                    "version": index.records[point.name].model_version,
+                    "phi": point.phi,
+                    "lambdas": point.lambdas,
+                }
+                for point in trend.points
+            ]
+            for key, trend in index.trends.items()
+        }
+
+    # -- the index ---------------------------------------------------------------------------
+
+    def _catalogue(self, *, rebuild: bool = False) -> HistoryIndex:
+        """The index brought up to date with the folder, saved when it changed; fills
+        :attr:`problems` as a full read would."""
+        self.problems = []
+        if not self.directory.is_dir():
+            return HistoryIndex(self.trend_runs)
+        listing = _listing(self.directory)
+        loaded = None if rebuild else load_index(self.directory, self.trend_runs)
+        try:
+            index, changed = self._update(loaded, listing)
+        except IndexStale:
+            index, changed = self._update(None, listing)
+        if changed and (loaded is not None or index.records or index.unreadable):
+            save_index(self.directory, index)
+        return index
+
+    def _update(
+        self, loaded: HistoryIndex | None, listing: Mapping[str, int | None]
+    ) -> tuple[HistoryIndex, bool]:
+        self.problems = []
+        index = loaded if loaded is not None else HistoryIndex(self.trend_runs)
+        gone = [name for name, size in index.sizes().items() if listing.get(name, -1) != size]
+        if gone:
+            # Older points of the trends that lose some are read before the new records are
+            # added, so that each record is placed once.
+            index.refill(index.forget(gone), self._read_known)
+        changed = loaded is None or bool(gone)
+        for name in sorted(listing):
+            size = listing[name]
+            if name in index.records or name in index.unreadable:
+                continue
+            read = _read(self.directory / name)
+            if isinstance(read, StoredRecord) and size is not None:
+                index.add(name, size, read.record)
+                changed = True
+            elif isinstance(read, _Problem) and read.lasting and size is not None:
+                index.unreadable[name] = (size, read.problem.message)
+                changed = True
+            else:  # to be tried again next time: a permission, a file being replaced
+                self.problems.append(
+                    read.problem
+                    if isinstance(read, _Problem)
+                    else StoreProblem(read.path, "unreadable: its size cannot be read")
+                )
+        self.problems.extend(
+            StoreProblem(self.directory / name, message)
+            for name, (_, message) in index.unreadable.items()
+        )
+        self.problems.sort(key=lambda problem: problem.path)
+        return index, changed
+
+    def _read_known(self, name: str) -> dict[str, Any]:
+        read = _read(self.directory / name)
+        if not isinstance(read, StoredRecord):
+            raise IndexStale(name)
+        return read.record
+
+
+def _listing(directory: Path) -> dict[str, int | None]:
+    """The ``*.json`` names in ``directory`` with their sizes (``None`` where the size cannot be
+    read: such a file is read, and named as a problem). One pass of ``os.scandir``: with
+    thousands of records, pathlib's glob cost more than everything else a run reads."""
+    found: dict[str, int | None] = {}
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return found
+    for entry in entries:
+        if not os.path.normcase(entry.name).endswith(".json"):
+            continue
+        try:
+            found[entry.name] = entry.stat().st_size
+        except OSError:
+            found[entry.name] = None
+    return found
+
+
+@dataclass(frozen=True)
+class _Problem:
+    problem: StoreProblem
+    #: Whether the file's content is the cause, which stays until the file changes; a
+    #: permission or a vanished file is tried again on the next read.
+    lasting: bool
+
+
+def _read(path: Path) -> StoredRecord | _Problem:
+    """The validated record in ``path``, or why there is none."""
+    try:
+        document = read_json(path)
+    except OSError as exc:
+        return _Problem(StoreProblem(path, f"unreadable: {exc.strerror or exc}"), lasting=False)
+    except json.JSONDecodeError as exc:
+        problem = (
+            "empty file (a write may be in progress)"
+            if not exc.doc.strip()
+            else f"not valid JSON at line {exc.lineno}: {exc.msg}"
+        )
+        return _Problem(StoreProblem(path, problem), lasting=True)
+    except ValueError as exc:  # not UTF-8, or nested too deep
+        return _Problem(StoreProblem(path, f"unreadable: {exc}"), lasting=True)
+    try:
+        record = migrate_record(document, file=str(path))
+    except HistoryError as exc:
+        return _Problem(StoreProblem(path, exc.problem), lasting=True)
+    return StoredRecord(path, record, parse_utc(record["started_utc"]))
 
 
 def record_text(record: Mapping[str, Any]) -> str:
