@@ -16,10 +16,10 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     What a run does that depends on its history, step by step, on folders of ``--records``
     records, in one process, ``--repeat`` runs each: ``Publisher.start`` (the baseline of
     ``--hevval-compare=latest``, read), ``Publisher._decorate`` (each signal's trend for the
-    HTML report), the HTML report of those results (``write_reports``: with a history it draws
-    a trend beside each of the 137 signals; the seed's results carry no figures, so this is
-    the trends' share of the report) and ``Publisher._record`` (its own record, written, and
-    added to the index).
+    HTML report), the trend plots the report draws from them (``report.svg.history_svg``, one
+    per signal that has a trend; the rest of the report does not depend on the history, but
+    for the page growing by about 6 KB per trend) and
+    ``Publisher._record`` (its own record, written, and added to the index).
     Each run adds a record, so the folder grows by one per run, as in use; the empty one is
     emptied again. Measured with the index present (every run but the first) and, for the
     sizes in ``--cold``, once without it (the run that builds it by reading every record, as
@@ -28,7 +28,7 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
 ``--part pytest``
     ``pytest --hevval --hevval-report=html`` on the example project with an empty history and
     with ``--pytest-records`` records, alternating run by run (the order swaps each round), in
-    child processes, wall time. The history folder and the report go to temporary folders
+    child processes. The history folder and the report go to temporary folders
     (``--hevval-history-dir``, ``--hevval-report-dir``); the example project is not written
     to. The large history is run once first to build its index (timed and printed apart);
     each run adds its own record, so the large history grows by one per round, as in use.
@@ -36,7 +36,8 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     the CPU time is the steadier of the two. The whole example scores for half a minute, and
     a shared machine varies it by seconds; ``--select hwfet`` runs one spec of it (a few
     seconds), which pays the same history costs (the folder listed, the index read for the
-    trends, the record added to it) with far less noise around them.
+    trends, the record added to it; only the plots of three trends instead of 137) with far
+    less noise around them.
 """
 
 from __future__ import annotations
@@ -63,7 +64,7 @@ from pytest_hevval.files import read_json
 from pytest_hevval.history import HistoryStore, format_utc, migrate_record, slugify
 from pytest_hevval.history.store import record_text
 from pytest_hevval.publish import Publication, Publisher, PublishOptions
-from pytest_hevval.report import write_reports
+from pytest_hevval.report.svg import history_svg
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "example_project"
@@ -162,15 +163,16 @@ def _publisher(history: Path, root: Path) -> Publisher:
     return Publisher(options)
 
 
-_STEPS = ("start", "decorate", "html", "record")
+_STEPS = ("start", "decorate", "plots", "record")
 
 
 def _history_part(
-    publisher: Callable[[], Publisher], results: list[dict[str, Any]], report: Path
+    publisher: Callable[[], Publisher], results: list[dict[str, Any]]
 ) -> tuple[dict[str, tuple[float, float]], int]:
     """What a run does that depends on its history: the baseline (start), the trends
-    (decorate), the HTML report that draws them (html) and its own record, added to the index
-    (record). (wall, CPU) seconds by step, and the number of trend points drawn."""
+    (decorate), the trend plots the HTML report draws from them (plots) and its own record,
+    added to the index (record). (wall, CPU) seconds by step, and the number of trend points
+    drawn."""
     run = publisher()
     spent: dict[str, tuple[float, float]] = {}
     decorated: list[dict[str, Any]] = []
@@ -180,8 +182,11 @@ def _history_part(
             run.start()
         elif step == "decorate":
             decorated = run._decorate(results, {})
-        elif step == "html":
-            write_reports(decorated, {"html"}, report, title="benchmark")
+        elif step == "plots":
+            for spec in decorated:
+                for signal in spec["signals"]:
+                    if signal.get("history"):
+                        history_svg(signal["history"])
         else:
             out = Publication()
             run._record(results, out)
@@ -208,9 +213,9 @@ def _row(label: str, count: int, runs: list[dict[str, tuple[float, float]]], poi
 
 def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
     results = seed["specs"]
-    print(f"\n## history part alone: start, decorate, html, record ({_machine()})")
+    print(f"\n## history part alone: start, decorate, plots, record ({_machine()})")
     print(f"medians of {args.repeat} runs each; wall time, and CPU time of the total")
-    print("| records | index | start | decorate | html | record | total | total CPU | points |")
+    print("| records | index | start | decorate | plots | record | total | total CPU | points |")
     print("|---|---|---|---|---|---|---|---|---|", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -222,11 +227,11 @@ def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
                 return _publisher(folder, root)
 
             if count and count in args.cold:
-                spent, points = _history_part(publisher, results, root / "report")
+                spent, points = _history_part(publisher, results)
                 print(_row("missing: built", count, [spent], points), flush=True)
             runs = []
             for _ in range(args.repeat):
-                spent, points = _history_part(publisher, results, root / "report")
+                spent, points = _history_part(publisher, results)
                 runs.append(spent)
                 if not count:  # an empty history stays empty; the others grow as in use
                     for path in folder.glob("*.json"):
