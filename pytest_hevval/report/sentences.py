@@ -9,7 +9,7 @@ from ..core.measurement import ERROR_CHARACTERISTICS
 from ..core.registry import describe
 from ..core.uncertainty import value_text
 from ..defaults import UNCERTAINTY_SIGMA
-from ..results.campaign import campaign_of, campaign_verdicts
+from ..results.campaign import CampaignVerdict, campaign_of, campaign_verdicts
 from ..results.local import NAMED_GROUPS, LocalFailure
 from ..results.measurement import ErrorCheck
 from ..results.spec_result import Failure, SignalResult, SpecResult
@@ -133,35 +133,36 @@ def where_lines(signal: SignalResult) -> list[str]:
     return lines
 
 
-def outcome_line(results: Sequence[SpecResult]) -> str:
+def outcome_line(
+    results: Sequence[SpecResult], verdicts: Sequence[CampaignVerdict] | None = None
+) -> str:
     """The run's outcome in one line, counted as pytest counts items (a signal, a Φ, a campaign
     gate) and by spec file, so that the terminal, the reports and the docs say one count.
 
     ``14 spec files, 3 pass; 161 items, 40 fail: 38 of 137 signals, 1 of 23 Φ, 1 of 1
     campaign gate``. A recording of a campaign is a spec of its own (its signals and its Φ);
-    its file passes when every recording and the campaign gate do.
+    its file passes when every recording and the campaign gate do. ``verdicts``: the
+    campaigns' verdicts of ``results`` where the caller has them already.
     """
-    verdicts = {v.spec: v for v in campaign_verdicts(results)}
+    by_spec = {v.spec: v for v in (campaign_verdicts(results) if verdicts is None else verdicts)}
     files: dict[str, bool] = {}
     for result in results:
         key = campaign_of(result.spec)
         files[key] = files.get(key, True) and result.passed
-    for key, verdict in verdicts.items():
+    for key, verdict in by_spec.items():
         files[key] = files.get(key, True) and verdict.passed
     signals = [s for r in results for s in r.signals]
     failed_signals = sum(not s.passed for s in signals)
     failed_phi = sum(not r.phi_passed for r in results)
-    failed_gates = sum(not v.passed for v in verdicts.values())
-    items = len(signals) + len(results) + len(verdicts)
+    failed_gates = sum(not v.passed for v in by_spec.values())
+    items = len(signals) + len(results) + len(by_spec)
     failed = failed_signals + failed_phi + failed_gates
     counts = [
         f"{failed_signals} of {len(signals)} signal{'s' * (len(signals) != 1)}",
         f"{failed_phi} of {len(results)} Φ",
     ]
-    if verdicts:
-        counts.append(
-            f"{failed_gates} of {len(verdicts)} campaign gate{'s' * (len(verdicts) != 1)}"
-        )
+    if by_spec:
+        counts.append(f"{failed_gates} of {len(by_spec)} campaign gate{'s' * (len(by_spec) != 1)}")
     passing_files = sum(files.values())
     return (
         f"{len(files)} spec file{'s' * (len(files) != 1)}, {passing_files} pass; "

@@ -217,10 +217,11 @@ def quality_lines(result: SpecResult) -> list[str]:
 def run_summary(results: Sequence[SpecResult], *, details: bool = False) -> list[str]:
     """The run's summary: every spec's tree, then each campaign's verdict."""
     lines = tree_summary(results, details=details)
-    for found in campaign_verdicts(results):
+    verdicts = campaign_verdicts(results)
+    for found in verdicts:
         lines.extend(verdict_lines(found))
     if results:
-        lines.append(outcome_line(results))
+        lines.append(outcome_line(results, verdicts))
     return lines
 
 
