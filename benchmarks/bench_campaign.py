@@ -5,6 +5,7 @@ Run from the project root::
     python benchmarks/bench_campaign.py --recordings 10 --repeat 1    # quick
     python benchmarks/bench_campaign.py                              # 100 recordings, 3 repeats
     python benchmarks/bench_campaign.py --part spread --counts 50,100,200 --repeat 3
+    python benchmarks/bench_campaign.py --part spread --counts 20,40 --rate 100   # 60,000 samples
 
 The data: ``--recordings`` recordings of 10 min at 10 Hz (6,000 samples) with 20 channels, and a
 callable model that reproduces each channel with a lag, a gain and noise. Two ways to score the
@@ -34,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from _env import user_environment
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE / ".data" / "campaign"
@@ -144,7 +146,7 @@ def _pytest_run(spec: Path, extra: list[str]) -> float:
     command = [sys.executable, "-m", "pytest", "--hevval", spec.name, "-q", "-p"]
     command += ["no:cacheprovider", "--hevval-no-history", *extra]
     started = time.perf_counter()
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True)
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, env=user_environment())
     seconds = time.perf_counter() - started
     if done.returncode not in (0, 1) or "campaign" not in done.stdout:
         raise SystemExit(f"{' '.join(command)} failed ({done.returncode}):\n{done.stdout[-3000:]}")
@@ -166,7 +168,7 @@ def spread(counts: list[int], repeat: int) -> None:
         for _ in range(repeat):
             for way, extra in ways.items():
                 times[way].append(_pytest_run(spec, extra))
-        line = f"{count} recordings ({count * (CHANNELS + 2) + 1} items):"
+        line = f"{count} recordings at {RATE_HZ:g} Hz ({count * (CHANNELS + 1) + 1} items):"
         for way, found in times.items():
             median = statistics.median(found)
             ratios = [t / s for t, s in zip(found, times["serial"], strict=True)]
@@ -242,6 +244,8 @@ def u_distribution_timing(calls: int = 300) -> None:
 
 
 def main() -> None:
+    # One benchmark process, one data set: --rate picks it for every part.
+    global ROOT, RATE_HZ
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--recordings", type=int, default=100)
     parser.add_argument("--repeat", type=int, default=3)
@@ -258,7 +262,17 @@ def main() -> None:
         default="50,100,200",
         help="spread: comma-separated campaign sizes (recordings)",
     )
+    parser.add_argument(
+        "--rate",
+        type=float,
+        default=RATE_HZ,
+        help="spread: the recordings' sample rate in Hz (longer scoring per item); data for a "
+        "rate other than 10 Hz goes to its own folder",
+    )
     args = parser.parse_args()
+    if args.rate != RATE_HZ:
+        ROOT = ROOT.with_name(f"campaign-{args.rate:g}hz")
+        RATE_HZ = args.rate
     if args.part == "spread":
         spread([int(c) for c in args.counts.split(",")], args.repeat)
         return

@@ -14,7 +14,6 @@ rounds in it. Goal: the first run within 15 % of the second.
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import statistics
 import subprocess
@@ -23,11 +22,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from _env import user_environment
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(python: str, project: Path, cache: Path, history: Path) -> float:
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    env = user_environment(NUMBA_CACHE_DIR=str(cache))
     env.pop("HEVVAL_KERNEL", None)
     command = [python, "-m", "pytest", "--hevval", "-q", "-p", "no:cacheprovider"]
     command += [f"--hevval-history-dir={history}"]

@@ -59,6 +59,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _env import user_environment
 
 from pytest_hevval.files import read_json
 from pytest_hevval.history import HistoryStore, format_utc, migrate_record, slugify
@@ -94,7 +95,9 @@ def _run_example(history: Path, report: Path, select: str | None = None) -> tupl
     ]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run(command, cwd=EXAMPLE, capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        command, cwd=EXAMPLE, capture_output=True, text=True, check=False, env=user_environment()
+    )
     elapsed = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)

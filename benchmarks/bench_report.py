@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _env import user_environment
 
 from pytest_hevval.report import figure_data, write_reports
 
@@ -110,7 +111,9 @@ def _pytest(
         command += [f"--hevval-report={formats}", f"--hevval-report-dir={report_dir}"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    done = subprocess.run(command, cwd=EXAMPLE, capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        command, cwd=EXAMPLE, capture_output=True, text=True, check=False, env=user_environment()
+    )
     elapsed = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)

@@ -91,7 +91,13 @@ OPTIONS: tuple[Option, ...] = (
         const="0.01",
     ),
     Option("dask", "string", "evaluate specs on this dask.distributed scheduler address", None),
-    Option("workers", "string", "threads per spec for scoring signals (default 2)", None),
+    Option(
+        "workers",
+        "string",
+        "threads per spec for scoring signals (default 2; on an xdist worker, its share of "
+        "the cores)",
+        None,
+    ),
     Option(
         "hash",
         "choice",

@@ -164,6 +164,12 @@ def test_same_outcomes_under_xdist_and_selection(project: pytest.Pytester) -> No
     # --lf reruns the failed recording's items and the failed campaign item, nothing else.
     rerun = project.runpytest("--hevval", "--hevval-no-history", "--lf")
     rerun.assert_outcomes(failed=3)
+    # A gate deselected with -k is not judged under xdist either (its recordings unscored).
+    selected_parallel = project.runpytest(
+        "--hevval", "--hevval-no-history", "-k", "Trip03", "-p", "xdist", "-n", "2"
+    )
+    selected_parallel.assert_outcomes(passed=1, failed=2)  # xdist does not count deselected
+    assert "fleet.hevval.yaml::campaign" not in selected_parallel.stdout.str()
 
 
 def test_recordings_spread_over_workers_and_the_gate_judges_them_all(

@@ -79,6 +79,8 @@ def pytest_sessionstart(session: pytest.Session) -> None:
         state.start()
 
 
+# Last: a gate deselected with -k or -m is not judged, as without xdist.
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(
     session: pytest.Session, config: pytest.Config, items: list[pytest.Item]
 ) -> None:

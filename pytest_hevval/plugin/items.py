@@ -102,8 +102,9 @@ class _SpecItem(pytest.Item):
         self.spec = spec
         self.line = line
         self.evaluation: Evaluation | None = None
-        self.hevval_payload: dict[str, Any] | None = None
-        self.hevval_diagnosis: Mapping[str, Any] | None = None
+        # JSON text for the xdist controller (see HevvalSession.ship).
+        self.hevval_payload: str | None = None
+        self.hevval_diagnosis: str | None = None
 
     @property
     def state(self) -> HevvalSession:

@@ -7,6 +7,8 @@ and reports, once, from the results the workers' reports carry back.
 
 from __future__ import annotations
 
+import json
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,9 +74,14 @@ class HevvalSession:
         return get_option(self.config, name)
 
     def workers(self) -> int | None:
+        """Threads each spec is scored on: ``--hevval-workers``, else, on an xdist worker, its
+        share of the cores (the processes already fill them; more threads only contend)."""
         value = self.option("workers")
         if value in (None, ""):
-            return None
+            if self.is_controller:
+                return None
+            processes = int(self.config.workerinput.get("workercount", 1))  # type: ignore[attr-defined]
+            return max(1, (os.cpu_count() or 1) // max(processes, 1))
         try:
             count = int(value)
         except ValueError:
@@ -187,31 +194,37 @@ class HevvalSession:
         return self.publisher.regressions_for(result, signal)
 
     # -- results crossing from workers ------------------------------------------------------
-    def ship(self, result: SpecResult) -> dict[str, Any] | None:
-        """The spec's result as JSON data the first time a worker reports on the spec; the
-        controller (no xdist) keeps the typed result itself."""
+    def ship(self, result: SpecResult) -> str | None:
+        """The spec's result as JSON text the first time a worker reports on the spec; the
+        controller (no xdist) keeps the typed result itself.
+
+        Text, not a dict: xdist's serializer walks a dict value by value in Python, which for
+        a campaign of thousands of signals cost the workers more than scoring them."""
         if result.spec in self.shipped:
             return None
         self.shipped.add(result.spec)
         if self.is_controller:
             self.results[result.spec] = result
             return None
-        return result.to_dict()
+        return json.dumps(result.to_dict())
 
-    def keep_diagnosis(self, payload: Mapping[str, Any]) -> Mapping[str, Any] | None:
-        """Keep a diagnosis for the reports; JSON data to ship when this is a worker."""
+    def keep_diagnosis(self, payload: Mapping[str, Any]) -> str | None:
+        """Keep a diagnosis for the reports; JSON text to ship when this is a worker."""
         if self.is_controller:
             self.diagnoses.update(diagnosis_panels([payload]))
             return None
-        return payload
+        return json.dumps(payload)
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        # A worker sees its own reports too; only the controller gathers what they carry.
+        if not self.is_controller:
+            return
         payload = getattr(report, "hevval_spec", None)
         if payload is not None:
             self._receive(payload)
         diagnosis = getattr(report, "hevval_diagnosis", None)
         if diagnosis is not None:
-            self.diagnoses.update(diagnosis_panels([diagnosis]))
+            self.diagnoses.update(diagnosis_panels([json.loads(diagnosis)]))
         for recording in getattr(report, "hevval_campaign", None) or ():
             self._receive(recording)
 
@@ -247,8 +260,9 @@ class HevvalSession:
             pass_rate, failure = judge_campaign(outcomes)
             _log_gate(session, gate, pass_rate, failure)
 
-    def _receive(self, payload: Mapping[str, Any]) -> None:
-        self.results[payload["spec"]] = SpecResult.from_dict(payload)
+    def _receive(self, payload: str) -> None:
+        result = SpecResult.from_dict(json.loads(payload))
+        self.results[result.spec] = result
 
     def spec_results(self) -> list[SpecResult]:
         return [self.results[k] for k in sorted(self.results)]

@@ -176,8 +176,9 @@ def evaluate_on_dask(
     progress
         Called with the number of specs completed so far, each time one completes.
     threads_per_spec
-        Threads the engine scores one spec's signals on; ``None`` keeps the engine's default
-        (up to two), which also keeps results bit-identical to a local run.
+        Threads the engine scores one spec's signals on; ``None``: one on a ``"local"``
+        cluster (a worker process per core), else the engine's default (up to two). The
+        results do not depend on it.
     data_hash
         How data files are identified in the results: ``"fast"`` or ``"sha256"``.
     intervals
@@ -203,6 +204,10 @@ def evaluate_on_dask(
     if not paths:
         return []
     distributed = _distributed()
+    if address == LOCAL and threads_per_spec is None:
+        # One process per core already fills this machine; a second thread per spec only
+        # contends with the other worker (the results are the same on any thread count).
+        threads_per_spec = 1
     # evaluate_spec_file's arguments after the spec's path, the same for every task.
     task_arguments = (str(rootdir), figures, threads_per_spec, data_hash, intervals)
     if address == LOCAL:
