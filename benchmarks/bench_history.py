@@ -70,7 +70,17 @@ from pytest_hevval.report.svg import history_svg
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "example_project"
 SEED_DIR = Path(__file__).resolve().parent / ".data" / "history"
-PYTEST = [sys.executable, "-m", "pytest", "--hevval", "-q", "-p", "no:cacheprovider"]
+# Every run is recorded, as in CI (a local run records nothing unless asked).
+PYTEST = [
+    sys.executable,
+    "-m",
+    "pytest",
+    "--hevval",
+    "--hevval-history",
+    "-q",
+    "-p",
+    "no:cacheprovider",
+]
 START = datetime(2025, 1, 1, tzinfo=timezone.utc)
 
 
