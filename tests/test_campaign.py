@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import sys
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -196,6 +197,22 @@ def test_recordings_spread_over_workers_and_the_gate_judges_them_all(
     xml = (project.path / "out.xml").read_text()
     assert 'name="campaign"' in xml
     assert "pass_rate" in xml
+    # Each recording's items are judged by one of them on its worker and reported by the
+    # controller: the same items, outcomes, texts and properties as a serial run.
+    project.runpytest("--hevval", "--hevval-no-history", "--junitxml=serial.xml")
+
+    def cases(name: str) -> dict[str, dict[str, str | None]]:
+        tree = ET.parse(project.path / name)
+        return {
+            f"{c.get('classname')}::{c.get('name')}": {
+                **{p.get("name", ""): p.get("value") for p in c.iter("property")},
+                "failure": next((f.get("message") for f in c.iter("failure")), None),
+            }
+            for c in tree.iter("testcase")
+        }
+
+    assert len(cases("serial.xml")) == 13
+    assert cases("serial.xml") == cases("out.xml")
 
 
 def test_one_count_in_pytest_the_summary_and_the_reports(project: pytest.Pytester) -> None:

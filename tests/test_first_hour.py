@@ -72,7 +72,7 @@ def test_one_bad_spec_prints_its_error_once(pytester: pytest.Pytester) -> None:
     text = result.stdout.str()
     assert text.count("the model asked for the column 'heater_kw'") == 1
     assert "During handling of the above exception" not in text
-    assert text.count("not scored: the error of trip.hevval.yaml::v (above) stops this spec") == 2
+    assert text.count("not scored: the error of trip.hevval.yaml::v stops this spec") == 2
 
 
 def test_hevval_run_names_the_model_line_too(pytester: pytest.Pytester) -> None:

@@ -298,12 +298,31 @@ def test_same_outcomes_under_xdist(project: pytest.Pytester, fault: str | None) 
     def cases(name: str) -> dict[str, dict[str, str | None]]:
         tree = ET.parse(project.path / name)
         return {
-            c.get("name", ""): {p.get("name", ""): p.get("value") for p in c.iter("property")}
+            c.get("name", ""): {
+                **{p.get("name", ""): p.get("value") for p in c.iter("property")},
+                "failure": next((f.get("message") for f in c.iter("failure")), None),
+            }
             for c in tree.iter("testcase")
         }
 
+    # Under xdist one item of the spec judges the others and the controller reports them
+    # (items.carry_spec_items): every item still has its own outcome, text and properties.
     assert cases("serial.xml") == cases("par.xml")
     parallel.stdout.fnmatch_lines(["*hevval validation summary*", "pack: Φ = *"])
+
+
+def test_a_data_error_under_xdist_is_every_items_error_said_once(
+    project: pytest.Pytester,
+) -> None:
+    write_data(project.path)
+    (project.path / "data" / "ref.csv").unlink()
+    serial = project.runpytest("--hevval").stdout.str()
+    result = project.runpytest("--hevval", "-p", "xdist", "-n", "2")
+    result.assert_outcomes(errors=6)
+    output = result.stdout.str()
+    assert output.count("ref.csv: file not found") == serial.count("ref.csv: file not found") == 1
+    assert output.count("not scored: the error of") == serial.count("not scored: the error of")
+    _no_plugin_traceback(output)
 
 
 def test_cli_run_json(project: pytest.Pytester) -> None:

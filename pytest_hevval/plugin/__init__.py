@@ -70,12 +70,17 @@ def pytest_runtest_makereport(
         campaign = getattr(item, "hevval_campaign", None)
         if campaign:
             report.hevval_campaign = campaign  # type: ignore[attr-defined]
+    carried = getattr(item, "hevval_carried", None)
+    if carried is not None and (call.when == "call" or report.failed):
+        report.hevval_carried = carried  # type: ignore[attr-defined]
+        item.hevval_carried = None  # type: ignore[attr-defined]
     return report
 
 
 def pytest_sessionstart(session: pytest.Session) -> None:
     state = state_of(session.config)
     if state is not None:
+        state.session = session
         state.start()
 
 
@@ -86,9 +91,18 @@ def pytest_collection_modifyitems(
 ) -> None:
     state = state_of(config)
     if state is not None and not state.is_controller:
-        from .items import defer_campaign_gates
+        from .items import carry_spec_items, defer_campaign_gates
 
         items[:] = defer_campaign_gates(items, state)
+        if config.workerinput.get(_CARRY):  # type: ignore[attr-defined]
+            carry_spec_items(items)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> bool | None:
+    """An item that another item of its spec judges and reports is not run on its own
+    (``items.carry_spec_items``; read as an attribute, so other test runs import nothing)."""
+    return True if getattr(item, "carried_by", None) is not None else None
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -110,6 +124,19 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
     state = state_of(config)
     if state is not None and state.is_controller:
         state.summarise(terminalreporter)
+
+
+#: Set in a worker's input when its spec items reach it whole and in collection order (the
+#: plugin's scheduler), so one item per spec can judge and report the others.
+_CARRY = "hevval_carry_spec_items"
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: Any) -> None:
+    # A worker's own --dist is always "no": the controller says which scheduler it runs.
+    config = node.config
+    if state_of(config) is not None:
+        node.workerinput[_CARRY] = config.getoption("dist", "load") == "load"
 
 
 @pytest.hookimpl(optionalhook=True)

@@ -10,6 +10,7 @@ a FAILURE.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ __all__ = [
     "Recording",
     "SignalItem",
     "SpecFile",
+    "carry_spec_items",
     "defer_campaign_gates",
     "judge_campaign",
 ]
@@ -105,6 +107,11 @@ class _SpecItem(pytest.Item):
         # JSON text for the xdist controller (see HevvalSession.ship).
         self.hevval_payload: str | None = None
         self.hevval_diagnosis: str | None = None
+        #: On an xdist worker: the other items of this spec, judged with this one and reported
+        #: by the controller from what this item's report carries (:func:`carry_spec_items`).
+        self.carried: list[_SpecItem] = []
+        self.carried_by: _SpecItem | None = None
+        self.hevval_carried: str | None = None
 
     @property
     def state(self) -> HevvalSession:
@@ -115,10 +122,46 @@ class _SpecItem(pytest.Item):
             self.evaluation = self.state.evaluate(self.spec)
             return
         except HevvalError as exc:
-            message = self.state.error_once(self.spec.key, self.nodeid, exc)
+            # In collection order, so that the spec's first item shows the error, as when
+            # every item runs on its own (the items this one carries come before it).
+            texts = {
+                item.nodeid: self.state.error_once(self.spec.key, item.nodeid, exc)
+                for item in [*self.carried, self]
+            }
+            message = texts[self.nodeid]
+            if self.carried:
+                self.hevval_carried = json.dumps(
+                    [
+                        outcome_of(item, "failed", "setup", texts[item.nodeid])
+                        for item in self.carried
+                    ]
+                )
         # An ERROR (setup), shown as the message alone: the data, not the code, is at fault.
         # Outside the except block, so that pytest does not print it twice as a chain.
         pytest.fail(message, pytrace=False)
+
+    def judge(self) -> None:
+        """Pass, or raise :class:`ThresholdMissed` with the report text."""
+        raise NotImplementedError
+
+    def runtest(self) -> None:
+        missed: ThresholdMissed | None = None
+        try:
+            self.judge()
+        except ThresholdMissed as exc:
+            missed = exc
+        if self.carried:
+            outcomes = []
+            for item in self.carried:
+                item.evaluation = self.evaluation
+                try:
+                    item.judge()
+                    outcomes.append(outcome_of(item, "passed", "call", None))
+                except ThresholdMissed as exc:
+                    outcomes.append(outcome_of(item, "failed", "call", str(exc)))
+            self.hevval_carried = json.dumps(outcomes)
+        if missed is not None:
+            raise missed
 
     @property
     def result(self) -> SpecResult:
@@ -150,7 +193,7 @@ class _SpecItem(pytest.Item):
 class SignalItem(_SpecItem):
     """One validation signal γ(i, j, k): passes when every gated λ meets its threshold."""
 
-    def runtest(self) -> None:
+    def judge(self) -> None:
         result = self.result
         signal = result.signal(self.name)
         self._record(signal)
@@ -177,7 +220,7 @@ class SignalItem(_SpecItem):
 class PhiItem(_SpecItem):
     """The spec's global validation metric Φ against ``min_phi``."""
 
-    def runtest(self) -> None:
+    def judge(self) -> None:
         result = self.result
         self._record(None)
         if not result.phi_passed:
@@ -238,6 +281,44 @@ def judge_campaign(
         )
     found = verdict(results)
     return found.pass_rate, None if found.passed else "\n".join(verdict_lines(found))
+
+
+def outcome_of(item: _SpecItem, outcome: str, when: str, text: str | None) -> dict[str, Any]:
+    """What the controller needs to report ``item`` as pytest would have (see
+    ``session.log_outcome``): JSON data."""
+    fspath, lineno, domain = item.location
+    return {
+        "nodeid": item.nodeid,
+        "location": [fspath, lineno, domain],
+        "keywords": sorted(item.keywords),
+        "outcome": outcome,
+        "when": when,
+        "longrepr": text,
+        "user_properties": [[str(k), str(v)] for k, v in item.user_properties],
+        "diagnosis": item.hevval_diagnosis,
+    }
+
+
+def carry_spec_items(items: list[pytest.Item]) -> None:
+    """On an xdist worker: the last selected item of each spec (or campaign recording) judges
+    the spec's other items with it, and the controller reports them from its report; the
+    others are passed over (``pytest_runtest_protocol``).
+
+    A spec's items are judged from one evaluation, so running each as its own pytest item only
+    adds pytest's work per item, and under xdist three reports per item crossing to the
+    controller: for a campaign of thousands of signals, more than the scoring itself. They
+    stay in the collection, so that counts, progress and the scheduler see every item. The
+    carrier is a spec's last item: the items it carries come before it in the worker's queue,
+    and pytest's setup of the spec's collectors is made and torn down around it alone.
+    """
+    groups: dict[str, list[_SpecItem]] = {}
+    for item in items:
+        if isinstance(item, (SignalItem, PhiItem)):
+            groups.setdefault(item.spec.key, []).append(item)
+    for *carried, carrier in groups.values():
+        carrier.carried = carried
+        for item in carried:
+            item.carried_by = carrier
 
 
 def defer_campaign_gates(items: list[pytest.Item], state: HevvalSession) -> list[pytest.Item]:

@@ -12,9 +12,12 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 import pytest
+from _pytest._code.code import TerminalRepr
+from _pytest._io import TerminalWriter
 
 from ..errors import HevvalError
 from ..options import get_option
@@ -54,6 +57,11 @@ class HevvalSession:
     error_shown: dict[str, str] = field(default_factory=dict)
     #: Campaign gate items the xdist workers left to this controller, by node id.
     gates: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Outcomes of items a worker judged with another one (``items.carry_spec_items``), by the
+    #: node id of the item whose report carried them, with the worker; reported once that
+    #: item's reports are in.
+    carried: dict[str, tuple[list[dict[str, Any]], Any]] = field(default_factory=dict)
+    session: pytest.Session | None = None
     _publisher: Publisher | None = None
     _run_options: RunOptions | None = None
 
@@ -174,7 +182,7 @@ class HevvalSession:
         first = self.error_shown.setdefault(key, nodeid)
         if first == nodeid:
             return str(error)
-        return f"not scored: the error of {first} (above) stops this spec"
+        return f"not scored: the error of {first} stops this spec"
 
     def diagnosis_for(
         self, evaluation: Evaluation | None, signal: SignalResult
@@ -227,6 +235,19 @@ class HevvalSession:
             self.diagnoses.update(diagnosis_panels([json.loads(diagnosis)]))
         for recording in getattr(report, "hevval_campaign", None) or ():
             self._receive(recording)
+        carried = getattr(report, "hevval_carried", None)
+        if carried is not None:
+            self.carried[report.nodeid] = (json.loads(carried), getattr(report, "node", None))
+
+    def pytest_runtest_logfinish(self, nodeid: str) -> None:
+        found = self.carried.pop(nodeid, None)
+        if found is None or self.session is None:
+            return
+        outcomes, node = found
+        for outcome in outcomes:
+            if outcome.get("diagnosis"):
+                self.diagnoses.update(diagnosis_panels([json.loads(outcome["diagnosis"])]))
+            log_outcome(self.session, outcome, node)
 
     # -- campaign gates under xdist ------------------------------------------------------------
     def defer(self, gates: list[dict[str, Any]]) -> None:
@@ -307,30 +328,65 @@ def _log_gate(
 ) -> None:
     """Report a campaign gate's outcome as pytest reports a run item: the terminal, JUnit XML
     and ``--lf`` see it like any other."""
+    log_outcome(
+        session,
+        {
+            "nodeid": gate["nodeid"],
+            "location": gate["location"],
+            "keywords": gate["keywords"],
+            "outcome": "passed" if failure is None else "failed",
+            "when": "call",
+            "longrepr": failure,
+            "user_properties": [] if pass_rate is None else [["pass_rate", f"{pass_rate:.6f}"]],
+        },
+    )
+
+
+@dataclass(eq=False)
+class _SetupError(TerminalRepr):
+    """A setup error's text as pytest reports a ``pytest.fail`` in setup: the text, and the
+    crash line ``Failed: …`` that the short summary and JUnit XML quote."""
+
+    text: str
+
+    @property
+    def reprcrash(self) -> SimpleNamespace:
+        return SimpleNamespace(message=f"Failed: {self.text}", path=None, lineno=None)
+
+    def toterminal(self, tw: TerminalWriter) -> None:
+        tw.line(self.text)
+
+
+def log_outcome(session: pytest.Session, outcome: Mapping[str, Any], node: Any = None) -> None:
+    """Report an item run elsewhere (:func:`pytest_hevval.plugin.items.outcome_of`) as pytest
+    reports a run item, phase by phase; ``node`` is the xdist worker that judged it."""
     hook = session.config.hook
-    nodeid = str(gate["nodeid"])
-    fspath, lineno, domain = gate["location"]
+    nodeid = str(outcome["nodeid"])
+    fspath, lineno, domain = outcome["location"]
     location = (str(fspath), lineno, str(domain))
-    keywords: dict[str, Literal[1]] = {str(word): 1 for word in gate["keywords"]}
+    keywords: dict[str, Literal[1]] = {str(word): 1 for word in outcome["keywords"]}
+    failed_when = outcome["when"] if outcome["outcome"] == "failed" else None
+    properties = [(str(k), str(v)) for k, v in outcome["user_properties"]]
     hook.pytest_runtest_logstart(nodeid=nodeid, location=location)
-    phases: tuple[Literal["setup", "call", "teardown"], ...] = ("setup", "call", "teardown")
+    # A setup that fails has no call phase, as in pytest's own run of an item.
+    phases: tuple[Literal["setup", "call", "teardown"], ...] = (
+        ("setup", "teardown") if failed_when == "setup" else ("setup", "call", "teardown")
+    )
     for when in phases:
-        failed = when == "call" and failure is not None
-        hook.pytest_runtest_logreport(
-            report=pytest.TestReport(
-                nodeid,
-                location,
-                keywords,
-                "failed" if failed else "passed",
-                failure if failed else None,
-                when,
-                user_properties=(
-                    [("pass_rate", f"{pass_rate:.6f}")]
-                    if when == "call" and pass_rate is not None
-                    else []
-                ),
-            )
+        failed = when == failed_when
+        text = outcome["longrepr"]
+        report = pytest.TestReport(
+            nodeid,
+            location,
+            keywords,
+            "failed" if failed else "passed",
+            (_SetupError(text) if when == "setup" else text) if failed else None,
+            when,
+            user_properties=properties if when != "setup" else [],
         )
+        if node is not None:
+            report.node = node  # type: ignore[attr-defined]
+        hook.pytest_runtest_logreport(report=report)
     hook.pytest_runtest_logfinish(nodeid=nodeid, location=location)
-    if failure is not None:
+    if failed_when is not None:
         session.testsfailed += 1
