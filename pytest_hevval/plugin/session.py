@@ -387,6 +387,5 @@ def log_outcome(session: pytest.Session, outcome: Mapping[str, Any], node: Any =
         if node is not None:
             report.node = node  # type: ignore[attr-defined]
         hook.pytest_runtest_logreport(report=report)
+    # pytest's session counts the failure from its report (testsfailed, --maxfail).
     hook.pytest_runtest_logfinish(nodeid=nodeid, location=location)
-    if failed_when is not None:
-        session.testsfailed += 1
