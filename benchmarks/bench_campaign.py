@@ -28,14 +28,13 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from _env import user_environment
+from _env import timed_run
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE / ".data" / "campaign"
@@ -145,9 +144,7 @@ def _pytest_run(spec: Path, extra: list[str]) -> float:
     """Wall seconds of one whole ``pytest --hevval`` process over ``spec``, as a user runs it."""
     command = [sys.executable, "-m", "pytest", "--hevval", spec.name, "-q", "-p"]
     command += ["no:cacheprovider", "--hevval-no-history", *extra]
-    started = time.perf_counter()
-    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, env=user_environment())
-    seconds = time.perf_counter() - started
+    seconds, _, done = timed_run(command, ROOT)
     if done.returncode not in (0, 1) or "campaign" not in done.stdout:
         raise SystemExit(f"{' '.join(command)} failed ({done.returncode}):\n{done.stdout[-3000:]}")
     return seconds

@@ -22,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _env import user_environment
+from _env import timed_run, user_environment
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,9 +32,7 @@ def _run(python: str, project: Path, cache: Path, history: Path) -> float:
     env.pop("HEVVAL_KERNEL", None)
     command = [python, "-m", "pytest", "--hevval", "-q", "-p", "no:cacheprovider"]
     command += [f"--hevval-history-dir={history}"]
-    started = time.perf_counter()
-    done = subprocess.run(command, cwd=project, env=env, capture_output=True, text=True)
-    seconds = time.perf_counter() - started
+    seconds, _, done = timed_run(command, project, env)
     if done.returncode not in (0, 1):
         raise SystemExit(f"the example failed to run ({done.returncode}):\n{done.stdout[-2000:]}")
     return seconds

@@ -45,10 +45,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import resource
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -59,7 +57,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _env import user_environment
+from _env import timed_run
 
 from pytest_hevval.files import read_json
 from pytest_hevval.history import HistoryStore, format_utc, migrate_record, slugify
@@ -103,14 +101,7 @@ def _run_example(history: Path, report: Path, select: str | None = None) -> tupl
         f"--hevval-report-dir={report}",
         *(["-k", select] if select else []),
     ]
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    done = subprocess.run(
-        command, cwd=EXAMPLE, capture_output=True, text=True, check=False, env=user_environment()
-    )
-    elapsed = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    elapsed, cpu, done = timed_run(command, EXAMPLE)
     # The example fails some items on purpose (exit 1); anything else is a broken run.
     if done.returncode not in (0, 1) or "report: " not in done.stdout:
         sys.exit(f"the example run failed ({done.returncode}):\n{done.stdout[-3000:]}")

@@ -27,9 +27,7 @@ import argparse
 import json
 import os
 import re
-import resource
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -37,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _env import user_environment
+from _env import timed_run
 
 from pytest_hevval.report import figure_data, write_reports
 
@@ -109,14 +107,7 @@ def _pytest(
     ]
     if report_dir is not None:
         command += [f"--hevval-report={formats}", f"--hevval-report-dir={report_dir}"]
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    done = subprocess.run(
-        command, cwd=EXAMPLE, capture_output=True, text=True, check=False, env=user_environment()
-    )
-    elapsed = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    elapsed, cpu, done = timed_run(command, EXAMPLE)
     # The example fails some items on purpose (exit 1); anything else is a broken run.
     if done.returncode not in (0, 1):
         raise SystemExit(f"pytest exited {done.returncode}:\n{done.stdout[-3000:]}{done.stderr}")
