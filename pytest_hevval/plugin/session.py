@@ -245,8 +245,6 @@ class HevvalSession:
             return
         outcomes, node = found
         for outcome in outcomes:
-            if outcome.get("diagnosis"):
-                self.diagnoses.update(diagnosis_panels([json.loads(outcome["diagnosis"])]))
             log_outcome(self.session, outcome, node)
 
     # -- campaign gates under xdist ------------------------------------------------------------
@@ -386,6 +384,9 @@ def log_outcome(session: pytest.Session, outcome: Mapping[str, Any], node: Any =
         )
         if node is not None:
             report.node = node  # type: ignore[attr-defined]
+        if when == "call" and outcome.get("diagnosis"):
+            # Gathered from the report, as from a worker's (pytest_runtest_logreport).
+            report.hevval_diagnosis = outcome["diagnosis"]  # type: ignore[attr-defined]
         hook.pytest_runtest_logreport(report=report)
     # pytest's session counts the failure from its report (testsfailed, --maxfail).
     hook.pytest_runtest_logfinish(nodeid=nodeid, location=location)
