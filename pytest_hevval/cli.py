@@ -62,13 +62,14 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 def _run(args: argparse.Namespace) -> int:
     from . import __version__
     from .core.kernel import compile_note, prepare
+    from .data.remote import relative_to
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
     from .results.campaign import campaign_verdicts
     from .scoring.cluster import error_payload
     from .scoring.engine import Evaluation
-    from .scoring.run import RunOptions, relative_to, run_specs
+    from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
 
     prepare()

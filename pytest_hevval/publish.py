@@ -183,16 +183,20 @@ class Publisher:
         results: Sequence[SpecResult],
         specs: Mapping[str, Spec],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
+        dicts: Sequence[dict[str, Any]] | None = None,
     ) -> Publication:
         """Reports, comparison, ratchet and history record of a run's results, in that order.
 
         ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
-        (spec, signal), as :func:`diagnosis_panels` gives them.
+        (spec, signal), as :func:`diagnosis_panels` gives them; ``dicts`` the results' JSON
+        data where the caller holds it already (``SpecResult.to_dict`` of each, in order).
         """
         out = Publication()
         if not results:
             return out
-        dicts = [result.to_dict() for result in results]
+        if dicts is None:
+            dicts = [result.to_dict() for result in results]
+        dicts = list(dicts)
         self._write_reports(dicts, diagnoses, out)
         self._compare(dicts, out)
         self._ratchet(dicts, specs, out)
@@ -200,7 +204,7 @@ class Publisher:
         return out
 
     def _relative(self, path: Path | str) -> str:
-        from .scoring.run import relative_to
+        from .data.remote import relative_to
 
         return relative_to(self.options.rootdir, str(path))
 

@@ -26,7 +26,6 @@ from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
-from scipy import linalg as sla
 
 from ..errors import DegenerateSignalError, SpecError
 from .importance import MAX_TERMS, explained_sums, shapley_from_sums
@@ -862,6 +861,8 @@ def _independent(
     standardised[0] = 1.0 / math.sqrt(ng)
     for i, s in enumerate(usable):
         standardised[i + 1] = (s.grid - s.mean) / s.std
+    from scipy import linalg as sla  # a tenth of a second to import; scoring never needs it
+
     gram = np.einsum("it,jt->ij", standardised, standardised)
     factor_rows = np.zeros_like(gram)
     factor_rows[0, 0] = math.sqrt(gram[0, 0])

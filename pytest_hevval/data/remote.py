@@ -58,6 +58,16 @@ def is_url(path: str | os.PathLike[str]) -> bool:
     return bool(_URL.match(os.fspath(path)))
 
 
+def relative_to(rootdir: str | os.PathLike[str], path: str) -> str:
+    """``path`` relative to ``rootdir`` (URLs and paths on another drive unchanged)."""
+    if is_url(path):
+        return path
+    try:
+        return os.path.relpath(path, rootdir)
+    except ValueError:
+        return path
+
+
 def _fsspec() -> Any:
     try:
         import fsspec

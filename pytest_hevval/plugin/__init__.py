@@ -145,8 +145,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
     data file is read once and a campaign's recordings spread over the workers."""
     if state_of(config) is None or config.getoption("dist", "load") != "load":
         return None
-    from xdist.scheduler import LoadScopeScheduling
+    from .scheduling import SpecScheduling
 
-    # Its scope of a node id is all but the last ``::`` part: the spec file for a spec's items,
-    # ``file::recording`` for a campaign recording's.
-    return LoadScopeScheduling(config, log)
+    return SpecScheduling(config, log)

@@ -11,7 +11,7 @@ a FAILURE.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ from ..results.spec_result import SignalResult, SpecResult
 from ..scoring.engine import Evaluation
 from ..spec.load import load_spec
 from ..spec.model import Spec
-from .session import HevvalSession
+from .session import HevvalSession, judge_campaign
 from .stash import session_key
 
 __all__ = [
@@ -36,7 +36,6 @@ __all__ = [
     "SpecFile",
     "carry_spec_items",
     "defer_campaign_gates",
-    "judge_campaign",
 ]
 
 
@@ -264,23 +263,6 @@ class CampaignItem(_SpecItem):
             self.user_properties.append(("pass_rate", f"{pass_rate:.6f}"))
         if failure is not None:
             raise ThresholdMissed(failure)
-
-
-def judge_campaign(
-    outcomes: Mapping[str, SpecResult | HevvalError],
-) -> tuple[float | None, str | None]:
-    """A campaign gate's (pass rate, failure text or None) from its recordings' outcomes, by
-    recording: what its item reports, in this process or, under xdist, on the controller."""
-    from ..report.terminal import verdict_lines
-    from ..results.campaign import verdict
-
-    results = [o for o in outcomes.values() if isinstance(o, SpecResult)]
-    if not results:
-        return None, "no recording of the campaign could be scored:\n" + "\n".join(
-            f"  {name}: {error}" for name, error in outcomes.items()
-        )
-    found = verdict(results)
-    return found.pass_rate, None if found.passed else "\n".join(verdict_lines(found))
 
 
 def outcome_of(item: _SpecItem, outcome: str, when: str, text: str | None) -> dict[str, Any]:

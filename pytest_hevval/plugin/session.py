@@ -7,30 +7,35 @@ and reports, once, from the results the workers' reports carry back.
 
 from __future__ import annotations
 
+import atexit
+import gc
 import json
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import pytest
 from _pytest._code.code import TerminalRepr
 from _pytest._io import TerminalWriter
 
+from ..data.remote import relative_to
 from ..errors import HevvalError
 from ..options import get_option
 from ..publish import Publisher, PublishOptions, diagnosis_panels
-from ..report.diagnosis import target_payload
 from ..report.terminal import run_summary
 from ..results.spec_result import SignalResult, SpecResult
-from ..scoring.diagnosis import diagnosis_target
-from ..scoring.engine import DataCache, Evaluation
-from ..scoring.run import RunOptions, relative_to, run_specs
 from ..spec.model import Spec
 
-__all__ = ["HevvalSession"]
+if TYPE_CHECKING:
+    # Scoring brings numpy's and scipy's numerics: a controller that only reports never
+    # imports them, so it starts its xdist workers sooner.
+    from ..scoring.engine import DataCache, Evaluation
+    from ..scoring.run import RunOptions
+
+__all__ = ["HevvalSession", "judge_campaign"]
 
 #: The key of the campaign gates in an xdist worker's output to the controller.
 _GATES = "hevval_campaign_gates"
@@ -40,12 +45,14 @@ _GATES = "hevval_campaign_gates"
 @dataclass(eq=False)
 class HevvalSession:
     config: pytest.Config
-    cache: DataCache = field(default_factory=DataCache)
     evaluations: dict[str, Evaluation | HevvalError] = field(default_factory=dict)
     #: Specs collected by this process, by path relative to the rootdir.
     specs: dict[str, Spec] = field(default_factory=dict)
     #: Spec results seen by this process (the controller receives them from worker reports).
     results: dict[str, SpecResult] = field(default_factory=dict)
+    #: The JSON data of the results received from workers, by spec: what the reports and the
+    #: history record take, so the controller does not turn each result back into it.
+    received: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: Spec results already attached to a report by this process.
     shipped: set[str] = field(default_factory=set)
     #: Diagnosis payloads by (spec, signal), for the reports (see publish.diagnosis_panels).
@@ -64,6 +71,16 @@ class HevvalSession:
     session: pytest.Session | None = None
     _publisher: Publisher | None = None
     _run_options: RunOptions | None = None
+    _cache: DataCache | None = None
+
+    @property
+    def cache(self) -> DataCache:
+        """Reads each data file once for this process (created when first needed)."""
+        if self._cache is None:
+            from ..scoring.engine import DataCache
+
+            self._cache = DataCache()
+        return self._cache
 
     # -- options ----------------------------------------------------------------------------
     @property
@@ -124,6 +141,7 @@ class HevvalSession:
         from ..core.kernel import prepare
 
         prepare()
+        _freeze_objects_at_exit()
         try:
             self.notes.extend(self.publisher.start(controller=self.is_controller))
         except HevvalError as exc:
@@ -138,6 +156,8 @@ class HevvalSession:
     def run_options(self) -> RunOptions:
         """The scoring settings of this run, read from the options once."""
         if self._run_options is None:
+            from ..scoring.run import RunOptions
+
             self._run_options = RunOptions(
                 rootdir=self.rootdir,
                 figures="html" in self.publisher.formats,
@@ -156,6 +176,8 @@ class HevvalSession:
         if not options.dask or not self.specs:
             return
         specs = list(self.specs.values())
+        from ..scoring.run import run_specs
+
         try:
             outcomes = run_specs(specs, options)
         except HevvalError as exc:
@@ -170,6 +192,8 @@ class HevvalSession:
         if key not in self.evaluations and options.dask:
             self.prefetch_on_dask()
         if key not in self.evaluations:
+            from ..scoring.run import run_specs
+
             (self.evaluations[key],) = run_specs([spec], options, cache=self.cache)
         outcome = self.evaluations[key]
         if isinstance(outcome, HevvalError):
@@ -191,6 +215,10 @@ class HevvalSession:
         mode = self.option("diagnose")
         if evaluation is None or mode == "off" or (mode == "failed" and signal.passed):
             return None
+        # Imported here: the diagnosis brings scipy.linalg, which a run without one never needs.
+        from ..report.diagnosis import target_payload
+        from ..scoring.diagnosis import diagnosis_target
+
         target = diagnosis_target(signal)
         found = evaluation.diagnoses.get(target)
         if found is None:
@@ -263,7 +291,6 @@ class HevvalSession:
         as its item's outcome. A recording no worker scored (deselected with -k, or its data
         failed) is scored here, as the gate item does without xdist."""
         from ..spec.load import load_specs
-        from .items import judge_campaign
 
         for gate in self.gates.values():
             outcomes: dict[str, SpecResult | HevvalError] = {}
@@ -280,8 +307,10 @@ class HevvalSession:
             _log_gate(session, gate, pass_rate, failure)
 
     def _receive(self, payload: str) -> None:
-        result = SpecResult.from_dict(json.loads(payload))
+        data = json.loads(payload)
+        result = SpecResult.from_dict(data)
         self.results[result.spec] = result
+        self.received[result.spec] = data
 
     def spec_results(self) -> list[SpecResult]:
         return [self.results[k] for k in sorted(self.results)]
@@ -298,7 +327,9 @@ class HevvalSession:
         if self.gates and not (session.shouldfail or session.shouldstop):
             self.judge_gates(session)
 
-        published = self.publisher.publish(self.spec_results(), self.specs, self.diagnoses)
+        results = self.spec_results()
+        dicts = [self.received.get(r.spec) or r.to_dict() for r in results]
+        published = self.publisher.publish(results, self.specs, self.diagnoses, dicts)
         self.notes.extend(published.notes)
         kernel_note = compile_note()
         if kernel_note is not None:
@@ -319,6 +350,41 @@ class HevvalSession:
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)
+
+
+def judge_campaign(
+    outcomes: Mapping[str, SpecResult | HevvalError],
+) -> tuple[float | None, str | None]:
+    """A campaign gate's (pass rate, failure text or None) from its recordings' outcomes, by
+    recording: what its item reports, in this process or, under xdist, on the controller."""
+    from ..report.terminal import verdict_lines
+    from ..results.campaign import verdict
+
+    results = [o for o in outcomes.values() if isinstance(o, SpecResult)]
+    if not results:
+        return None, "no recording of the campaign could be scored:\n" + "\n".join(
+            f"  {name}: {error}" for name, error in outcomes.items()
+        )
+    found = verdict(results)
+    return found.pass_rate, None if found.passed else "\n".join(verdict_lines(found))
+
+
+def _freeze_objects_at_exit() -> None:
+    """At exit, move every object out of the cycle collector's reach (``gc.freeze``).
+
+    A campaign leaves hundreds of thousands of objects (pytest's reports, the results) that the
+    interpreter walks in each of its collections while it shuts down: about a second for 200
+    recordings, paid by every process of the run and, under xdist, by the controller waiting
+    for its workers to end. Nothing needs a cycle collected once the process exits, and an
+    ``atexit`` handler runs only then, so a pytest run inside another (pytester) loses nothing.
+    """
+    global _freeze_registered
+    if not _freeze_registered:
+        atexit.register(gc.freeze)
+        _freeze_registered = True
+
+
+_freeze_registered = False
 
 
 def _log_gate(

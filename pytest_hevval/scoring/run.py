@@ -8,13 +8,12 @@ gives the same result and the same history record, apart from the run's own meta
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..data.digest import DEFAULT_HASH
-from ..data.remote import is_url
+from ..data.remote import relative_to
 from ..errors import HevvalError
 from ..results.spec_result import SpecResult
 from ..spec.model import Spec
@@ -48,16 +47,6 @@ class RunOptions:
     #: Diagnose the failing signals ("failed"), every signal ("all") or none ("off"), right
     #: after each spec is scored; the aligned data is then let go unless ``keep_arrays``.
     diagnose: str = "off"
-
-
-def relative_to(rootdir: Path, path: str) -> str:
-    """``path`` relative to ``rootdir`` (URLs and paths on another drive unchanged)."""
-    if is_url(path):
-        return path
-    try:
-        return os.path.relpath(path, rootdir)
-    except ValueError:
-        return path
 
 
 def _relative_result(result: SpecResult, rootdir: Path) -> None:
