@@ -383,6 +383,22 @@ def test_reports_are_written_once_with_diagnosis(project: pytest.Pytester) -> No
     assert "<script src" not in html
 
 
+def test_exitfirst_under_xdist_stops_on_a_failure_its_worker_judged_with_another_item(
+    project: pytest.Pytester,
+) -> None:
+    """A failing item judged on the worker by another item of its spec counts for -x and
+    --maxfail as a failure the worker reports itself: the run stops, as a serial one does."""
+    write_data(project.path, fault="leaf")
+    for index in range(6):
+        project.makefile(".hevval.yaml", **{f"more{index}": TREE_SPEC})
+    result = project.runpytest("--hevval", "--hevval-no-history", "-p", "xdist", "-n", "1", "-x")
+    assert result.ret == pytest.ExitCode.INTERRUPTED
+    result.stdout.fnmatch_lines(["*stopping after 1 failures*"])
+    # Not every spec ran: the worker was told to stop with work left in its queue.
+    outcomes = result.parseoutcomes()
+    assert outcomes.get("failed", 0) + outcomes.get("passed", 0) < 7 * 6
+
+
 def test_reports_and_history_under_xdist_hold_what_a_serial_run_writes(
     project: pytest.Pytester,
 ) -> None:

@@ -454,5 +454,19 @@ def log_outcome(session: pytest.Session, outcome: Mapping[str, Any], node: Any =
             # Gathered from the report, as from a worker's (pytest_runtest_logreport).
             report.hevval_diagnosis = outcome["diagnosis"]  # type: ignore[attr-defined]
         hook.pytest_runtest_logreport(report=report)
+        if node is not None and failed:
+            _count_worker_failure(session, report)
     # pytest's session counts the failure from its report (testsfailed, --maxfail).
     hook.pytest_runtest_logfinish(nodeid=nodeid, location=location)
+
+
+def _count_worker_failure(session: pytest.Session, report: pytest.TestReport) -> None:
+    """Count a failure judged on an xdist worker as xdist counts the failures its workers
+    report, so that -x and --maxfail stop the workers as they do for any item.
+
+    xdist counts them in its own session plugin, not in pytest's: without this the controller
+    knew of the failure, but the workers went on with their queues to the end."""
+    dsession = session.config.pluginmanager.getplugin("dsession")
+    count = getattr(dsession, "_handlefailures", None)
+    if callable(count):
+        count(report)
