@@ -194,8 +194,7 @@ def child_e2e(spec_path: str, intervals: bool = True) -> None:
     started = time.perf_counter()
     spec = load_spec(spec_path)
     cache = DataCache()
-    cache.declare(spec.reference, spec.reference_columns())
-    cache.declare(spec.model, spec.model_columns())
+    cache.declare_spec(spec)
     # Reading first through the same cache splits the wall time without reading twice:
     # evaluate_spec then finds every column it needs already there.
     reference = cache.read(spec.reference, spec.reference_columns())
@@ -414,8 +413,7 @@ def part_dask(count: int, signals: int, duration_s: float, rate_hz: float) -> No
         cache = DataCache()
         loaded = [load_spec(p) for p in specs]
         for spec in loaded:
-            cache.declare(spec.reference, spec.reference_columns())
-            cache.declare(spec.model, spec.model_columns())
+            cache.declare_spec(spec)
         serial = [
             evaluate_spec(s, cache=cache, rootdir=specs[0].parent).result.to_dict() for s in loaded
         ]

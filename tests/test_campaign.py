@@ -31,6 +31,8 @@ from pytest_hevval.results.campaign import (
     Distribution,
     RecordingOutcome,
 )
+from pytest_hevval.scoring.engine import DataCache, Evaluation
+from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import load_specs, parse_spec_text
 
 from .strategies import finite
@@ -87,6 +89,54 @@ def hevval_run(project: pytest.Pytester, *args: str) -> pytest.RunResult:
     return project.run(
         sys.executable, "-m", "pytest_hevval", "run", "fleet.hevval.yaml", "--no-history", *args
     )
+
+
+# -- memory -----------------------------------------------------------------------------------
+
+
+def test_a_recordings_data_are_let_go_once_it_is_scored(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A campaign of thousands of recordings holds the data of the one being scored, not of
+    every recording scored so far; each file is still read once."""
+    write_campaign(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    specs = load_specs(tmp_path / "fleet.hevval.yaml")
+    cache = DataCache()
+    held: list[list[str]] = []
+    outcomes = run_specs(
+        specs,
+        RunOptions(rootdir=tmp_path),
+        cache=cache,
+        progress=lambda _: held.append(cache.held()),
+    )
+    assert all(isinstance(outcome, Evaluation) for outcome in outcomes)
+    assert held == [[] for _ in TRIPS]
+    assert sorted(Path(path).name for path in cache.reads) == [f"{t}.csv" for t in sorted(TRIPS)]
+    assert set(cache.reads.values()) == {1}
+
+
+def test_a_file_two_specs_declare_is_read_once_and_let_go_after_both(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    write_campaign(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    first = load_specs(tmp_path / "fleet.hevval.yaml")
+    second = load_specs(tmp_path / "fleet.hevval.yaml")
+    cache = DataCache()
+    for spec in [*first, *second]:
+        cache.declare_spec(spec)
+    options = RunOptions(rootdir=tmp_path)
+    run_specs(first, options, cache=cache)
+    for spec in first:
+        cache.release_spec(spec)
+    # Every file is still declared by a spec of the second campaign: kept, not read again.
+    assert len(cache.held()) == len(TRIPS)
+    run_specs(second, options, cache=cache)
+    assert set(cache.reads.values()) == {1}
+    for spec in second:
+        cache.release_spec(spec)
+    assert cache.held() == []
 
 
 # -- pytest items, end to end -----------------------------------------------------------------

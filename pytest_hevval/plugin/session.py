@@ -150,8 +150,7 @@ class HevvalSession:
     # -- evaluation -------------------------------------------------------------------------
     def register(self, spec: Spec) -> None:
         self.specs[self.relative(spec.key)] = spec
-        self.cache.declare(spec.reference, spec.reference_columns())
-        self.cache.declare(spec.model, spec.model_columns())
+        self.cache.declare_spec(spec)
 
     def run_options(self) -> RunOptions:
         """The scoring settings of this run, read from the options once."""
@@ -195,6 +194,8 @@ class HevvalSession:
             from ..scoring.run import run_specs
 
             (self.evaluations[key],) = run_specs([spec], options, cache=self.cache)
+            # Its items judge from the evaluation: the data this spec declared may go.
+            self.cache.release_spec(spec)
         outcome = self.evaluations[key]
         if isinstance(outcome, HevvalError):
             raise outcome

@@ -102,7 +102,9 @@ class DataCache:
     """Reads each data file once per session, with the union of the columns every spec needs.
 
     Specs declare their columns at collection time (:meth:`declare`); the first :meth:`read` of
-    a file then reads all declared columns in one go.
+    a file then reads all declared columns in one go. A file's data are let go once every spec
+    that declared it is done with it (:meth:`release`), so a campaign holds the data of the
+    recordings being scored, not of every recording scored so far.
     """
 
     def __init__(self, data_hash: str = DEFAULT_HASH) -> None:
@@ -112,6 +114,8 @@ class DataCache:
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
         self._declared: dict[tuple[str, str], set[str]] = {}
+        #: Declarations not yet released, by file: the record is kept while any is left.
+        self._users: dict[tuple[str, str], int] = {}
         self._digests: dict[str, Future[dict[str, str]]] = {}
         self._hasher: ThreadPoolExecutor | None = None
         #: How many times each file was actually read (tests and benchmarks check it).
@@ -139,8 +143,38 @@ class DataCache:
     def declare(self, source: SourceSpec, columns: Iterable[str]) -> None:
         if source.kind != "file":
             return
+        key = self._key(source)
         with self._lock:
-            self._declared.setdefault(self._key(source), set()).update(columns)
+            self._declared.setdefault(key, set()).update(columns)
+            self._users[key] = self._users.get(key, 0) + 1
+
+    def release(self, source: SourceSpec) -> None:
+        """One declaration of ``source`` is done with it; the last one lets its data go."""
+        if source.kind != "file":
+            return
+        key = self._key(source)
+        with self._lock:
+            left = self._users.get(key, 0) - 1
+            if left > 0:
+                self._users[key] = left
+            else:
+                self._users.pop(key, None)
+                self._records.pop(key, None)
+
+    def held(self) -> list[str]:
+        """The files whose data this cache holds now."""
+        with self._lock:
+            return sorted(path for path, _ in self._records)
+
+    def declare_spec(self, spec: Spec) -> None:
+        """The columns ``spec`` reads from its reference and model files."""
+        self.declare(spec.reference, spec.reference_columns())
+        self.declare(spec.model, spec.model_columns())
+
+    def release_spec(self, spec: Spec) -> None:
+        """``spec`` is scored: its files' data may go (:meth:`release`)."""
+        self.release(spec.reference)
+        self.release(spec.model)
 
     def read(self, source: SourceSpec, columns: Iterable[str]) -> Record:
         key = self._key(source)

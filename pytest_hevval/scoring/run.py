@@ -81,11 +81,11 @@ def run_specs(
         return outcomes
     shared = cache if cache is not None else DataCache(options.data_hash)
     for spec in specs:
-        shared.declare(spec.reference, spec.reference_columns())
-        shared.declare(spec.model, spec.model_columns())
+        shared.declare_spec(spec)
     outcomes = []
     for done, spec in enumerate(specs, start=1):
         outcome = _evaluate(spec, options, shared)
+        shared.release_spec(spec)
         # Right away: the aligned data are let go before the next spec is read.
         _finish(outcome, options)
         outcomes.append(outcome)
