@@ -455,19 +455,36 @@ def test_dask_gives_the_same_outcomes(project: pytest.Pytester) -> None:
         pytest.skip("distributed is not installed (the dask extra)")
     write_data(project.path, fault="leaf")
     serial = project.runpytest("--hevval", "--hevval-no-history", "--junitxml=serial.xml")
+    project.makeconftest(
+        "def pytest_runtest_setup(item):\n"
+        "    with open('setups.txt', 'a') as f:\n"
+        "        f.write(item.nodeid + '\\n')\n"
+    )
     # In a subprocess: importing distributed inside an in-process run would leave state
     # (tblib's pickling hooks) pointing at modules pytester removes afterwards.
     remote = project.runpytest_subprocess(
         "--hevval", "--hevval-no-history", "--hevval-dask=local", "--junitxml=dask.xml"
     )
     assert serial.parseoutcomes() == remote.parseoutcomes()
+    # Scored on the cluster, the spec's items are judged here by one of them.
+    assert len((project.path / "setups.txt").read_text().splitlines()) == 1
 
-    def properties(name: str) -> dict[str, dict[str, str | None]]:
+    def cases(name: str) -> dict[str, dict[str, str | None]]:
         tree = ET.parse(project.path / name)
         return {
-            c.get("name", ""): {p.get("name", ""): p.get("value") for p in c.iter("property")}
+            c.get("name", ""): {
+                **{p.get("name", ""): p.get("value") for p in c.iter("property")},
+                # Its first lines: a spec scored on Dask comes back without its traces, so
+                # its failures have no diagnosis.
+                "failure": next(
+                    ("\n".join(f.get("message", "").splitlines()[:5]) for f in c.iter("failure")),
+                    None,
+                ),
+            }
             for c in tree.iter("testcase")
         }
 
-    assert properties("serial.xml") == properties("dask.xml")
+    # One item per spec judges the others in the pytest process; each is still its own case.
+    assert len(cases("dask.xml")) == 6
+    assert cases("serial.xml") == cases("dask.xml")
     remote.stdout.fnmatch_lines(["E/P/I missed its thresholds (pack.hevval.yaml:18)"])

@@ -90,12 +90,19 @@ def pytest_collection_modifyitems(
     session: pytest.Session, config: pytest.Config, items: list[pytest.Item]
 ) -> None:
     state = state_of(config)
-    if state is not None and not state.is_controller:
+    if state is None:
+        return
+    if not state.is_controller:
         from .items import carry_spec_items, defer_campaign_gates
 
         items[:] = defer_campaign_gates(items, state)
         if config.workerinput.get(_CARRY):  # type: ignore[attr-defined]
             carry_spec_items(items)
+    elif state.option("dask"):
+        # Scored on the cluster: this process only judges and reports, one item per spec.
+        from .items import carry_spec_items
+
+        carry_spec_items(items)
 
 
 @pytest.hookimpl(tryfirst=True)
