@@ -194,9 +194,7 @@ class Publisher:
         out = Publication()
         if not results:
             return out
-        if dicts is None:
-            dicts = [result.to_dict() for result in results]
-        dicts = list(dicts)
+        dicts = [r.to_dict() for r in results] if dicts is None else list(dicts)
         self._write_reports(dicts, diagnoses, out)
         self._compare(dicts, out)
         self._ratchet(dicts, specs, out)

@@ -39,6 +39,7 @@ __all__ = [
     "open_url",
     "parquet_source",
     "read_url",
+    "relative_to",
     "url_digest",
     "url_filesystem",
 ]

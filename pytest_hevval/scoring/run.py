@@ -21,7 +21,7 @@ from .cluster import error_from_payload, evaluate_on_dask, is_error_payload
 from .diagnosis import diagnose_failures
 from .engine import DataCache, Evaluation, evaluate_spec
 
-__all__ = ["RunOptions", "relative_to", "run_specs"]
+__all__ = ["RunOptions", "run_specs"]
 
 Outcome = Evaluation | HevvalError
 
