@@ -9,7 +9,14 @@ from hypothesis.extra import numpy as hnp
 
 from pytest_hevval.core.tree import TreeNode
 
-__all__ = ["finite", "quantised_pairs", "regression_terms", "signal_pairs", "signal_trees"]
+__all__ = [
+    "finite",
+    "logged_channels",
+    "quantised_pairs",
+    "regression_terms",
+    "signal_pairs",
+    "signal_trees",
+]
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
@@ -43,6 +50,41 @@ def quantised_pairs(
         return np.repeat(levels, hold)[:n] * quantum
 
     return curve(), curve()
+
+
+@st.composite
+def logged_channels(
+    draw: st.DrawFn, min_size: int = 3, max_size: int = 400
+) -> tuple[np.ndarray, np.ndarray]:
+    """(time, values) of a logged channel without NaN: stretches of noise, of a held value
+    (zero or not), of straight-line fill and at a clipped extreme, on a time base that may
+    jump forward or back."""
+    n = draw(st.integers(min_size, max_size))
+    quantum = draw(st.sampled_from([0.0, 0.1, 0.25, 1 / 3]))
+    pieces: list[np.ndarray] = []
+    while sum(p.shape[0] for p in pieces) < n:
+        length = draw(st.integers(1, 40))
+        kind = draw(st.sampled_from(["noise", "hold", "zero", "ramp", "clip"]))
+        if kind == "noise":
+            piece = draw(hnp.arrays(np.float64, length, elements=st.floats(-50.0, 50.0)))
+        elif kind == "hold":
+            piece = np.full(length, draw(st.floats(-50.0, 50.0)))
+        elif kind == "zero":
+            piece = np.zeros(length)
+        elif kind == "ramp":
+            start, slope = draw(st.floats(-50.0, 50.0)), draw(st.floats(-2.0, 2.0))
+            piece = start + slope * np.arange(length)
+        else:
+            piece = np.full(length, 60.0)
+        pieces.append(piece)
+    values = np.concatenate(pieces)[:n]
+    if quantum:
+        values = np.round(values / quantum) * quantum
+    steps = draw(
+        hnp.arrays(np.float64, n - 1, elements=st.sampled_from([0.1, 0.1, 0.1, 2.0, 0.0, -0.5]))
+    )
+    time = np.concatenate([[0.0], np.cumsum(steps)])
+    return time, values
 
 
 @st.composite

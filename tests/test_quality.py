@@ -7,13 +7,17 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pytest_hevval.data.quality import QualityLimits, assess
+from pytest_hevval.data.quality import Finding, QualityLimits, assess
 from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import Channel, Record, SourceOptions
 from pytest_hevval.errors import DataError, SpecError
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
+from tests.conftest import needs_kernel
+from tests.strategies import logged_channels
 
 DATA = Path(__file__).parent / "data" / "i3"
 B02 = DATA / "TripB02_0-400s.parquet"
@@ -29,7 +33,7 @@ def _findings(
     return [(f.channel, f.kind, f.start_s, f.stop_s) for f in found]
 
 
-def test_b02_straight_line_fill_is_found_on_every_channel_it_touched() -> None:
+def test_b02_straight_line_fill_is_found_on_every_channel_it_touched(kernel_path: str) -> None:
     columns = ["Velocity [km/h]", "Battery Voltage [V]", "Battery Current [A]"]
     found = _findings(B02, columns)
     assert found == [
@@ -37,7 +41,7 @@ def test_b02_straight_line_fill_is_found_on_every_channel_it_touched() -> None:
     ]
 
 
-def test_b34_nan_run_in_soc_is_found() -> None:
+def test_b34_nan_run_in_soc_is_found(kernel_path: str) -> None:
     found = _findings(B34, ["Velocity [km/h]", "SoC [%]"])
     assert found == [("SoC [%]", "NaN run", pytest.approx(293.1), pytest.approx(400.0))]
 
@@ -46,7 +50,7 @@ def _record(**channels: tuple[np.ndarray, np.ndarray]) -> Record:
     return Record(source="log.csv", channels={k: Channel(t, v) for k, (t, v) in channels.items()})
 
 
-def test_each_kind_of_finding() -> None:
+def test_each_kind_of_finding(kernel_path: str) -> None:
     t = np.arange(0.0, 1000.0, 0.1)
     rng = np.random.default_rng(0)
     noisy = 50.0 + rng.normal(0.0, 1.0, t.shape[0])
@@ -200,3 +204,67 @@ def test_findings_do_not_depend_on_the_thread_count() -> None:
     assert {f.kind for f in one} == {"NaN run", "flat line"}
     assert assess(record, record.channels, limits, threads=2) == one
     assert assess(record, record.channels, limits, threads=3) == one
+
+
+@needs_kernel
+@given(
+    logged_channels(),
+    st.sampled_from([0.0, 0.3, 2.0]),
+    st.sampled_from([0.0, 0.5, 3.0]),
+    st.sampled_from([0.0, 0.2, 1.0]),
+)
+@settings(max_examples=150, deadline=None)
+def test_the_compiled_scan_finds_what_the_numpy_scan_finds(
+    channel: tuple[np.ndarray, np.ndarray], straight_s: float, flat_s: float, saturation_s: float
+) -> None:
+    from pytest_hevval.core import kernel
+    from pytest_hevval.data import quality
+
+    time, values = channel
+    limits = QualityLimits(
+        straight_run_s=straight_s, flat_run_s=flat_s, saturation_run_s=saturation_s
+    )
+    spans = quality._time_spans(time, limits)
+    compiled = kernel.load_or_raise()
+    plain = quality._channel_findings("c", time, values, True, limits, "V", spans, None)
+    fast = quality._channel_findings("c", time, values, True, limits, "V", spans, compiled)
+    assert fast == plain
+
+
+@needs_kernel
+def test_the_compiled_scan_lists_more_runs_than_it_first_makes_room_for() -> None:
+    from pytest_hevval.core import kernel
+    from pytest_hevval.data import quality
+
+    time = np.arange(0.0, 200.0, 0.1)
+    values = np.tile(np.repeat([1.0, 2.0, 3.0, 4.0], 5), 100)  # 400 holds of 0.4 s
+    limits = QualityLimits(flat_run_s=0.3, saturation_run_s=0.3)
+    spans = quality._time_spans(time, limits)
+    compiled = kernel.load_or_raise()
+    plain = quality._channel_findings("c", time, values, True, limits, None, spans, None)
+    fast = quality._channel_findings("c", time, values, True, limits, None, spans, compiled)
+    assert fast == plain
+    flat = [f.detail for f in plain if f.kind == "flat line"]
+    assert flat[-1] == "and 395 more stretches like it"
+    assert "100 times" in next(f.detail for f in plain if f.kind == "saturation")
+
+
+@needs_kernel
+@pytest.mark.parametrize("path", sorted(DATA.glob("*.parquet")), ids=lambda p: p.stem)
+def test_the_compiled_scan_finds_what_the_numpy_scan_finds_on_real_trips(
+    path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every numeric channel of each i3 trip, with the default limits and with limits short
+    enough that flat lines are found on every trip (B02 also has straight-line fill)."""
+    from pytest_hevval.core.kernel import KERNEL_ENV
+
+    frame = pd.read_parquet(path)
+    columns = [c for c in frame.columns if c != "Time [s]" and frame[c].dtype.kind == "f"]
+    record = read_record(str(path), columns, SourceOptions(time="Time [s]"))
+    settings = (QualityLimits(), QualityLimits(straight_run_s=2.0, flat_run_s=5.0))
+    found: dict[str, list[list[Finding]]] = {}
+    for kernel in ("numpy", "numba"):
+        monkeypatch.setenv(KERNEL_ENV, kernel)
+        found[kernel] = [assess(record, columns, limits) for limits in settings]
+    assert found["numba"] == found["numpy"]
+    assert "flat line" in {f.kind for f in found["numpy"][1]}

@@ -283,6 +283,13 @@ def test_compiled_block_sums_of_long_records_and_extreme_scales() -> None:
             (1e300 * rng.normal(size=n), 1e300 * rng.normal(size=n)),
             (1e-300 * rng.normal(size=n), 1e-300 * rng.normal(size=n)),
             (drift + 1e6, drift + rng.normal(size=n)),
+            # A bias that dwarfs the spread (ρ from a second, centred loop), an error that
+            # drifts away from its first samples' mean, and peaks just inside the unscaled
+            # range that only the peak itself can clear (2^397 and 2^-397).
+            (drift, drift - 1e3 - 1e-3 * rng.normal(size=n)),
+            (drift, drift - np.linspace(0.0, 50.0, n) - rng.normal(size=n)),
+            (2.0**397 * rng.normal(size=n), 2.0**397 * rng.normal(size=n)),
+            (2.0**-397 * rng.normal(size=n), 2.0**-397 * rng.normal(size=n)),
         ]
         plain = block_sums_many(pairs, compiled=False)
         for a, b in zip(plain, block_sums_many(pairs, compiled=True), strict=True):

@@ -38,6 +38,9 @@ from .kernel import (
 # comparisons. NaN input still poisons the sums of squares, which the caller checks before
 # trusting an extreme.
 _FAST = {"reassoc", "contract", "nnan", "nsz"}
+# For minima, maxima and counts over finite values (the caller checks): order-free, so
+# reassociation changes nothing, and there is no NaN to keep.
+_QUALITY_FAST = {"reassoc", "nnan", "nsz"}
 
 
 def _minnum(typingctx, a, b):  # type: ignore[no-untyped-def]
@@ -471,6 +474,10 @@ def grouped_sums(r, s, labels, shift, out, extremes):  # type: ignore[no-untyped
 
 _TOO_BIG = 2.0**400
 _TOO_SMALL = 2.0**-400
+# Sums of squares that prove the peak within (2^-395, 2^395), so no scale is needed: a margin
+# of 2^10 on the squares for their rounding.
+_SQUARES_HIGH = 2.0**790
+_SQUARES_LOW = 2.0**-790
 
 
 @numba.njit(cache=True, fastmath=_FAST)
@@ -511,28 +518,20 @@ def _lag1_correlation(r, s, scale, mean):  # type: ignore[no-untyped-def]
     return 0.0
 
 
-@numba.njit(cache=True, nogil=True)
-def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-def]
-    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples into ``out``
-    (10, rows); returns (scale, shift, ρ).
+@numba.njit(cache=True, inline="always")
+def _fine_rows(r, s, fine, shift, scale, out):  # type: ignore[no-untyped-def]
+    """The rows of ``fine_block_sums`` at one scale, in one loop over the samples; returns
+    Σr² + Σs² (scaled), and Σd, Σd² and Σ d_j·d_(j−1) of the shifted errors d.
 
-    The scale is ``characteristics.power_of_two_scale`` of the peak magnitude and every sum is
-    taken of the scaled values; the shift is the mean of the first ``shift_samples`` errors.
-    Each run's samples are added left to right from zero, as ``np.bincount`` adds them, so
-    every column the shift does not enter is bit-identical to the numpy pass.
+    Inlined into each caller, so a literal scale of 1 folds the multiplications away.
     """
     n = r.shape[0]
     rows = out.shape[1]
-    peak = _peak_magnitude(r, s)
-    scale = 1.0
-    if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
-        scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
-    head = min(shift_samples, n)
+    power = 0.0
     total = 0.0
-    for j in range(head):
-        total += r[j] * scale - s[j] * scale
-    shift = total / head if head else 0.0
-    shifted_total = 0.0
+    total_sq = 0.0
+    lagged = 0.0
+    before = 0.0
     for row in range(rows):
         first = row * fine
         last = min(first + fine, n)
@@ -550,6 +549,8 @@ def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-
             a6 += ri * ri
             a7 += si * si
             a8 += ri * si
+            lagged += d * before
+            before = d
             if 0 < j < n - 1:
                 r2 = r[j + 1] * scale
                 r0 = r[j - 1] * scale
@@ -569,9 +570,184 @@ def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-
         out[7, row] = a7
         out[8, row] = a8
         out[9, row] = a9
-        shifted_total += a1
-    mean = shift + shifted_total / n if n else 0.0
-    return scale, shift, _lag1_correlation(r, s, scale, mean)
+        total += a1
+        total_sq += a2
+        power += a6 + a7
+    return power, total, total_sq, lagged
+
+
+@numba.njit(cache=True, inline="always")
+def _head_shift(r, s, scale, shift_samples):  # type: ignore[no-untyped-def]
+    """The mean of the first ``shift_samples`` errors, at ``scale``."""
+    head = min(shift_samples, r.shape[0])
+    total = 0.0
+    for j in range(head):
+        total += r[j] * scale - s[j] * scale
+    return total / head if head else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-def]
+    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples into ``out``
+    (10, rows); returns (scale, shift, ρ).
+
+    The scale is ``characteristics.power_of_two_scale`` of the peak magnitude and every sum is
+    taken of the scaled values; the shift is the mean of the first ``shift_samples`` errors.
+    Each run's samples are added left to right from zero, as ``np.bincount`` adds them, so
+    every column the shift does not enter is bit-identical to the numpy pass.
+
+    One loop over the samples in the common case: the rows are summed unscaled, and the sum
+    of squares tells whether the peak can ask for a scale (peak² ≤ Σx² ≤ n·peak²); only then
+    is the peak found and, if it asks, the rows summed again scaled. ρ comes from the same
+    loop's sums of the shifted errors unless their mean dwarfs their spread, when a second
+    loop centres them first.
+    """
+    n = r.shape[0]
+    scale = 1.0
+    shift = _head_shift(r, s, 1.0, shift_samples)
+    power, total, total_sq, lagged = _fine_rows(r, s, fine, shift, 1.0, out)
+    if not _SQUARES_LOW * max(n, 1) < power < _SQUARES_HIGH:
+        peak = _peak_magnitude(r, s)
+        if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
+            scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
+            shift = _head_shift(r, s, scale, shift_samples)
+            power, total, total_sq, lagged = _fine_rows(r, s, fine, shift, scale, out)
+    if n < 3:
+        return scale, shift, 0.0
+    offset = total / n
+    mean = shift + offset
+    if offset * total > 0.5 * total_sq:
+        # The mean error dwarfs the spread: the one-loop sums would cancel.
+        return scale, shift, _lag1_correlation(r, s, scale, mean)
+    # Centred on the mean instead of the shift: Σ(d−δ)² and Σ(d_j−δ)(d_(j−1)−δ), δ = Σd / n.
+    d_first = r[0] * scale - s[0] * scale - shift
+    d_last = r[n - 1] * scale - s[n - 1] * scale - shift
+    spread = total_sq - offset * total
+    centred_lagged = lagged - offset * (2.0 * total - d_first - d_last) + (n - 1) * offset * offset
+    if spread > 0.0 and math.isfinite(spread):
+        return scale, shift, centred_lagged / spread
+    return scale, shift, 0.0
+
+
+# -- data-quality scan ------------------------------------------------------------------------
+
+
+# A step of zero weighs this much in the smallest step: more than any finite step, so only a
+# channel whose every moving step overflows sees it (where 2 × it is inf, as 2 × inf is).
+_NOT_MOVING = float(np.finfo(np.float64).max)
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_QUALITY_FAST)
+def quality_steps(v):  # type: ignore[no-untyped-def]
+    """(smallest step that moves, steps that do not move, max, min) of a finite channel, in
+    one loop; the smallest step is inf without any that moves, and stands for every step's
+    size only through twice its value (see ``_NOT_MOVING``).
+
+    Minima, maxima and counts do not depend on the order they are taken in, so the loop is
+    vectorised and still gives numpy's values; no step is NaN, since the values are finite.
+    """
+    n = v.shape[0]
+    resolution = math.inf
+    still = 0
+    top = v[0]
+    bottom = v[0]
+    for i in range(n - 1):
+        after = v[i + 1]
+        change = abs(after - v[i])
+        zero = change == 0.0
+        still += zero
+        resolution = _fmin(resolution, _fmax(change, _NOT_MOVING * zero))
+        top = _fmax(top, after)
+        bottom = _fmin(bottom, after)
+    return resolution, still, top, bottom
+
+
+@numba.njit(cache=True, inline="always")
+def _kept_run(kind, start, stop, widen, time, seconds, out, count):  # type: ignore[no-untyped-def]
+    """Row ``count`` of ``out`` for the run [start, stop) if it lasts ``seconds``; the count."""
+    final = min(stop - 1 + widen, time.shape[0] - 1)
+    if time[final] - time[start] >= seconds:
+        if count < out.shape[0]:
+            out[count, 0] = kind
+            out[count, 1] = start
+            out[count, 2] = final
+        return count + 1
+    return count
+
+
+@numba.njit(cache=True, inline="always")
+def _in_run(kind, v, i, limit, value):  # type: ignore[no-untyped-def]
+    """Whether index i of ``kind``'s mask is set (each caller passes a literal kind, so the
+    other kinds' code folds away)."""
+    if kind == 0:  # steps i and i + 1 both move, and their difference is within ``limit``
+        step = v[i + 1] - v[i]
+        following = v[i + 2] - v[i + 1]
+        return (abs(following - step) <= limit) & (step != 0.0) & (following != 0.0)
+    if kind == 1:  # step i is zero at a non-zero value
+        after = v[i + 1]
+        return (after - v[i] == 0.0) & (after != 0.0)
+    return v[i] == value  # sample i is at ``value``
+
+
+#: Mask entries looked at together: a block where no run starts or ends is passed over after
+#: one vectorised count.
+_RUN_BLOCK = 256
+
+
+@numba.njit(cache=True, inline="always")
+def _kind_runs(kind, v, m, widen, limit, value, time, seconds, out, count, edges):  # type: ignore[no-untyped-def]
+    """The runs of ``kind``'s mask over [0, m) lasting ``seconds``, appended to ``out``."""
+    inside = False
+    start = 0
+    for first in range(0, m, _RUN_BLOCK):
+        last = min(first + _RUN_BLOCK, m)
+        hits = 0
+        for i in range(first, last):
+            hits += _in_run(kind, v, i, limit, value)
+        if hits == (last - first if inside else 0):
+            continue
+        # Where the mask flips, without a branch per entry: a noisy channel flips at random.
+        flips = 0
+        was = inside
+        for i in range(first, last):
+            now = _in_run(kind, v, i, limit, value)
+            edges[flips] = i
+            flips += now != was
+            was = now
+        for e in range(flips):
+            if inside:
+                count = _kept_run(kind, start, edges[e], widen, time, seconds, out, count)
+            else:
+                start = edges[e]
+            inside = not inside
+    if inside:
+        count = _kept_run(kind, start, m, widen, time, seconds, out, count)
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def quality_runs(v, time, limit, straight_s, flat_s, top, bottom, saturation_s, checks, out):  # type: ignore[no-untyped-def]
+    """The runs of a finite channel that last long enough, as rows (kind, start, final) of
+    ``out``, kind by kind, each in time order; returns how many there are (rows beyond ``out``
+    are counted, not written).
+
+    Kinds, each asked for by its bit of ``checks``: 0 steps that move and whose second
+    difference is within ``limit`` (widened by 2 samples), 1 steps of zero at a non-zero value
+    (widened by 1), 2 samples at ``top``, 3 samples at ``bottom``. The same comparisons as
+    ``data.quality``'s numpy scan, so the same runs.
+    """
+    n = v.shape[0]
+    edges = np.empty(_RUN_BLOCK, dtype=np.int64)
+    count = 0
+    if checks & 1 and n > 2:
+        count = _kind_runs(0, v, n - 2, 2, limit, 0.0, time, straight_s, out, count, edges)
+    if checks & 2 and n > 1:
+        count = _kind_runs(1, v, n - 1, 1, limit, 0.0, time, flat_s, out, count, edges)
+    if checks & 4:
+        count = _kind_runs(2, v, n, 0, limit, top, time, saturation_s, out, count, edges)
+    if checks & 8:
+        count = _kind_runs(3, v, n, 0, limit, bottom, time, saturation_s, out, count, edges)
+    return count
 
 
 @numba.njit(cache=True, nogil=True)

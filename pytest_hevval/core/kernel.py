@@ -94,6 +94,7 @@ NUMPY_EXTRA_S = {
     "grouped_sums": 3e-9,
     "fine_block_sums": 3e-9,
     "dtw_path": 1.5e-8,
+    "quality_steps": 9e-9,
 }
 #: Environment variable that, set to 0, stops a run from starting a background compile (for a
 #: job that must not leave a process behind; the test suite sets it for stable output).
@@ -140,10 +141,19 @@ COMPILED = (
     "grouped_sums",
     "fine_block_sums",
     "dtw_path",
+    "quality_steps",
+    "quality_runs",
 )
 
 #: The order a background compile takes: what a run needs soonest and most often first.
-FIRST_COMPILED = ("main_pass", "lag_window", "fine_block_sums", "dtw_path")
+FIRST_COMPILED = (
+    "main_pass",
+    "lag_window",
+    "fine_block_sums",
+    "quality_steps",
+    "quality_runs",
+    "dtw_path",
+)
 
 _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
@@ -284,6 +294,10 @@ def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
             module, x, y, fine, 8, np.empty((10, n // fine), dtype=np.float64)
         ),
         "dtw_path": lambda: dtw_path(module, x[:32], y[:32], 3),
+        "quality_steps": lambda: quality_steps(module, x),
+        "quality_runs": lambda: quality_runs(
+            module, x, np.arange(n, dtype=np.float64), 0.1, (1.0, 1.0, 1.0), (1.0, -1.0), 15
+        ),
     }
     seconds: dict[str, float] = {}
     for name in dict.fromkeys([*order, *COMPILED]):
@@ -765,3 +779,53 @@ def dtw_path(
         int(band),
     )
     return rows, cols
+
+
+def quality_steps(
+    module: ModuleType, values: AnyFloatArray
+) -> tuple[float, bool, bool, float, float]:
+    """(resolution, any step moves, every step moves, max, min) of a finite channel, in one
+    compiled loop (see ``_fused.quality_steps``). The resolution is numpy's, or, where every
+    step that moves overflows, a finite number whose double is inf as numpy's is."""
+    n = values.shape[0]
+    resolution, still, top, bottom = module.quality_steps(_read_only(values))
+    return float(resolution), still < n - 1, still == 0, float(top), float(bottom)
+
+
+#: Kinds of run ``quality_runs`` reports, in its rows' first column.
+STRAIGHT_RUN, FLAT_RUN, TOP_RUN, BOTTOM_RUN = range(4)
+# Rows made ready for a channel's runs; a channel with more is scanned again with room for all.
+_QUALITY_ROWS = 64
+
+
+def quality_runs(
+    module: ModuleType,
+    values: AnyFloatArray,
+    time: AnyFloatArray,
+    limit: float,
+    seconds: tuple[float, float, float],
+    extremes: tuple[float, float],
+    checks: int,
+) -> npt.NDArray[np.int64]:
+    """Rows (kind, start, final) of a finite channel's long runs, in one compiled loop (see
+    ``_fused.quality_runs``): ``seconds`` are the straight, flat and saturation lengths,
+    ``extremes`` (max, min), ``checks`` a bit per kind."""
+    straight_s, flat_s, saturation_s = seconds
+    top, bottom = extremes
+    arguments = (
+        _read_only(values),
+        _read_only(time),
+        float(limit),
+        float(straight_s),
+        float(flat_s),
+        float(top),
+        float(bottom),
+        float(saturation_s),
+        int(checks),
+    )
+    out = np.empty((_QUALITY_ROWS, 3), dtype=np.int64)
+    count = int(module.quality_runs(*arguments, out))
+    if count > out.shape[0]:
+        out = np.empty((count, 3), dtype=np.int64)
+        module.quality_runs(*arguments, out)
+    return out[:count]

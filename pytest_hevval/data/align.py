@@ -21,7 +21,7 @@ import numpy.typing as npt
 from ..core import kernel
 from ..core.lag import search_lag
 from ..errors import DataError
-from .record import Channel, Record
+from .record import Channel, Record, find_finite
 
 __all__ = [
     "AlignedData",
@@ -119,7 +119,7 @@ class AlignedData:
                 # Channels that share a time array share one plan: the search is done once.
                 plan = self._plans[plan_key] = _Plan.build(channel.time, shift, self.time, method)
             values = np.asarray(channel.values, dtype=np.float64)
-            if _all_finite(values):
+            if channel.finite:
                 # The other declared columns of this time base go through the plan in the same
                 # pass: one hand-over to the kernel's threads instead of one per column.
                 others = self._same_time_base(side, record, channel.time, name, method)
@@ -157,10 +157,9 @@ class AlignedData:
             channel = record.channel(other)
             if channel.time is not time:
                 continue
-            values = np.asarray(channel.values, dtype=np.float64)
             # A column with NaN or inf goes its own way when it is asked for (gaps, errors).
-            if _all_finite(values):
-                others[other] = values
+            if channel.finite:
+                others[other] = np.asarray(channel.values, dtype=np.float64)
         return others
 
     def columns(
@@ -306,8 +305,12 @@ def align_records(
     max_offset_s: float = 30.0,
     nan_policy: Literal["raise", "omit"] = "raise",
     by: Literal["time", "clock"] = "time",
+    threads: int = 1,
 ) -> AlignedData:
     """Build the common grid for the channels a spec uses.
+
+    ``threads`` check the columns' values for NaN and inf side by side before they are put on
+    the grid one by one.
 
     With ``by="clock"`` both records carry an absolute start (``meta["start_epoch_s"]``, set
     by readers of clock-time columns) and the model's time is shifted by the difference of
@@ -319,6 +322,10 @@ def align_records(
         reference.channel(name)
     for name in model_names:
         model.channel(name)
+    find_finite(
+        [*(reference.channel(n) for n in ref_names), *(model.channel(n) for n in model_names)],
+        threads,
+    )
 
     if rate_hz is None:
         channels = [reference.channel(n) for n in ref_names] or list(reference.channels.values())
@@ -414,17 +421,6 @@ def _range(record: Record, names: list[str], shift: float = 0.0) -> str:
     return f"{float(channel.time[0]) + shift:g}–{float(channel.time[-1]) + shift:g} s"
 
 
-def _all_finite(values: FloatArray) -> bool:
-    """Whether every value is finite, usually in one pass that allocates nothing.
-
-    A NaN or an infinity makes any sum that includes it non-finite, so a finite sum proves
-    every value finite; only a sum that overflows (or a bad value) needs the exact look.
-    """
-    with np.errstate(over="ignore", invalid="ignore"):
-        total = float(np.add.reduce(values))
-    return math.isfinite(total) or bool(np.isfinite(values).all())
-
-
 def _interpolate(
     channel: Channel,
     grid: FloatArray,
@@ -438,7 +434,7 @@ def _interpolate(
     plan: _Plan | None = None,
 ) -> tuple[FloatArray, npt.NDArray[np.bool_] | None]:
     values = np.asarray(channel.values, dtype=np.float64)
-    finite = _all_finite(values)
+    finite = channel.finite
     if finite and on_grid:
         # Already sampled on the grid: the channel's own values, not a copy of them.
         return values, None

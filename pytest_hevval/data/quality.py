@@ -13,11 +13,13 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from types import ModuleType
 from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
+from ..core import kernel
 from ..core.local import runs
 from ..errors import DataError
 from .record import Record
@@ -131,13 +133,20 @@ def assess(
             times[id(original)] = known
         work.append((name, known[1], known[2]))
 
+    # One choice for the whole record: the findings are the same on either path.
+    compiled = kernel.kernel_for(
+        sum(time.shape[0] for _, time, _ in work), ("quality_steps", "quality_runs")
+    )
+
     def one(item: tuple[str, FloatArray, _TimeSpans | None]) -> list[Finding]:
         name, time, spans = item
         if spans is None:
             return []
         channel = record.channels[name]
         values = np.asarray(channel.values, dtype=np.float64)
-        return _channel_findings(name, time, values, limits, channel.unit, spans)
+        return _channel_findings(
+            name, time, values, channel.finite, limits, channel.unit, spans, compiled
+        )
 
     if threads > 1 and len(work) > 1:
         with ThreadPoolExecutor(max_workers=threads) as pool:
@@ -167,9 +176,11 @@ def _channel_findings(
     name: str,
     time: FloatArray,
     values: FloatArray,
+    clean: bool,
     limits: QualityLimits,
     unit: str | None,
     spans: _TimeSpans,
+    compiled: ModuleType | None = None,
 ) -> list[Finding]:
     found: list[Finding] = []
     unit_text = f" {unit}" if unit else ""
@@ -192,10 +203,6 @@ def _channel_findings(
     add("time gap", spans.gaps, f"no samples for more than {limits.max_gap_s:g} s")
     add("clock reset", spans.resets, "time stamps go back or repeat")
 
-    # A finite sum means every value is finite (a NaN or an infinity would carry into it);
-    # an overflowing sum only sends the channel down the exact path.
-    with np.errstate(over="ignore", invalid="ignore"):
-        clean = bool(np.isfinite(np.sum(values)))
     if clean:
         finite = values
     else:
@@ -206,10 +213,68 @@ def _channel_findings(
         finite = np.where(bad, np.nan, values)
         clean = not nan_runs
 
+    scan = (
+        _compiled_scan(compiled, finite, time, limits)
+        if clean and compiled is not None
+        else _numpy_scan(finite, clean, time, limits)
+    )
+    if scan.straight is not None:
+        add(
+            "straight-line fill",
+            scan.straight,
+            f"changes at a constant rate for over {limits.straight_run_s:g} s, as a logger "
+            "filling a dropout writes",
+        )
+    if scan.flat is not None:
+        add(
+            "flat line",
+            scan.flat,
+            f"the same non-zero value for over {limits.flat_run_s:g} s: a stuck sensor?",
+        )
+    for extreme, where, episodes in scan.extremes:
+        # A clipped sensor hits its limit again and again; a slow signal such as the state of
+        # charge sits at its extreme once, at the start or the end.
+        if len(episodes) >= SATURATION_EPISODES:
+            add(
+                "saturation",
+                episodes,
+                f"held at its {where} {extreme:g}{unit_text} for over "
+                f"{limits.saturation_run_s:g} s, {len(episodes)} times",
+            )
+    rate = limits.rate_limits.get(name)
+    if rate is not None:
+        steps = np.diff(time)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            too_fast = np.abs(np.diff(finite)) / np.where(steps > 0, steps, np.inf) > rate
+        add(
+            "spike",
+            _runs(too_fast),
+            f"changes faster than the declared {rate:g}{unit_text}/s",
+        )
+    return found
+
+
+Runs = list[tuple[int, int]]
+
+
+@dataclass(frozen=True)
+class _Scan:
+    """A channel's long runs, as sample index ranges [start, stop] inclusive."""
+
+    #: Straight-line stretches; None where no step moves (there is no resolution).
+    straight: Runs | None
+    #: Flat lines; None where they were not looked for (every step moves).
+    flat: Runs | None
+    #: (value, "maximum" or "minimum", its runs) for each extreme looked at.
+    extremes: list[tuple[float, str, Runs]]
+
+
+def _numpy_scan(finite: FloatArray, clean: bool, time: FloatArray, limits: QualityLimits) -> _Scan:
     d1 = np.diff(finite)
     change = np.abs(d1)
     moving = change > 0
     every_step_moves = bool(moving.all())
+    straight_runs = None
     if every_step_moves or moving.any():
         # the smallest step that moves
         resolution = float(
@@ -222,52 +287,74 @@ def _channel_findings(
         straight &= moving[1:]
         straight &= moving[:-1]
         del d2
-        add(
-            "straight-line fill",
-            _long_runs(straight, time, limits.straight_run_s, widen=2),
-            f"changes at a constant rate for over {limits.straight_run_s:g} s, as a logger "
-            "filling a dropout writes",
-        )
-    # Without NaN, a channel whose every step moves holds no value for two samples in a row:
-    # it has no flat line and no run at an extreme longer than one sample, which lasts 0 s.
+        straight_runs = _long_runs(straight, time, limits.straight_run_s, widen=2)
     steady = clean and every_step_moves
+    flat_runs = None
     if not steady:
         # Zero held for long is a vehicle at rest (a soak, a stop), not a stuck sensor.
         flat = (d1 == 0) & (finite[1:] != 0)
-        add(
-            "flat line",
-            _long_runs(flat, time, limits.flat_run_s, widen=1),
-            f"the same non-zero value for over {limits.flat_run_s:g} s: a stuck sensor?",
-        )
-    # (unless a run of one sample, 0 s long, is long enough)
-    if (not steady or limits.saturation_run_s <= 0.0) and (clean or np.isfinite(finite).any()):
+        flat_runs = _long_runs(flat, time, limits.flat_run_s, widen=1)
+    extremes: list[tuple[float, str, Runs]] = []
+    if _looks_for_saturation(steady, limits) and (clean or np.isfinite(finite).any()):
         top = float(np.max(finite) if clean else np.nanmax(finite))
         bottom = float(np.min(finite) if clean else np.nanmin(finite))
-        if top > bottom:
-            for extreme, where in ((top, "maximum"), (bottom, "minimum")):
-                if extreme == 0.0:
-                    continue  # resting at zero is a standstill, not saturation
-                episodes = _long_runs(finite == extreme, time, limits.saturation_run_s)
-                # A clipped sensor hits its limit again and again; a slow signal such as the
-                # state of charge sits at its extreme once, at the start or the end.
-                if len(episodes) >= SATURATION_EPISODES:
-                    add(
-                        "saturation",
-                        episodes,
-                        f"held at its {where} {extreme:g}{unit_text} for over "
-                        f"{limits.saturation_run_s:g} s, {len(episodes)} times",
-                    )
-    rate = limits.rate_limits.get(name)
-    if rate is not None:
-        steps = np.diff(time)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            too_fast = change / np.where(steps > 0, steps, np.inf) > rate
-        add(
-            "spike",
-            _runs(too_fast),
-            f"changes faster than the declared {rate:g}{unit_text}/s",
-        )
-    return found
+        for extreme, where in _saturation_extremes(top, bottom):
+            episodes = _long_runs(finite == extreme, time, limits.saturation_run_s)
+            extremes.append((extreme, where, episodes))
+    return _Scan(straight_runs, flat_runs, extremes)
+
+
+def _compiled_scan(
+    compiled: ModuleType, finite: FloatArray, time: FloatArray, limits: QualityLimits
+) -> _Scan:
+    """:func:`_numpy_scan` of a channel without NaN or inf, in two compiled loops."""
+    resolution, any_moves, every_moves, top, bottom = kernel.quality_steps(compiled, finite)
+    steady = every_moves
+    checks = 0
+    if any_moves:
+        checks |= 1 << kernel.STRAIGHT_RUN
+    if not steady:
+        checks |= 1 << kernel.FLAT_RUN
+    extremes = _saturation_extremes(top, bottom) if _looks_for_saturation(steady, limits) else []
+    for _, where in extremes:
+        checks |= 1 << (kernel.TOP_RUN if where == "maximum" else kernel.BOTTOM_RUN)
+    rows = kernel.quality_runs(
+        compiled,
+        finite,
+        time,
+        2.0 * resolution,
+        (limits.straight_run_s, limits.flat_run_s, limits.saturation_run_s),
+        (top, bottom),
+        checks,
+    )
+    found: dict[int, Runs] = {kind: [] for kind in range(4)}
+    for kind, start, final in rows.tolist():
+        found[kind].append((start, final))
+    return _Scan(
+        found[kernel.STRAIGHT_RUN] if any_moves else None,
+        None if steady else found[kernel.FLAT_RUN],
+        [
+            (extreme, where, found[kernel.TOP_RUN if where == "maximum" else kernel.BOTTOM_RUN])
+            for extreme, where in extremes
+        ],
+    )
+
+
+def _looks_for_saturation(steady: bool, limits: QualityLimits) -> bool:
+    # Without NaN, a channel whose every step moves holds no value for two samples in a row:
+    # it has no flat line and no run at an extreme longer than one sample, which lasts 0 s
+    # (unless a run of one sample, 0 s long, is long enough).
+    return not steady or limits.saturation_run_s <= 0.0
+
+
+def _saturation_extremes(top: float, bottom: float) -> list[tuple[float, str]]:
+    """The extremes a saturation is looked for at: none on a constant channel, and not zero,
+    where resting is a standstill, not saturation."""
+    if not top > bottom:
+        return []
+    return [
+        (value, where) for value, where in ((top, "maximum"), (bottom, "minimum")) if value != 0.0
+    ]
 
 
 def mask_on_grid(findings: Iterable[Finding], grid: FloatArray) -> npt.NDArray[np.bool_]:

@@ -7,8 +7,11 @@ happens later, in :mod:`pytest_hevval.data.align`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any, Protocol
 
 import numpy as np
@@ -16,7 +19,16 @@ import numpy.typing as npt
 
 from ..errors import DataError, did_you_mean
 
-__all__ = ["Channel", "Reader", "Record", "SourceOptions", "missing_column", "model_column_error"]
+__all__ = [
+    "Channel",
+    "Reader",
+    "Record",
+    "SourceOptions",
+    "all_finite",
+    "find_finite",
+    "missing_column",
+    "model_column_error",
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -28,6 +40,36 @@ class Channel:
     time: FloatArray
     values: npt.NDArray[np.floating]
     unit: str | None = None
+
+    @cached_property
+    def finite(self) -> bool:
+        """Whether every value is finite. Found once per channel: the data-quality checks, the
+        alignment and the interpolation all ask, and on a long record each asking is a read
+        of the whole column."""
+        return all_finite(self.values)
+
+
+def all_finite(values: npt.NDArray[np.floating]) -> bool:
+    """Whether every value is finite, usually in one pass that allocates nothing.
+
+    A NaN or an infinity makes any sum that includes it non-finite, so a finite sum proves
+    every value finite; only a sum that overflows (or a bad value) needs the exact look.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = float(np.add.reduce(values))
+    return math.isfinite(total) or bool(np.isfinite(values).all())
+
+
+def find_finite(channels: Iterable[Channel], threads: int) -> None:
+    """:attr:`Channel.finite` of each channel, found on up to ``threads`` threads (numpy's sums
+    release the GIL) before the channels are asked one by one."""
+    todo = list(channels)
+    if threads > 1 and len(todo) > 1:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            list(pool.map(lambda channel: channel.finite, todo))
+    else:
+        for channel in todo:
+            _ = channel.finite
 
 
 @dataclass

@@ -254,7 +254,8 @@ def _load_model(
     model = spec.model
     if model.kind == "file":
         record = cache.read(model, spec.model_columns())
-        return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "file"}
+        # The file's digest is computed while the spec is scored; _spec_result waits for it.
+        return record, {"path": model.path, "kind": "file"}
     if model.kind == "callable":
         from ..data.models import run_callable
 
@@ -295,7 +296,7 @@ def _load_model(
         step_size=model.step_size,
         parameters={k: float(v) for k, v in model.params.items()},
     )
-    return record, {"path": model.path, **cache.digest(str(model.path)), "kind": "fmu"}
+    return record, {"path": model.path, "kind": "fmu"}
 
 
 def _check_model_columns(node: SignalSpec, model: Record) -> tuple[str, ...]:
@@ -532,6 +533,7 @@ def _align(
         # Scoring around bad stretches includes stretches of NaN.
         nan_policy="omit" if spec.data_quality.action == "omit" else alignment.nan,
         by=alignment.by,
+        threads=_scoring_threads(workers),
     )
     aligned.quality = findings
     if findings and spec.data_quality.action == "omit":
@@ -921,7 +923,7 @@ def _spec_result(
                 "path": spec.reference.path,
                 **cache.digest(str(spec.reference.path)),
             },
-            "model": model_info,
+            "model": _with_digest(model_info, cache),
             **(
                 {
                     "quality": {
@@ -950,6 +952,14 @@ def _spec_result(
             ),
         },
     )
+
+
+def _with_digest(model_info: dict[str, Any], cache: DataCache) -> dict[str, Any]:
+    """A model file's entry with its digest after its path (a callable has neither)."""
+    if "path" not in model_info:
+        return model_info
+    path = model_info["path"]
+    return {"path": path, **cache.digest(str(path)), **model_info}
 
 
 def _add_campaign_facts(
