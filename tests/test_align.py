@@ -123,6 +123,38 @@ def test_nan_raise_and_omit() -> None:
     assert lenient.coverage == pytest.approx(0.95)
 
 
+def test_each_column_is_checked_for_nan_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The data-quality checks and the alignment both ask whether a column is finite; on a long
+    record each asking is a read of the column, so it is answered once per channel."""
+    from pytest_hevval.data import record as record_module
+    from pytest_hevval.data.quality import QualityLimits, assess
+
+    asked: list[int] = []
+    real = record_module.all_finite
+
+    def counted(values: np.ndarray) -> bool:
+        asked.append(id(values))
+        return real(values)
+
+    monkeypatch.setattr(record_module, "all_finite", counted)
+    t = np.arange(0, 10, 0.1)
+    bad = np.sin(t)
+    bad[7] = np.inf
+    ref = record("ref.csv", t, x=np.sin(t), y=np.cos(t), z=bad)
+    sim = record("sim.csv", t, x=np.sin(t), y=np.cos(t), z=np.sin(t))
+    assess(ref, ["x", "y", "z"], QualityLimits(), threads=2)
+    aligned = align_records(
+        ref, sim, reference_columns=["x", "y", "z"], model_columns=["x", "y"], threads=2
+    )
+    for side, name in [("reference", "x"), ("reference", "y"), ("model", "x"), ("model", "y")]:
+        aligned.column(side, name, "linear")  # type: ignore[arg-type]
+    with pytest.raises(DataError, match="1 NaN or inf values"):
+        aligned.column("reference", "z", "linear")
+    assert sorted(asked) == sorted(
+        id(r.channels[n].values) for r, names in ((ref, "xyz"), (sim, "xy")) for n in names
+    )
+
+
 def test_units_are_converted_with_pint(tmp_path: Path) -> None:
     pytest.importorskip("pint")
     t = np.arange(0, 60, 0.5)
