@@ -363,27 +363,58 @@ def part_e2e(
 
 
 def part_quality(signals: int, duration_s: float, rate_hz: float, repeat: int = 3) -> None:
-    """The data-quality checks of the e2e reference alone, on one and on two threads."""
+    """The data-quality checks of the e2e reference alone, on one and on two threads, on the
+    numpy path and the compiled one, interleaved: as logged, and rounded to 0.1 (a logger's
+    resolution: flat steps, so flat lines and saturation are looked for too)."""
+    from pytest_hevval.core import kernel
     from pytest_hevval.data.quality import QualityLimits, assess
     from pytest_hevval.data.readers import read_record
-    from pytest_hevval.data.record import SourceOptions
+    from pytest_hevval.data.record import Channel, Record, SourceOptions
     from pytest_hevval.scoring.engine import _tune_allocator
 
     folder = e2e_data(signals, duration_s, rate_hz)
     n = int(duration_s * rate_hz)
     _tune_allocator()  # as evaluate_spec does: column-sized temporaries stay in the heap
     columns = [f"c{i:03d}" for i in range(signals)]
-    record = read_record(str(folder / "ref.parquet"), columns, SourceOptions(time="time"))
+    logged = read_record(str(folder / "ref.parquet"), columns, SourceOptions(time="time"))
+    rounded = {
+        name: (channel.time, np.round(np.asarray(channel.values), 1))
+        for name, channel in logged.channels.items()
+    }
+    records = {
+        "as logged": {name: (c.time, c.values) for name, c in logged.channels.items()},
+        "rounded to 0.1": rounded,
+    }
+    paths = ["numpy", "numba"] if kernel.requested_path() != "numpy" else ["numpy"]
+    if "numba" in paths:
+        kernel.load_or_raise()  # its load is a run's cost once, not the checks'
     print(f"\n== quality: data-quality checks of {signals} reference channels × {n:,} samples ==")
-    for threads in (1, 2) * repeat:
-        cpu = time.process_time()
-        started = time.perf_counter()
-        found = assess(record, columns, QualityLimits(), threads=threads)
-        wall = time.perf_counter() - started
-        print(
-            f"  {threads} thread(s): wall {wall:.3f} s, CPU {time.process_time() - cpu:.3f} s, "
-            f"{len(found)} findings; load average {os.getloadavg()[0]:.1f}"
-        )
+    saved = os.environ.get(kernel.KERNEL_ENV)
+    try:
+        for _ in range(repeat):
+            for label, arrays in records.items():
+                for path in paths:
+                    os.environ[kernel.KERNEL_ENV] = path
+                    for threads in (1, 2):
+                        # Fresh channels: whether a column is finite is found once per channel.
+                        record = Record(
+                            source=logged.source,
+                            channels={k: Channel(t, v) for k, (t, v) in arrays.items()},
+                        )
+                        cpu = time.process_time()
+                        started = time.perf_counter()
+                        found = assess(record, columns, QualityLimits(), threads=threads)
+                        wall = time.perf_counter() - started
+                        print(
+                            f"  {label}, {path}, {threads} thread(s): wall {wall:.3f} s, "
+                            f"CPU {time.process_time() - cpu:.3f} s, {len(found)} findings; "
+                            f"load average {os.getloadavg()[0]:.1f}"
+                        )
+    finally:
+        if saved is None:
+            os.environ.pop(kernel.KERNEL_ENV, None)
+        else:
+            os.environ[kernel.KERNEL_ENV] = saved
 
 
 # ------------------------------------------------------------------------------------------

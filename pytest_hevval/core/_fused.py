@@ -662,16 +662,24 @@ def quality_steps(v):  # type: ignore[no-untyped-def]
     return resolution, still, top, bottom
 
 
-@numba.njit(cache=True, inline="always")
-def _kept_run(kind, start, stop, widen, time, seconds, out, count):  # type: ignore[no-untyped-def]
-    """Row ``count`` of ``out`` for the run [start, stop) if it lasts ``seconds``; the count."""
-    final = min(stop - 1 + widen, time.shape[0] - 1)
-    if time[final] - time[start] >= seconds:
-        if count < out.shape[0]:
-            out[count, 0] = kind
-            out[count, 1] = start
-            out[count, 2] = final
-        return count + 1
+@numba.njit(cache=True)
+def _kept_pairs(kind, edges, flips, widen, time, seconds, out, count):  # type: ignore[no-untyped-def]
+    """Rows (kind, start, final) of ``out`` for the runs [edges[0], edges[1]), [edges[2],
+    edges[3]) … of the first ``flips`` edges that last ``seconds``; returns the new count.
+
+    Called once per block, not once per run: a helper taking arrays, called per run, cost
+    three times the loop that found the runs.
+    """
+    last = time.shape[0] - 1
+    for e in range(0, flips - 1, 2):
+        start = edges[e]
+        final = min(edges[e + 1] - 1 + widen, last)
+        if time[final] - time[start] >= seconds:
+            if count < out.shape[0]:
+                out[count, 0] = kind
+                out[count, 1] = start
+                out[count, 2] = final
+            count += 1
     return count
 
 
@@ -698,7 +706,6 @@ _RUN_BLOCK = 256
 def _kind_runs(kind, v, m, widen, limit, value, time, seconds, out, count, edges):  # type: ignore[no-untyped-def]
     """The runs of ``kind``'s mask over [0, m) lasting ``seconds``, appended to ``out``."""
     inside = False
-    start = 0
     for first in range(0, m, _RUN_BLOCK):
         last = min(first + _RUN_BLOCK, m)
         hits = 0
@@ -706,22 +713,22 @@ def _kind_runs(kind, v, m, widen, limit, value, time, seconds, out, count, edges
             hits += _in_run(kind, v, i, limit, value)
         if hits == (last - first if inside else 0):
             continue
-        # Where the mask flips, without a branch per entry: a noisy channel flips at random.
-        flips = 0
+        # Where the mask flips, without a branch per entry (a noisy channel flips at random),
+        # after the start of a run carried into the block, kept in edges[0].
+        flips = 1 if inside else 0
         was = inside
         for i in range(first, last):
             now = _in_run(kind, v, i, limit, value)
             edges[flips] = i
             flips += now != was
             was = now
-        for e in range(flips):
-            if inside:
-                count = _kept_run(kind, start, edges[e], widen, time, seconds, out, count)
-            else:
-                start = edges[e]
-            inside = not inside
+        count = _kept_pairs(kind, edges, flips, widen, time, seconds, out, count)
+        if flips % 2:  # a run goes on into the next block
+            edges[0] = edges[flips - 1]
+        inside = was
     if inside:
-        count = _kept_run(kind, start, m, widen, time, seconds, out, count)
+        edges[1] = m
+        count = _kept_pairs(kind, edges, 2, widen, time, seconds, out, count)
     return count
 
 
@@ -737,7 +744,7 @@ def quality_runs(v, time, limit, straight_s, flat_s, top, bottom, saturation_s, 
     ``data.quality``'s numpy scan, so the same runs.
     """
     n = v.shape[0]
-    edges = np.empty(_RUN_BLOCK, dtype=np.int64)
+    edges = np.empty(_RUN_BLOCK + 1, dtype=np.int64)
     count = 0
     if checks & 1 and n > 2:
         count = _kind_runs(0, v, n - 2, 2, limit, 0.0, time, straight_s, out, count, edges)
