@@ -11,7 +11,6 @@ import math
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any, Protocol
 
 import numpy as np
@@ -41,12 +40,18 @@ class Channel:
     values: npt.NDArray[np.floating]
     unit: str | None = None
 
-    @cached_property
+    @property
     def finite(self) -> bool:
         """Whether every value is finite. Found once per channel: the data-quality checks, the
         alignment and the interpolation all ask, and on a long record each asking is a read
         of the whole column."""
-        return all_finite(self.values)
+        # Not functools.cached_property: before Python 3.12 it holds one lock for every
+        # instance while it computes, which would make the channels' threads take turns.
+        known: bool | None = self.__dict__.get("_finite")
+        if known is None:
+            known = all_finite(self.values)
+            object.__setattr__(self, "_finite", known)
+        return known
 
 
 def all_finite(values: npt.NDArray[np.floating]) -> bool:
