@@ -143,9 +143,7 @@ def test_each_column_is_checked_for_nan_once(monkeypatch: pytest.MonkeyPatch) ->
     ref = record("ref.csv", t, x=np.sin(t), y=np.cos(t), z=bad)
     sim = record("sim.csv", t, x=np.sin(t), y=np.cos(t), z=np.sin(t))
     assess(ref, ["x", "y", "z"], QualityLimits(), threads=2)
-    aligned = align_records(
-        ref, sim, reference_columns=["x", "y", "z"], model_columns=["x", "y"], threads=2
-    )
+    aligned = align_records(ref, sim, reference_columns=["x", "y", "z"], model_columns=["x", "y"])
     for side, name in [("reference", "x"), ("reference", "y"), ("model", "x"), ("model", "y")]:
         aligned.column(side, name, "linear")  # type: ignore[arg-type]
     with pytest.raises(DataError, match="1 NaN or inf values"):

@@ -21,7 +21,7 @@ import numpy.typing as npt
 from ..core import kernel
 from ..core.lag import search_lag
 from ..errors import DataError
-from .record import Channel, Record, find_finite
+from .record import Channel, Record
 
 __all__ = [
     "AlignedData",
@@ -305,12 +305,8 @@ def align_records(
     max_offset_s: float = 30.0,
     nan_policy: Literal["raise", "omit"] = "raise",
     by: Literal["time", "clock"] = "time",
-    threads: int = 1,
 ) -> AlignedData:
     """Build the common grid for the channels a spec uses.
-
-    ``threads`` check the columns' values for NaN and inf side by side before they are put on
-    the grid one by one.
 
     With ``by="clock"`` both records carry an absolute start (``meta["start_epoch_s"]``, set
     by readers of clock-time columns) and the model's time is shifted by the difference of
@@ -322,10 +318,6 @@ def align_records(
         reference.channel(name)
     for name in model_names:
         model.channel(name)
-    find_finite(
-        [*(reference.channel(n) for n in ref_names), *(model.channel(n) for n in model_names)],
-        threads,
-    )
 
     if rate_hz is None:
         channels = [reference.channel(n) for n in ref_names] or list(reference.channels.values())

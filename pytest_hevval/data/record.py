@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -24,7 +23,6 @@ __all__ = [
     "Record",
     "SourceOptions",
     "all_finite",
-    "find_finite",
     "missing_column",
     "model_column_error",
 ]
@@ -63,18 +61,6 @@ def all_finite(values: npt.NDArray[np.floating]) -> bool:
     with np.errstate(over="ignore", invalid="ignore"):
         total = float(np.add.reduce(values))
     return math.isfinite(total) or bool(np.isfinite(values).all())
-
-
-def find_finite(channels: Iterable[Channel], threads: int) -> None:
-    """:attr:`Channel.finite` of each channel, found on up to ``threads`` threads (numpy's sums
-    release the GIL) before the channels are asked one by one."""
-    todo = list(channels)
-    if threads > 1 and len(todo) > 1:
-        with ThreadPoolExecutor(max_workers=threads) as pool:
-            list(pool.map(lambda channel: channel.finite, todo))
-    else:
-        for channel in todo:
-            _ = channel.finite
 
 
 @dataclass

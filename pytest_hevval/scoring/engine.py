@@ -520,6 +520,13 @@ def _align(
     )
     if spec.data_quality.action == "error":
         fail_on(findings, reference.source)
+    # Whether each model column is finite, found side by side before the alignment asks column
+    # by column (the checks above found the reference's).
+    _per_signal(
+        lambda channel: channel.finite,
+        [model_record.channels[n] for n in sorted(model_columns) if n in model_record.channels],
+        _scoring_threads(workers),
+    )
     aligned = align_records(
         reference,
         model_record,
@@ -533,7 +540,6 @@ def _align(
         # Scoring around bad stretches includes stretches of NaN.
         nan_policy="omit" if spec.data_quality.action == "omit" else alignment.nan,
         by=alignment.by,
-        threads=_scoring_threads(workers),
     )
     aligned.quality = findings
     if findings and spec.data_quality.action == "omit":
