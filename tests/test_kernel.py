@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
-from pytest_hevval.core.local import LOCAL_CHARACTERISTICS, labelled_table
+from pytest_hevval.core.local import LOCAL_CHARACTERISTICS, Grouping, labelled_table
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
 from tests.conftest import _kernel_unavailable, needs_kernel
 from tests.strategies import signal_pairs
@@ -166,14 +166,14 @@ def test_compiled_main_pass_matches_the_numpy_sums_and_levels(n: int) -> None:
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv(kernel.KERNEL_ENV, "numpy")
         numpy_levels = levels()
-        expected = core._all_sums(reference, simulated, 1.0, 2, numpy_levels)
+        expected, _ = core._all_sums(reference, simulated, 1.0, 2, numpy_levels)
         # The main pass's third level is the lag search's next level of the second.
         np.testing.assert_array_equal(numpy_levels[2][0], lag._quarter_level(numpy_levels[1][0], 1))
         numpy_next = lag._quarter_level(numpy_levels[2][0], 2)
         for workers in (1, 2):
             patch.setenv(kernel.KERNEL_ENV, "numba")
             compiled_levels = levels()
-            got = core._all_sums(reference, simulated, 1.0, workers, compiled_levels)
+            got, _ = core._all_sums(reference, simulated, 1.0, workers, compiled_levels)
             for (a, b), (c, d) in zip(numpy_levels, compiled_levels, strict=True):
                 np.testing.assert_array_equal(a, c)
                 np.testing.assert_array_equal(b, d)
@@ -257,10 +257,12 @@ def test_each_compiled_function_has_one_signature_for_writable_and_read_only_inp
     y = np.cos(np.linspace(0.0, 6.0, 512))
     for a in (x, y):
         a.flags.writeable = False
+    grouping = Grouping.of(np.arange(512) // 8, (64,))
     kernel.main_pass(module, x, y, 1.0, 1, None)
+    kernel.main_pass(module, x, y, 1.0, 1, None, grouping.runs(x, y))
     kernel.lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, 510), 1)
     kernel.quarter_level(module, x, 1)
-    kernel.grouped_sums(module, x, y, np.arange(512) // 8, 64, 0.0)
+    kernel.grouped_sums(module, x, y, grouping.runs(x, y))
     kernel.fine_block_sums(module, x, y, 4, 8, np.empty((10, 128)))
     kernel.dtw_path(module, x[:40], y[:40], 3)
     plan = np.arange(511, dtype=np.intp)

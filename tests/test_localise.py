@@ -7,11 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval import cli
 from pytest_hevval.core.local import (
+    Grouping,
+    SumTable,
+    grouped_tables,
     labelled_table,
     segment_sums,
 )
@@ -224,18 +227,20 @@ def test_a_node_overrides_the_local_gate() -> None:
 # -- the one-pass sums ---------------------------------------------------------------------
 
 
+@pytest.mark.parametrize("compiled", [False, pytest.param(True, marks=needs_kernel)])
 @given(signal_pairs(min_size=12), st.integers(2, 9), st.integers(1, 5))
 @settings(max_examples=80, deadline=None)
 def test_one_pass_fine_sums_merge_to_the_window_sums(
-    pair: tuple[np.ndarray, np.ndarray], size: int, cells: int
+    compiled: bool, pair: tuple[np.ndarray, np.ndarray], size: int, cells: int
 ) -> None:
     ref, sim = pair
     n = ref.shape[0]
     window = np.arange(n) // size
     cell = np.arange(n) % cells
     windows = int(window[-1]) + 1
-    fine = labelled_table(ref, sim, window * cells + cell, windows * cells, compiled=False)
-    merged = fine.merged((windows, cells), 0).sums()
+    grouping = Grouping.of(window * cells + cell, (windows, cells))
+    tables = grouped_tables(ref, sim, grouping, compiled=compiled)
+    merged = tables.rows(grouping.rows(0)).sums()
     starts = np.arange(windows) * size
     direct = segment_sums(ref, sim, starts, np.minimum(starts + size, n))
     scale = float(np.max(np.abs(np.concatenate([ref, sim])))) + 1.0
@@ -284,24 +289,179 @@ def _labelled_pairs(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return ref, sim, labels, groups
 
 
+def _rounding_bound(
+    ref: np.ndarray, sim: np.ndarray, labels: np.ndarray, table: SumTable
+) -> np.ndarray:
+    """How far two orders of summing each column of ``table`` may differ: each term's magnitude
+    summed over its group, times the group's size and a few ulps (the compiled pass adds in
+    another order and fuses a product into its sum)."""
+    r, s = ref * table.scale, sim * table.scale
+    e = r - s
+    d = e - table.shift
+    terms = (d, d * d, e, r, s, r * r, s * s, r * s)
+    keep = labels >= 0
+    groups = table.values.shape[0]
+    n = np.bincount(labels[keep], minlength=groups).astype(np.float64)
+    magnitude = np.column_stack(
+        [np.zeros(groups)]
+        + [np.bincount(labels[keep], weights=np.abs(t)[keep], minlength=groups) for t in terms]
+        + [np.zeros(groups)]
+    )
+    return 4.0 * np.finfo(np.float64).eps * (n[:, None] + 2.0) * magnitude
+
+
 @needs_kernel
 @given(_labelled_pairs())
 @settings(max_examples=150, deadline=None)
-def test_the_compiled_pass_is_numpys_to_the_bit(
+def test_the_compiled_pass_agrees_with_numpy_to_rounding(
     case: tuple[np.ndarray, np.ndarray, np.ndarray, int],
 ) -> None:
-    """Sample by sample into each group's row, as np.bincount adds: the same table, shift and
-    scale on both paths, with the scale found by the pass itself (NaN included)."""
+    """The compiled pass reassociates its sums (as the main pass does): every column within the
+    rounding of a different order, the counts and sign matches exact, and the same shift and
+    scale, with the scale found from the pass's own sums of squares (NaN included)."""
     ref, sim, labels, groups = case
     with np.errstate(invalid="ignore", over="ignore"):
         fast = labelled_table(ref, sim, labels, groups, compiled=True)
         plain = labelled_table(ref, sim, labels, groups, compiled=False)
+        bound = _rounding_bound(ref, sim, labels, plain)
     assert fast.scale == plain.scale
     assert fast.shift == plain.shift or (np.isnan(fast.shift) and np.isnan(plain.shift))
-    assert fast.values.tobytes() == plain.values.tobytes()
+    assert np.array_equal(fast.values[:, [0, 9]], plain.values[:, [0, 9]])
+    same_nan = np.isnan(fast.values) == np.isnan(plain.values)
+    assert same_nan.all()
+    with np.errstate(invalid="ignore"):
+        apart = np.abs(fast.values - plain.values)
+    assert np.all((apart <= bound) | np.isnan(plain.values))
+
+
+@needs_kernel
+@given(_labelled_pairs(), st.sampled_from([1, 3, 200, 1500]))
+@settings(max_examples=60, deadline=None)
+def test_the_main_pass_sums_the_groups_as_the_grouped_pass_does(
+    case: tuple[np.ndarray, np.ndarray, np.ndarray, int], repeat: int
+) -> None:
+    """The groups' sums taken along with λ, chunk by chunk, are the standalone pass's to the
+    bit, also when runs cross the chunks' edges (2^15 samples: records repeated 1,500 times)."""
+    from pytest_hevval.core import kernel
+
+    ref, sim, labels, groups = case
+    ref, sim, labels = np.tile(ref, repeat), np.tile(sim, repeat), np.tile(labels, repeat)
+    assume(np.isfinite(ref).all() and np.isfinite(sim).all())
+    module = kernel.load_or_raise()
+    grouping = Grouping.of(labels, (groups,))
+    runs = grouping.runs(ref, sim)
+    alone = kernel.grouped_sums(module, ref, sim, runs)
+    _, along = kernel.main_pass(module, ref, sim, 1.0, 1, None, runs)
+    assert along is not None
+    assert along.tobytes() == alone.tobytes()
 
 
 # -- through pytest and the command line ----------------------------------------------------
+
+
+def test_a_grouping_keeps_the_runs_and_the_groups_the_record_visits() -> None:
+    # Two axes of sizes 3 and 4: labels are 4·a + b; −1 is no group.
+    labels = np.array([5, 5, 5, -1, -1, 0, 0, 5, 11, 11, 0], dtype=np.int64)
+    grouping = Grouping.of(labels, (3, 4))
+    assert grouping.starts.tolist() == [0, 5, 7, 8, 10]
+    assert grouping.stops.tolist() == [3, 7, 8, 10, 11]
+    # Only the visited groups, in label order: 0, 5, 11.
+    assert grouping.digits.tolist() == [[0, 0], [1, 1], [2, 3]]
+    assert grouping.run_group.tolist() == [1, 0, 1, 2, 0]
+    assert grouping.group.tolist() == [1, 1, 1, -1, -1, 0, 0, 1, 2, 2, 0]
+    assert grouping.samples == 9
+    assert grouping.rows(0) == slice(0, 3)
+    assert grouping.rows(1) == slice(3, 7)
+    empty = Grouping.of(np.empty(0, dtype=np.int64), (2,))
+    assert empty.groups == 0
+    assert empty.samples == 0
+    with pytest.raises(ValueError, match="beyond the grouping's 12 groups"):
+        Grouping.of(np.array([12]), (3, 4))
+
+
+@pytest.mark.parametrize("compiled", [False, pytest.param(True, marks=needs_kernel)])
+def test_every_axis_adds_up_to_the_whole_record(compiled: bool) -> None:
+    rng = np.random.default_rng(5)
+    n = 5_000
+    ref = np.cumsum(rng.normal(size=n))
+    sim = ref + rng.normal(0, 0.3, n) + 1.0
+    window, phase, cell = np.arange(n) // 400, rng.integers(0, 4, n) // 3, rng.integers(0, 7, n)
+    grouping = Grouping.of((window * 2 + phase) * 7 + cell, (13, 2, 7))
+    table = grouped_tables(ref, sim, grouping, compiled=compiled)
+    whole = labelled_table(ref, sim, np.zeros(n, np.int64), 1, compiled=False).values[0]
+    for axis in range(3):
+        rows = table.values[grouping.rows(axis)]
+        np.testing.assert_allclose(rows.sum(axis=0), whole, rtol=1e-12)
+        assert rows[:, 0].sum() == n
+
+
+def _trip_pair(n: int, factor: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(6)
+    ref = (np.sin(np.arange(n) / 300.0) * 40.0 + rng.normal(0, 1.0, n)) * factor
+    sim = (ref / factor * 0.97 + rng.normal(0, 0.5, n)) * factor
+    labels = (np.arange(n) // 3000) * 5 + (np.abs(ref / factor) // 10).astype(np.int64)
+    return ref, sim, labels
+
+
+@needs_kernel
+@pytest.mark.parametrize(
+    ("n", "workers", "factor", "along"),
+    [
+        (100_000, 1, 1.0, True),  # summed in the main pass, chunk by chunk
+        (100_000, 1, 2.0**450, True),  # squares overflow: summed again at a power-of-two scale
+        (100_000, 1, 2.0**-450, True),  # squares underflow: the same
+        (1 << 21, 2, 1.0, False),  # the main pass is shared between threads: a pass of its own
+    ],
+)
+def test_the_groups_summed_along_with_lambda_are_the_grouped_pass(
+    monkeypatch: pytest.MonkeyPatch, n: int, workers: int, factor: float, along: bool
+) -> None:
+    from pytest_hevval.core import kernel
+    from pytest_hevval.core.characteristics import signal_characteristics
+
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numba")
+    ref, sim, labels = _trip_pair(n, factor)
+    grouping = Grouping.of(labels, (int(labels.max()) // 5 + 1, 5))
+    chars = signal_characteristics(
+        ref, sim, dt=0.01, max_lag_s=1.0, workers=workers, group_runs=grouping.runs(ref, sim)
+    )
+    assert (chars.group_sums is not None) == along
+    with np.errstate(over="ignore", under="ignore"):
+        fused = grouped_tables(ref, sim, grouping, summed=chars.group_sums)
+    alone = grouped_tables(ref, sim, grouping, compiled=True)
+    plain = grouped_tables(ref, sim, grouping, compiled=False)
+    assert fused.values.tobytes() == alone.values.tobytes()
+    assert (fused.shift, fused.scale) == (alone.shift, alone.scale) == (plain.shift, plain.scale)
+    np.testing.assert_allclose(fused.values, plain.values, rtol=1e-9)
+
+
+@needs_kernel
+def test_the_engine_takes_the_windows_and_cells_from_the_main_pass(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With the kernel, a signal's windows and cells come from the pass that finds λ: the
+    grouped pass of its own is never called, and the tables are those it would give."""
+    from pytest_hevval.core import kernel
+
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numba")
+    write_trip(tmp_path, stretch=True, fast=True)
+    own_pass = kernel.grouped_sums
+    expected = _evaluate(tmp_path).result.signals[0]  # type: ignore[attr-defined]
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the groups were summed in a pass of their own")
+
+    monkeypatch.setattr(kernel, "grouped_sums", refuse)
+    got = _evaluate(tmp_path).result.signals[0]  # type: ignore[attr-defined]
+    assert got.local.to_dict() == expected.local.to_dict()
+    monkeypatch.setattr(kernel, "grouped_sums", own_pass)
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
+    on_numpy = _evaluate(tmp_path).result.signals[0]  # type: ignore[attr-defined]
+    for scope in ("windows", "phases", "regions"):
+        for name, values in getattr(on_numpy.local, scope).lambdas.items():
+            np.testing.assert_allclose(
+                getattr(got.local, scope).lambdas[name], values, rtol=1e-9, err_msg=name
+            )
 
 
 @pytest.mark.parametrize("xdist", [False, True])

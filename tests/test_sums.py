@@ -142,7 +142,7 @@ def test_the_whole_record_is_the_function_of_its_sums(
     )
     peak = float(max(np.abs(ref).max(), np.abs(sim).max()))
     scale = power_of_two_scale(peak)
-    sums = _all_sums(ref, sim, scale, 1)
+    sums, _ = _all_sums(ref, sim, scale, 1)
     found = lambdas_from_sums(
         n=sums.n,
         abs_error=sums.abs_error,

@@ -220,7 +220,9 @@ def test_stacked_block_sums_cover_whole_and_partial_fine_blocks() -> None:
         pairs = [(rng.normal(size=n), rng.normal(size=n)) for _ in range(3)]
         for (ref, sim), blocks in zip(pairs, block_sums_many(pairs, compiled=False), strict=True):
             fine = fine_block_size(n)
-            table = labelled_table(ref, sim, fine_labels(n, fine), math.ceil(n / fine))
+            table = labelled_table(
+                ref, sim, fine_labels(n, fine), math.ceil(n / fine), compiled=False
+            )
             np.testing.assert_array_equal(blocks.table.values, table.values)
             assert blocks.table.values[:, 0].sum() == n
 

@@ -31,6 +31,8 @@ from .kernel import (
     SIM_SQ,
     SIM_SUM,
     SQ_ERROR,
+    SQUARES_HIGH,
+    SQUARES_LOW,
     N,
 )
 
@@ -122,26 +124,29 @@ def quarter_level(x, out, chunk, first, last):  # type: ignore[no-untyped-def]
             part[q] = ((xs[4 * q] + xs[4 * q + 1]) + (xs[4 * q + 2] + xs[4 * q + 3])) * 0.25
 
 
+@numba.njit(cache=True, inline="always")
+def _with_neighbours(x, first, last):  # type: ignore[no-untyped-def]
+    """x[first:last] and the views one sample before and after it (0 < first ≤ last < n), each
+    indexed from zero: an index that may be negative makes numba check for wraparound, which
+    stops LLVM from vectorising the loop over them."""
+    return x[first:last], x[first - 1 : last - 1], x[first + 1 : last + 1]
+
+
 @numba.njit(cache=True, fastmath=_FAST)
 def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-def]
     """The sums of one chunk, in one loop over it (two when the error's bias dominates).
 
-    Loops index slice views from zero: an index that may be negative makes numba check for
-    wraparound, which stops LLVM from vectorising the loop. The samples with both neighbours
-    in the record carry the λ2 sign comparison in the same loop; the record's first and last
-    sample (derivative 0 on both sides, so they always agree) are added after it.
+    The samples with both neighbours in the record carry the λ2 sign comparison in the same
+    loop (over views from ``_with_neighbours``); the record's first and last sample
+    (derivative 0 on both sides, so they always agree) are added after it.
     """
     n_total = ref.shape[0]
     m = stop - start
     first = max(start, 1)
     last = max(min(stop, n_total - 1), first)
     inner = last - first
-    r_part = ref[first:last]
-    s_part = sim[first:last]
-    r_before = ref[first - 1 : last - 1]
-    r_after = ref[first + 1 : last + 1]
-    s_before = sim[first - 1 : last - 1]
-    s_after = sim[first + 1 : last + 1]
+    r_part, r_before, r_after = _with_neighbours(ref, first, last)
+    s_part, s_before, s_after = _with_neighbours(sim, first, last)
     abs_error = 0.0
     sq_error = 0.0
     error_sum = 0.0
@@ -218,13 +223,21 @@ def _chunk_row(ref, sim, start, stop, scale, row):  # type: ignore[no-untyped-de
 
 
 @numba.njit(cache=True, nogil=True)
-def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, ref64, sim64, rows, first, last):  # type: ignore[no-untyped-def]
+def main_pass(  # type: ignore[no-untyped-def]
+    ref, sim, scale, chunk, ref4, sim4, ref16, sim16, ref64, sim64, rows,
+    starts, stops, run_group, shift, sums, first, last,
+):  # fmt: skip
     """Rows of sums for chunks [first, last) of ``chunk`` samples (a multiple of 64).
 
-    The block means by 4, 16 and 64 are written into ref4 … sim64 unless they are empty.
+    The block means by 4, 16 and 64 are written into ref4 … sim64 unless they are empty. The
+    sums of the groups of the runs ``starts``, ``stops``, ``run_group`` (unscaled, about
+    ``shift``) are added to their rows of ``sums`` while each chunk is in cache, unless there
+    are no runs (see ``_grouped_span``; one range of chunks at a time, as the rows depend on
+    the order).
     """
     n = ref.shape[0]
     levels = ref4.shape[0] > 0
+    k = np.searchsorted(stops, first * chunk, side="right") if starts.shape[0] else 0
     for c in range(first, last):
         start = c * chunk
         stop = min(start + chunk, n)
@@ -232,6 +245,7 @@ def main_pass(ref, sim, scale, chunk, ref4, sim4, ref16, sim16, ref64, sim64, ro
         if levels:
             _quarter_means(ref, start, stop, scale, ref4, ref16, ref64)
             _quarter_means(sim, start, stop, scale, sim4, sim16, sim64)
+        k = _grouped_span(ref, sim, start, stop, shift, starts, stops, run_group, k, sums)
 
 
 #: Samples per tile of the lag window. Short tiles let the next tile's loads from memory
@@ -370,114 +384,111 @@ def interpolate(values, index, offset, step, out, start, stop):  # type: ignore[
 # -- sums per group (windows, phases, conditions, region cells) ---------------------------
 
 
-@numba.njit(cache=True, inline="always")
-def _store(out, row, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9):  # type: ignore[no-untyped-def]
-    """Writes one group's running sums back to its row."""
-    out[row, 0] = a0
-    out[row, 1] = a1
-    out[row, 2] = a2
-    out[row, 3] = a3
-    out[row, 4] = a4
-    out[row, 5] = a5
-    out[row, 6] = a6
-    out[row, 7] = a7
-    out[row, 8] = a8
-    out[row, 9] = a9
+#: The grouped sums are reassociated, as the main pass is, so the loop over a run vectorises;
+#: NaN keeps its meaning, so a NaN sample shows in the sums (the caller then finds the scale as
+#: numpy does).
+_GROUPED_FAST = {"reassoc", "contract", "nsz"}
+#: Runs shorter than this are summed sample by sample, without the set-up of a vectorised loop.
+_SHORT_RUN = 16
+
+
+@numba.njit(cache=True, fastmath=_GROUPED_FAST, inline="always")
+def _add_terms(sums, ri, si, r_before, r_after, s_before, s_after, shift):  # type: ignore[no-untyped-def]
+    """``sums`` plus one sample's ``core.local.SUM_COLUMNS`` but the count."""
+    a1, a2, a3, a4, a5, a6, a7, a8, a9 = sums
+    e = ri - si
+    d = e - shift
+    # No branch on the data: the signs of noisy signals agree at random.
+    match = ((r_after > r_before) == (s_after > s_before)) & (
+        (r_after < r_before) == (s_after < s_before)
+    )
+    return (
+        a1 + d,
+        a2 + d * d,
+        a3 + abs(e),
+        a4 + ri,
+        a5 + si,
+        a6 + ri * ri,
+        a7 + si * si,
+        a8 + ri * si,
+        a9 + match,
+    )
+
+
+@numba.njit(cache=True, fastmath=_GROUPED_FAST)
+def _grouped_span(r, s, lo, hi, shift, starts, stops, run_group, k, sums):  # type: ignore[no-untyped-def]
+    """Adds the ``core.local.SUM_COLUMNS`` of the samples in [lo, hi) to their groups' rows
+    of ``sums``, run by run from run ``k`` (the first that ends after ``lo``); returns the
+    first run that ends after ``hi``.
+
+    The runs ``[starts[k], stops[k])`` of group ``run_group[k]`` come in sample order; samples
+    between runs belong to no group. Each run's part of the span is summed on its own, then
+    added to its group's row: the rows depend only on the spans, so the main pass (which calls
+    this chunk by chunk while the chunk is in cache) and ``grouped_sums`` agree to the bit.
+    """
+    n = r.shape[0]
+    runs = starts.shape[0]
+    while k < runs and starts[k] < hi:
+        a = max(starts[k], lo)
+        b = min(stops[k], hi)
+        # The samples with both neighbours in the record carry the λ2 sign comparison in a
+        # loop that LLVM vectorises (see _with_neighbours). A short run (a noisy operating
+        # variable changes cell every few samples) and the record's first and last sample go
+        # sample by sample instead.
+        if b - a < _SHORT_RUN:
+            inner_lo = inner_hi = b
+        else:
+            inner_lo = max(a, 1)
+            inner_hi = min(b, n - 1)
+        rr, r_before, r_after = _with_neighbours(r, inner_lo, inner_hi)
+        ss, s_before, s_after = _with_neighbours(s, inner_lo, inner_hi)
+        sums9 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        for j in range(inner_hi - inner_lo):
+            sums9 = _add_terms(
+                sums9, rr[j], ss[j], r_before[j], r_after[j], s_before[j], s_after[j], shift
+            )
+        for part in range(2):
+            for i in range(a, inner_lo) if part == 0 else range(inner_hi, b):
+                if 0 < i < n - 1:
+                    sums9 = _add_terms(
+                        sums9, r[i], s[i], r[i - 1], r[i + 1], s[i - 1], s[i + 1], shift
+                    )
+                else:  # the record's ends: a derivative of 0 on both sides, which agree
+                    sums9 = _add_terms(sums9, r[i], s[i], 0.0, 0.0, 0.0, 0.0, shift)
+        a1, a2, a3, a4, a5, a6, a7, a8, a9 = sums9
+        if a < b:
+            g = run_group[k]
+            sums[g, 0] += b - a
+            sums[g, 1] += a1
+            sums[g, 2] += a2
+            sums[g, 3] += a3
+            sums[g, 4] += a4
+            sums[g, 5] += a5
+            sums[g, 6] += a6
+            sums[g, 7] += a7
+            sums[g, 8] += a8
+            sums[g, 9] += a9
+        if stops[k] > hi:
+            break  # the run goes on into the next span
+        k += 1
+    return k
 
 
 @numba.njit(cache=True, nogil=True)
-def grouped_sums(r, s, labels, shift, out, extremes):  # type: ignore[no-untyped-def]
-    """Adds the ``core.local.SUM_COLUMNS`` of every labelled sample to its group's row, and
-    writes (min r, max r, min s, max s, NaN in r, NaN in s) over every sample to extremes.
-
-    Each row is added to in sample order, starting from its value in ``out``, exactly as
-    ``np.bincount`` adds its weights: the table is the numpy path's to the bit. Labels come in
-    runs (a window, a stretch in one cell), so a row is read into registers when its run starts
-    and written back when it ends. The extremes (NaN-free, plus whether a NaN was seen) let the
-    caller decide the power-of-two scale from this same pass instead of four more reads.
-    """
+def grouped_sums(r, s, starts, stops, run_group, shift, chunk, sums):  # type: ignore[no-untyped-def]
+    """Adds every group's ``core.local.SUM_COLUMNS`` to its row of ``sums``, chunk by chunk
+    as the main pass does (see ``_grouped_span``)."""
     n = r.shape[0]
-    r_lo = s_lo = math.inf
-    r_hi = s_hi = -math.inf
-    r_nan = s_nan = False
-    current = labels[0] if n else -1
-    a0 = a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
-    if current >= 0:
-        a0 = out[current, 0]
-        a1 = out[current, 1]
-        a2 = out[current, 2]
-        a3 = out[current, 3]
-        a4 = out[current, 4]
-        a5 = out[current, 5]
-        a6 = out[current, 6]
-        a7 = out[current, 7]
-        a8 = out[current, 8]
-        a9 = out[current, 9]
-    for i in range(n):
-        ri = r[i]
-        si = s[i]
-        r_lo = _fmin(r_lo, ri)
-        r_hi = _fmax(r_hi, ri)
-        s_lo = _fmin(s_lo, si)
-        s_hi = _fmax(s_hi, si)
-        r_nan |= ri != ri
-        s_nan |= si != si
-        g = labels[i]
-        if g != current:
-            if current >= 0:
-                _store(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
-            current = g
-            if g >= 0:
-                a0 = out[g, 0]
-                a1 = out[g, 1]
-                a2 = out[g, 2]
-                a3 = out[g, 3]
-                a4 = out[g, 4]
-                a5 = out[g, 5]
-                a6 = out[g, 6]
-                a7 = out[g, 7]
-                a8 = out[g, 8]
-                a9 = out[g, 9]
-        if g < 0:
-            continue
-        e = ri - si
-        d = e - shift
-        a0 += 1.0
-        a1 += d
-        a2 += d * d
-        a3 += abs(e)
-        a4 += ri
-        a5 += si
-        a6 += ri * ri
-        a7 += si * si
-        a8 += ri * si
-        if 0 < i < n - 1:
-            # No branch on the data (as in fine_block_sums): the signs of noisy signals agree
-            # at random. The two loops are not one inlined helper: returning the sums as a
-            # tuple made the fine-block pass three times slower.
-            a9 += ((r[i + 1] > r[i - 1]) == (s[i + 1] > s[i - 1])) & (
-                (r[i + 1] < r[i - 1]) == (s[i + 1] < s[i - 1])
-            )
-        else:
-            a9 += 1.0
-    if current >= 0:
-        _store(out, current, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9)
-    extremes[0] = r_lo
-    extremes[1] = r_hi
-    extremes[2] = s_lo
-    extremes[3] = s_hi
-    extremes[4] = r_nan
-    extremes[5] = s_nan
+    k = 0
+    for start in range(0, n, chunk):
+        stop = min(start + chunk, n)
+        k = _grouped_span(r, s, start, stop, shift, starts, stops, run_group, k, sums)
 
 
 # -- bootstrap fine blocks ------------------------------------------------------------------
 
 _TOO_BIG = 2.0**400
 _TOO_SMALL = 2.0**-400
-# Sums of squares that prove the peak within (2^-395, 2^395), so no scale is needed: a margin
-# of 2^10 on the squares for their rounding.
-_SQUARES_HIGH = 2.0**790
-_SQUARES_LOW = 2.0**-790
 
 
 @numba.njit(cache=True, fastmath=_FAST)
@@ -606,7 +617,7 @@ def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-
     scale = 1.0
     shift = _head_shift(r, s, 1.0, shift_samples)
     power, total, total_sq, lagged = _fine_rows(r, s, fine, shift, 1.0, out)
-    if not _SQUARES_LOW * max(n, 1) < power < _SQUARES_HIGH:
+    if not SQUARES_LOW * max(n, 1) < power < SQUARES_HIGH:
         peak = _peak_magnitude(r, s)
         if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
             scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))

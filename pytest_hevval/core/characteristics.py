@@ -88,6 +88,9 @@ class SignalCharacteristics:
     dt: float
     correlation: CorrelationKind = "xcorr"
     lag_search: LagSearch | None = field(default=None, compare=False, repr=False)
+    #: The sums of the groups of ``group_runs`` (see ``core.local.grouped_tables``) when the
+    #: compiled main pass took them along, else None.
+    group_sums: FloatArray | None = field(default=None, compare=False, repr=False)
 
     @property
     def values(self) -> dict[str, float]:
@@ -376,16 +379,19 @@ def _all_sums(
     scale: float,
     workers: int,
     levels: _Levels | None = None,
-) -> _Sums:
+    group_runs: kernel.GroupRuns | None = None,
+) -> tuple[_Sums, FloatArray | None]:
+    """The whole record's sums, and the groups' sums when the compiled pass took them along."""
     n = ref.shape[0]
     compiled = kernel.kernel_for(n) if kernel.accepts(ref, sim) else None
     if compiled is not None:
         flat = None if levels is None else tuple(x for pair in levels for x in pair)
-        return _sums_from_rows(kernel.main_pass(compiled, ref, sim, scale, workers, flat))
+        rows, group_sums = kernel.main_pass(compiled, ref, sim, scale, workers, flat, group_runs)
+        return _sums_from_rows(rows), group_sums
     convert = scale != 1.0 or ref.dtype != np.float64 or sim.dtype != np.float64
     if n <= _SMALL:
         with np.errstate(all="ignore"):
-            return _chunk_sums(ref, sim, 0, n, scale, _Scratch(n, convert), levels)
+            return _chunk_sums(ref, sim, 0, n, scale, _Scratch(n, convert), levels), None
     bounds = [*range(0, n, _CHUNK), n]
     spans = list(itertools.pairwise(bounds))
 
@@ -413,7 +419,7 @@ def _all_sums(
     total = _Sums()
     for partial in partials:
         total.merge(partial)
-    return total
+    return total, None
 
 
 def _check_inputs(
@@ -505,6 +511,7 @@ def signal_characteristics(
     correlation: CorrelationKind = "xcorr",
     reference_range: float | None = None,
     workers: int | None = None,
+    group_runs: kernel.GroupRuns | None = None,
 ) -> SignalCharacteristics:
     r"""Compute λ1–λ6 for one aligned signal pair.
 
@@ -524,6 +531,9 @@ def signal_characteristics(
         Declared normalising range for λ3–λ6. Needed when the reference is constant.
     workers:
         Threads for long signals; default ``min(2, os.cpu_count())``.
+    group_runs:
+        Groups of samples (``core.local.Grouping.runs``) whose sums the compiled main pass
+        takes along while each chunk is in cache, into ``group_sums`` of the result.
 
     Returns
     -------
@@ -560,7 +570,7 @@ def signal_characteristics(
         workers = min(2, os.cpu_count() or 1)
 
     levels = _level_buffers(n, dt, max_lag_s)
-    sums = _all_sums(ref, sim, 1.0, workers, levels)
+    sums, group_sums = _all_sums(ref, sim, 1.0, workers, levels, group_runs)
     sim_extremes = _sim_extremes_needed(sums)
     if sim_extremes:
         sums.sim_min = float(np.min(sim))
@@ -583,7 +593,7 @@ def signal_characteristics(
         peak = max(peak, abs(sums.sim_min), abs(sums.sim_max))
     scale = power_of_two_scale(peak)
     if scale != 1.0:
-        sums = _all_sums(ref, sim, scale, workers)
+        sums, _ = _all_sums(ref, sim, scale, workers)
         # The first pass's block means are unscaled and may have overflowed; the lag search
         # builds its own from the records instead (this case is rare enough to pay a read).
         levels = None
@@ -674,6 +684,7 @@ def signal_characteristics(
         dt=float(dt),
         correlation=correlation,
         lag_search=search,
+        group_sums=group_sums,
     )
 
 

@@ -43,7 +43,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -55,6 +55,7 @@ __all__ = [
     "COMPILED",
     "KERNEL_ENV",
     "KERNEL_MIN_SAMPLES",
+    "GroupRuns",
     "KernelPath",
     "active_path",
     "cache_folder",
@@ -66,6 +67,7 @@ __all__ = [
     "kernel_for",
     "load_or_raise",
     "prepare",
+    "squares_rule_out_scale",
     "start_background_compile",
 ]
 
@@ -112,6 +114,12 @@ KERNEL_PARALLEL_MIN = 1 << 21
 #: The same for applying an interpolation plan, which costs about 15 times more per sample
 #: than the main pass (most of it the first write to the new column's pages).
 INTERPOLATE_PARALLEL_MIN = 1 << 17
+
+#: Sums of squares that prove the peak within (2^-395, 2^395), so that no power-of-two scale
+#: is needed (``characteristics.power_of_two_scale`` acts beyond 2^±400): a margin of 2^10 on
+#: the squares for their rounding.
+SQUARES_HIGH = 2.0**790
+SQUARES_LOW = 2.0**-790
 
 #: Columns of one chunk's row of sums from the compiled main pass. The simulated extremes are
 #: left to the caller, as on the numpy path, which rarely needs them.
@@ -263,6 +271,19 @@ def cached_functions() -> dict[str, bool]:
     return {name: _cache_holds(folder, (name,)) for name in COMPILED}
 
 
+def _runs(n: int, fine: int) -> GroupRuns:
+    """``n`` samples in consecutive runs of ``fine``, one group each."""
+    starts = np.arange(0, n, fine, dtype=np.int64)
+    groups = starts.shape[0]
+    return GroupRuns(
+        starts=starts,
+        stops=np.minimum(starts + fine, n),
+        run_group=np.arange(groups, dtype=np.int64),
+        groups=groups,
+        shift=0.0,
+    )
+
+
 def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
     """Compile every function of :data:`COMPILED` (those of ``order`` first, in that order)
     into numba's on-disk cache, in seconds each.
@@ -284,13 +305,13 @@ def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
     y = np.cos(np.linspace(0.0, 6.0, n))
     fine = 4
     calls: dict[str, Callable[[], object]] = {
-        "main_pass": lambda: main_pass(module, x, y, 1.0, 1, None),
+        "main_pass": lambda: main_pass(module, x, y, 1.0, 1, None, _runs(n, fine)),
         "lag_window": lambda: lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, n - 2), 1),
         "quarter_level": lambda: quarter_level(module, x, 1),
         "interpolate": lambda: interpolate(
             module, x, np.arange(n - 1, dtype=np.intp), np.zeros(n - 1), np.ones(n - 1), 1
         ),
-        "grouped_sums": lambda: grouped_sums(module, x, y, np.arange(n) // fine, n // fine, 0.0),
+        "grouped_sums": lambda: grouped_sums(module, x, y, _runs(n, fine)),
         "fine_block_sums": lambda: fine_block_sums(
             module, x, y, fine, 8, np.empty((10, n // fine), dtype=np.float64)
         ),
@@ -572,14 +593,24 @@ def main_pass(
     scale: float,
     workers: int,
     levels: tuple[FloatArray, ...] | None,
-) -> FloatArray:
+    runs: GroupRuns | None = None,
+) -> tuple[FloatArray, FloatArray | None]:
     """Rows of per-chunk sums (columns named in ``_fused``), in record order; ``levels`` are
-    the pyramid's (ref, sim) block means by 4, 16 and 64 to fill, flattened."""
+    the pyramid's (ref, sim) block means by 4, 16 and 64 to fill, flattened.
+
+    With ``runs``, an unscaled pass on one thread also gives :func:`grouped_sums`' table, from
+    each chunk while it is in cache; otherwise (a scale, or a record long enough to be shared
+    between threads, whose group rows would then depend on the split) the table is None.
+    """
     n = ref.shape[0]
     chunks = (n + KERNEL_CHUNK - 1) // KERNEL_CHUNK
     empty = np.empty(0, dtype=np.float64)
     ref4, sim4, ref16, sim16, ref64, sim64 = levels if levels is not None else (empty,) * 6
     rows = np.empty((chunks, FIELDS), dtype=np.float64)
+    shared = workers > 1 and chunks > 1 and n >= KERNEL_PARALLEL_MIN
+    if runs is not None and (scale != 1.0 or shared):
+        runs = None
+    sums = np.zeros((runs.groups if runs is not None else 0, 10), dtype=np.float64)
     _spread(
         module.main_pass,
         chunks,
@@ -597,8 +628,11 @@ def main_pass(
         ref64,
         sim64,
         rows,
+        *_run_arrays(runs),
+        float(runs.shift) if runs is not None else 0.0,
+        sums,
     )
-    return rows
+    return rows, (sums if runs is not None else None)
 
 
 def lag_window(
@@ -716,38 +750,51 @@ def interpolate_columns(
     return outs
 
 
-def grouped_sums(
-    module: ModuleType,
-    ref: AnyFloatArray,
-    sim: AnyFloatArray,
-    labels: npt.NDArray[np.int64],
-    groups: int,
-    shift: float,
-) -> tuple[npt.NDArray[np.float64], tuple[float, float, float, float]]:
-    """The (groups, 10) table of ``core.local.SUM_COLUMNS``, in one sequential compiled pass,
-    and (max, min) of ``ref`` then of ``sim`` as numpy gives them (NaN where one is NaN).
+class GroupRuns(NamedTuple):
+    """A record's samples in runs of one group, in sample order, as the compiled passes take
+    them (``core.local.Grouping.runs``), and the shift of the error sums."""
 
-    Sequential per signal, so the table is bit-for-bit repeatable (and np.bincount's); signals
-    run side by side on the engine's threads (the loop releases the GIL).
+    starts: npt.NDArray[np.int64]
+    stops: npt.NDArray[np.int64]
+    #: Each run's group, in [0, groups).
+    run_group: npt.NDArray[np.int64]
+    groups: int
+    shift: float
+
+
+def grouped_sums(
+    module: ModuleType, ref: AnyFloatArray, sim: AnyFloatArray, runs: GroupRuns
+) -> npt.NDArray[np.float64]:
+    """The (groups, 10) table of ``core.local.SUM_COLUMNS`` of every group of ``runs``, in one
+    sequential compiled pass: the table the main pass gives when it sums the groups.
+
+    Sequential per signal, so the table is repeatable bit for bit; signals run side by side on
+    the engine's threads (the loop releases the GIL). The sums are reassociated, as the main
+    pass's are: they agree with the numpy path's to rounding.
     """
-    out = np.zeros((groups, 10), dtype=np.float64)
-    extremes = np.empty(6, dtype=np.float64)
+    sums = np.zeros((runs.groups, 10), dtype=np.float64)
     module.grouped_sums(
         _read_only(ref),
         _read_only(sim),
-        _read_only(labels, np.int64),
-        float(shift),
-        out,
-        extremes,
+        *_run_arrays(runs),
+        float(runs.shift),
+        KERNEL_CHUNK,
+        sums,
     )
-    r_lo, r_hi, s_lo, s_hi, r_nan, s_nan = extremes.tolist()
-    nan = float("nan")
-    return out, (
-        nan if r_nan else r_hi,
-        nan if r_nan else r_lo,
-        nan if s_nan else s_hi,
-        nan if s_nan else s_lo,
-    )
+    return sums
+
+
+def _run_arrays(runs: GroupRuns | None) -> tuple[npt.NDArray[np.int64], ...]:
+    if runs is None:
+        return (_read_only(np.empty(0, dtype=np.int64), np.int64),) * 3
+    return tuple(_read_only(a, np.int64) for a in (runs.starts, runs.stops, runs.run_group))
+
+
+def squares_rule_out_scale(power: float, samples: int, summed: int) -> bool:
+    """Whether Σx² over ``summed`` of a record's ``samples`` values (both signals) proves that
+    no power-of-two scale is needed (every |x| within (2^-395, 2^395)): peak² ≤ Σx² ≤ n·peak².
+    A NaN or inf sum, or samples left out of it, prove nothing."""
+    return summed == samples and SQUARES_LOW * max(samples, 1) < power < SQUARES_HIGH
 
 
 def fine_block_sums(

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Literal
 
 import numpy as np
@@ -42,6 +42,7 @@ __all__ = [
     "SUM_COLUMNS",
     "Concentration",
     "GroupSums",
+    "Grouping",
     "RegionGrid",
     "SumTable",
     "concentration",
@@ -49,6 +50,7 @@ __all__ = [
     "driving_phases",
     "fixed_windows",
     "group_lambdas",
+    "grouped_tables",
     "labelled_table",
     "region_grid",
     "region_sums",
@@ -84,6 +86,10 @@ class GroupSums:
     sim_sq: FloatArray
     cross: FloatArray
     sign_matches: IntArray
+
+    def rows(self, selection: slice | npt.NDArray[np.intp]) -> GroupSums:
+        """The sums of some of the groups only."""
+        return GroupSums(**{f.name: getattr(self, f.name)[selection] for f in fields(self)})
 
 
 def derivative_signs(y: FloatArray) -> npt.NDArray[np.int8]:
@@ -375,12 +381,6 @@ class SumTable:
         """The table of some of the groups only."""
         return SumTable(self.values[selection], self.shift, self.scale)
 
-    def merged(self, shape: Sequence[int], keep: int) -> SumTable:
-        """Rows laid out as a mixed-radix grid of ``shape``, summed over all axes but ``keep``."""
-        grid = self.values.reshape((*shape, len(SUM_COLUMNS)))
-        axes = tuple(a for a in range(len(shape)) if a != keep)
-        return SumTable(np.ascontiguousarray(grid.sum(axis=axes)), self.shift, self.scale)
-
     def sums(self) -> GroupSums:
         table = self.values
         n = np.rint(table[:, 0]).astype(np.int64)
@@ -401,6 +401,155 @@ class SumTable:
         )
 
 
+@dataclass(frozen=True)
+class Grouping:
+    """A record's samples sorted into groups once, for every signal scored over them.
+
+    A sample's group is a mixed-radix number over ``shape``, one digit per way of grouping
+    (window, phase, conditions, region cell; −1: no group). Only the groups that hold samples
+    are kept, so a grouping with many axes costs what the record visits, not the product of
+    their sizes. The samples come in runs of one group (a window, a stretch in one cell): the
+    compiled pass sums each run as one contiguous stretch, inside the main pass of the core
+    while the record is in cache (:func:`grouped_tables`).
+    """
+
+    shape: tuple[int, ...]
+    #: The runs [starts[k], stops[k]) of one group each, in sample order; the samples between
+    #: them belong to no group.
+    starts: IntArray
+    stops: IntArray
+    #: Each run's group, in [0, groups).
+    run_group: IntArray
+    #: Each group's index along each axis: (groups, axes).
+    digits: IntArray
+    #: Every sample's group (−1: none), for the numpy path.
+    group: IntArray
+    #: The first row of each axis in :func:`grouped_tables`' stacked table.
+    offsets: IntArray
+    #: How many samples belong to a group.
+    samples: int
+    #: Where each group's sums go in the stacked table, flat: (group, axis, column) in C order.
+    placement: IntArray
+
+    @classmethod
+    def of(cls, labels: IntArray, shape: Sequence[int]) -> Grouping:
+        """The grouping of ``labels`` (mixed-radix numbers over ``shape``, −1: no group)."""
+        fine = np.asarray(labels, dtype=np.int64)
+        sizes = tuple(int(size) for size in shape)
+        n = fine.shape[0]
+        if n and int(fine.max()) >= math.prod(sizes):
+            raise ValueError(f"a label is beyond the grouping's {math.prod(sizes)} groups")
+        change = np.empty(n, dtype=bool)
+        change[:1] = True
+        np.not_equal(fine[1:], fine[:-1], out=change[1:])
+        every_start = np.flatnonzero(change)
+        lengths = np.diff(np.append(every_start, n))
+        every_label = fine[every_start]
+        in_group = every_label >= 0
+        present, run_group = np.unique(every_label[in_group], return_inverse=True)
+        every_group = np.full(every_start.shape[0], -1, dtype=np.int64)
+        every_group[in_group] = run_group
+        starts = every_start[in_group]
+        digits = np.stack(np.unravel_index(present, sizes), axis=1)
+        offsets = np.concatenate(([0], np.cumsum(sizes[:-1]))).astype(np.int64)
+        columns = len(SUM_COLUMNS)
+        placement = ((digits + offsets)[:, :, None] * columns + np.arange(columns)).reshape(-1)
+        return cls(
+            shape=sizes,
+            starts=starts.astype(np.int64),
+            stops=(starts + lengths[in_group]).astype(np.int64),
+            run_group=run_group.astype(np.int64).reshape(-1),
+            digits=np.ascontiguousarray(digits, dtype=np.int64).reshape(-1, len(sizes)),
+            group=np.repeat(every_group, lengths),
+            offsets=offsets,
+            samples=int(lengths[in_group].sum()),
+            placement=placement.astype(np.int64),
+        )
+
+    @property
+    def groups(self) -> int:
+        return int(self.digits.shape[0])
+
+    def rows(self, axis: int) -> slice:
+        """Axis ``axis``'s rows in :func:`grouped_tables`' stacked table."""
+        first = int(self.offsets[axis])
+        return slice(first, first + self.shape[axis])
+
+    def runs(self, ref: FloatArray, sim: FloatArray) -> kernel.GroupRuns:
+        """The runs as the compiled passes take them, with the shift of ``ref`` − ``sim``."""
+        return kernel.GroupRuns(
+            starts=self.starts,
+            stops=self.stops,
+            run_group=self.run_group,
+            groups=self.groups,
+            shift=_shift(ref, sim),
+        )
+
+    def stacked(self, sums: FloatArray) -> FloatArray:
+        """Every axis's rows from the groups' ``sums`` (groups, 10), each adding its groups in
+        group order."""
+        if len(self.shape) == 1 and self.groups == self.shape[0]:
+            return sums  # every row visited, in order: nothing to add
+        axes = len(self.shape)
+        rows = sum(self.shape)
+        weights = np.repeat(sums, axes, axis=0).reshape(-1) if axes > 1 else sums.reshape(-1)
+        table = np.bincount(self.placement, weights=weights, minlength=rows * len(SUM_COLUMNS))
+        return np.asarray(table, dtype=np.float64).reshape(rows, len(SUM_COLUMNS))
+
+
+def grouped_tables(
+    ref: FloatArray,
+    sim: FloatArray,
+    grouping: Grouping,
+    *,
+    compiled: bool | None = None,
+    summed: FloatArray | None = None,
+) -> SumTable:
+    """The additive sums of every index along every axis of ``grouping``.
+
+    The rows of axis ``a`` are ``grouping.rows(a)`` of the stacked table. Each signal is read
+    once and every grouping (windows, phases, conditions, cells) comes from the sums of the
+    groups it visits. ``summed``: the groups' sums the compiled main pass took along with λ
+    (``signal_characteristics(group_runs=grouping.runs(ref, sim))``), used unless the values
+    need a power-of-two scale. ``compiled``: None lets
+    :func:`pytest_hevval.core.kernel.kernel_for` choose (the compiled pass for long records or
+    a warm cache, ``HEVVAL_KERNEL`` to force); True or False force a path. The compiled sums
+    are reassociated, as the main pass's are, and agree with numpy's to rounding; the shift
+    and the scale are the same on both paths.
+    """
+    r, s = _check_pair(ref, sim)
+    if grouping.group.shape[0] != r.shape[0]:
+        raise DegenerateSignalError(
+            f"the grouping has {grouping.group.shape[0]} samples, the signal {r.shape[0]}"
+        )
+    module = None
+    if summed is None:
+        if compiled is None:
+            module = kernel.kernel_for(r.shape[0], ("grouped_sums",))
+        elif compiled:
+            module = kernel.load_or_raise()
+    if summed is not None or module is not None:
+        shift = _shift(r, s)
+        if summed is None:
+            assert module is not None
+            summed = kernel.grouped_sums(module, r, s, grouping.runs(r, s))
+        # The sums of squares tell whether the peak can ask for a power-of-two scale; only
+        # then (values beyond 2^±395, a NaN or inf, or samples in no group) is it found as
+        # numpy finds it, and the sums taken again of the scaled values.
+        power = float(summed[:, 6].sum() + summed[:, 7].sum())
+        scale = 1.0
+        if not kernel.squares_rule_out_scale(power, r.shape[0], grouping.samples):
+            scale = _rescale(r, s)
+        if scale != 1.0:
+            module = module or kernel.load_or_raise()
+            r, s = r * scale, s * scale
+            shift = _shift(r, s)
+            summed = kernel.grouped_sums(module, r, s, grouping.runs(r, s))
+        return SumTable(grouping.stacked(summed), shift, scale)
+    sums, shift, scale = _numpy_sums(r, s, grouping.group, grouping.groups)
+    return SumTable(grouping.stacked(sums), shift, scale)
+
+
 def labelled_table(
     ref: FloatArray,
     sim: FloatArray,
@@ -411,30 +560,22 @@ def labelled_table(
 ) -> SumTable:
     """The additive sums of every label in [0, ``groups``) (−1: no group), in one pass.
 
-    Callers combine several groupings (window × phase × conditions × region cell) into one fine
-    label, so each signal is read once and every grouping is then a sum over the small fine
-    table. ``compiled``: None lets :func:`pytest_hevval.core.kernel.kernel_for` choose (the
-    compiled pass for long records or a warm cache, ``HEVVAL_KERNEL`` to force); True or False
-    force a path.
+    One axis of :func:`grouped_tables`; the numpy path needs no grouping. ``compiled`` as
+    there.
     """
     r, s = _check_pair(ref, sim)
     labels = np.asarray(labels, dtype=np.int64)
-    module = None
-    if compiled is None:
-        module = kernel.kernel_for(r.shape[0], ("grouped_sums",))
-    elif compiled:
-        module = kernel.load_or_raise()
-    if module is not None:
-        # The pass finds the extremes that decide the scale as it sums; values that need
-        # one (beyond 2^±400) are summed again, scaled, which ordinary magnitudes never are.
-        shift = _shift(r, s)
-        table, extremes = kernel.grouped_sums(module, r, s, labels, groups, shift)
-        scale = _scale_of(extremes) if r.shape[0] else 1.0
-        if scale == 1.0:
-            return SumTable(table, shift, scale)
-        r, s = r * scale, s * scale
-        shift = _shift(r, s)
-        return SumTable(kernel.grouped_sums(module, r, s, labels, groups, shift)[0], shift, scale)
+    if compiled is None and kernel.kernel_for(r.shape[0], ("grouped_sums",)) is None:
+        compiled = False
+    if compiled is False:
+        return SumTable(*_numpy_sums(r, s, labels, groups))
+    return grouped_tables(r, s, Grouping.of(labels, (groups,)), compiled=True)
+
+
+def _numpy_sums(
+    r: FloatArray, s: FloatArray, labels: IntArray, groups: int
+) -> tuple[FloatArray, float, float]:
+    """The (groups, 10) table of labels in [0, ``groups``) (−1: none), its shift and scale."""
     scale = _rescale(r, s)
     if scale != 1.0:
         r, s = r * scale, s * scale
@@ -461,13 +602,16 @@ def labelled_table(
         total(r * s),
         total(signs_match),
     )
-    return SumTable(np.column_stack(columns), shift, scale)
+    return np.column_stack(columns), shift, scale
 
 
 def _shift(r: FloatArray, s: FloatArray) -> float:
     """The shift of the error sums: any value near the mean error keeps the shifted sums exact
     enough, and the first samples' mean costs nothing and is the same on both paths."""
-    return float(np.mean(r[:SHIFT_SAMPLES] - s[:SHIFT_SAMPLES])) if r.shape[0] else 0.0
+    if not r.shape[0]:
+        return 0.0
+    head = np.subtract(r[:SHIFT_SAMPLES], s[:SHIFT_SAMPLES], dtype=np.float64)
+    return float(np.mean(head))
 
 
 def _rescale(ref: FloatArray, sim: FloatArray) -> float:

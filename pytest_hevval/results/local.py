@@ -59,6 +59,20 @@ class GroupTable:
     ) -> GroupTable:
         """``sums`` of samples times ``scale`` (see :class:`~pytest_hevval.core.local.SumTable`);
         ``reference_range`` and the errors kept are in the signal's unit."""
+        return cls.many([labels], sums, reference_range, correlation, total_sq, scale)[0]
+
+    @classmethod
+    def many(
+        cls,
+        labels: Sequence[Sequence[str]],
+        sums: GroupSums,
+        reference_range: float,
+        correlation: str,
+        total_sq: float,
+        scale: float = 1.0,
+    ) -> list[GroupTable]:
+        """One table per entry of ``labels``, whose rows follow each other in ``sums``, as
+        :meth:`from_sums` of each: one vectorised call for them all."""
         kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
         lambdas = group_lambdas(sums, reference_range * scale, kind)
         n = sums.n.astype(np.float64)
@@ -70,16 +84,31 @@ class GroupTable:
         share = sums.sq_error / total_sq if total_sq > 0 else np.zeros_like(n)
         # tolist() makes Python numbers in one call (a float() per value costs a signal of
         # many cells milliseconds).
-        return cls(
-            labels=tuple(labels),
-            n=tuple(np.asarray(sums.n, dtype=np.int64).tolist()),
-            lambdas={
-                name: tuple(np.asarray(v, dtype=np.float64).tolist()) for name, v in lambdas.items()
-            },
-            error_share=tuple(np.asarray(share, dtype=np.float64).tolist()),
-            rms=tuple(np.asarray(rms, dtype=np.float64).tolist()),
-            mean_error=tuple(np.asarray(mean, dtype=np.float64).tolist()),
-        )
+        columns = {
+            "n": np.asarray(sums.n, dtype=np.int64).tolist(),
+            "error_share": np.asarray(share, dtype=np.float64).tolist(),
+            "rms": np.asarray(rms, dtype=np.float64).tolist(),
+            "mean_error": np.asarray(mean, dtype=np.float64).tolist(),
+        }
+        values = {name: np.asarray(v, dtype=np.float64).tolist() for name, v in lambdas.items()}
+        tables = []
+        first = 0
+        for names in labels:
+            part = slice(first, first + len(names))
+            first = part.stop
+            tables.append(
+                cls(
+                    labels=tuple(names),
+                    n=tuple(columns["n"][part]),
+                    lambdas={name: tuple(v[part]) for name, v in values.items()},
+                    error_share=tuple(columns["error_share"][part]),
+                    rms=tuple(columns["rms"][part]),
+                    mean_error=tuple(columns["mean_error"][part]),
+                )
+            )
+        if first != n.shape[0]:
+            raise ValueError(f"{first} labels for {n.shape[0]} groups")
+        return tables
 
     def judged(self, index: int, min_samples: int = MIN_GROUP_SAMPLES) -> bool:
         return self.n[index] >= max(min_samples, MIN_GROUP_SAMPLES)

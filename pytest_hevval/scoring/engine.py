@@ -443,10 +443,9 @@ def _evaluate(
     aligned = _align(spec, nodes, reference, model_record, workers)
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
-    fused = _fused_characteristics(spec, unique, values, dt, workers)
-    registered = _registered_characteristics(spec, unique, values, dt)
     labels = _labels(spec, aligned)
-    local = _local_results(spec, labels, unique, values, fused, workers)
+    fused, local = _fused_characteristics(spec, unique, values, dt, workers, labels)
+    registered = _registered_characteristics(spec, unique, values, dt)
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
@@ -589,26 +588,6 @@ def _labels(spec: Spec, aligned: AlignedData) -> Labels | None:
         raise exc.with_context(key="regions") from None
 
 
-def _local_results(
-    spec: Spec,
-    labels: Labels | None,
-    unique: dict[Signature, SignalSpec],
-    values: dict[Signature, tuple[FloatArray, FloatArray]],
-    fused: Mapping[Signature, SignalCharacteristics],
-    workers: int | None,
-) -> dict[Signature, LocalResult]:
-    """Each distinct signal over windows, phases, conditions and cells (one pass each)."""
-    if labels is None:
-        return {}
-
-    def score(signature: Signature) -> tuple[Signature, LocalResult]:
-        ref, sim = values[signature]
-        chars = fused[signature]
-        return signature, score_local(labels, ref, sim, chars.reference_range, spec.correlation)
-
-    return dict(_per_signal(score, list(unique), _scoring_threads(workers)))
-
-
 def _block_sums(
     values: Mapping[Signature, tuple[FloatArray, FloatArray]], workers: int | None
 ) -> dict[Signature, BlockSums]:
@@ -701,15 +680,20 @@ def _fused_characteristics(
     values: dict[Signature, tuple[FloatArray, FloatArray]],
     dt: float,
     workers: int | None,
-) -> dict[Signature, SignalCharacteristics]:
-    """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass."""
+    labels: Labels | None,
+) -> tuple[dict[Signature, SignalCharacteristics], dict[Signature, LocalResult]]:
+    """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass, and
+    with ``labels`` the signal over the spec's windows, phases, conditions and cells: the same
+    pass sums them, and their tables are built on the signal's thread while the other threads
+    score (most of it is Python, which takes turns)."""
     n_workers = _scoring_threads(workers)
 
-    def score(item: tuple[Signature, SignalSpec]) -> tuple[Signature, Any]:
+    def score(item: tuple[Signature, SignalSpec]) -> tuple[Signature, Any, LocalResult | None]:
         signature, node = item
         ref, sim = values[signature]
+        group_runs = labels.grouping.runs(ref, sim) if labels is not None else None
         try:
-            result: Any = signal_characteristics(
+            chars = signal_characteristics(
                 ref,
                 sim,
                 dt=dt,
@@ -717,16 +701,24 @@ def _fused_characteristics(
                 correlation=spec.correlation,
                 reference_range=node.reference_range,
                 workers=1 if len(unique) > 1 else n_workers,
+                group_runs=group_runs,
             )
         except DegenerateSignalError as exc:
-            result = exc.with_context(line=node.line, key=node.key)
-        return signature, result
+            return signature, exc.with_context(line=node.line, key=node.key), None
+        local = None
+        if labels is not None:
+            local = score_local(
+                labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
+            )
+        return signature, chars, local
 
-    scored = dict(_per_signal(score, list(unique.items()), n_workers))
-    for outcome in scored.values():
+    scored = _per_signal(score, list(unique.items()), n_workers)
+    for _, outcome, _ in scored:
         if isinstance(outcome, HevvalError):
             raise outcome
-    return scored
+    fused = {signature: chars for signature, chars, _ in scored}
+    local = {signature: found for signature, _, found in scored if found is not None}
+    return fused, local
 
 
 def _registered_characteristics(

@@ -1,9 +1,10 @@
 """Where and when the model is wrong: a spec's ``local:`` and ``regions:`` scored and gated.
 
 The samples of a spec's record are labelled once (time window × driving phase × conditions ×
-region cell, one *fine* label per sample, shared by every signal); each signal's sums over the
-fine labels come from one pass of :func:`pytest_hevval.core.local.labelled_table`, and every
-table (windows, phases, conditions, cells) is a merge of that small fine table. The tables, the
+region cell, one *fine* label per sample, shared by every signal) and sorted into the groups
+they visit (:class:`pytest_hevval.core.local.Grouping`); each signal's tables (windows, phases,
+conditions, cells) come from one pass of :func:`pytest_hevval.core.local.grouped_tables`, and
+their λ from one vectorised call. The tables, the
 concentration of the error and the window and cell gates end up in each signal's result; the
 grid, the coverage and Φ per window and per cell in the spec's.
 """
@@ -21,9 +22,10 @@ import numpy.typing as npt
 from ..core.local import (
     LOCAL_CHARACTERISTICS,
     PHASES,
+    Grouping,
     concentration,
     driving_phases,
-    labelled_table,
+    grouped_tables,
     region_grid,
 )
 from ..core.tree import global_metric_arrays
@@ -56,10 +58,9 @@ CONDITION_MAJORITY = 0.5
 class Labels:
     """How a spec's samples fall into windows, phases, conditions and region cells."""
 
-    fine: IntArray
-    #: The fine label is a mixed-radix number: window, then phase, conditions and cell (0:
-    #: outside the grid, else cell + 1), in this shape.
-    shape: tuple[int, ...]
+    #: The samples' groups: a mixed-radix number over window, then phase, conditions and cell
+    #: (0: outside the grid, else cell + 1), sorted once for every signal.
+    grouping: Grouping
     windows: int
     spans_s: tuple[tuple[float, float], ...]
     window_starts: IntArray
@@ -75,8 +76,8 @@ class Labels:
     region: Mapping[str, Any] | None = None
 
     @property
-    def fine_groups(self) -> int:
-        return int(np.prod(self.shape))
+    def shape(self) -> tuple[int, ...]:
+        return self.grouping.shape
 
 
 def _window_label(span: tuple[float, float]) -> str:
@@ -205,8 +206,7 @@ def label_samples(
                 if window_condition[k] is None:
                     window_condition[k] = condition.name
     return Labels(
-        fine=np.ascontiguousarray(fine, dtype=np.int64),
-        shape=tuple(shape),
+        grouping=Grouping.of(fine, shape),
         windows=windows,
         spans_s=spans,
         window_starts=starts,
@@ -231,26 +231,41 @@ def score_local(
     sim: FloatArray,
     reference_range: float,
     correlation: str,
+    summed: FloatArray | None = None,
 ) -> LocalResult:
-    """One signal's tables over every grouping of ``labels``."""
-    fine = labelled_table(ref, sim, labels.fine, labels.fine_groups)
-    total_sq = float(fine.sums().sq_error.sum())
-
-    def table(axis: int, names: Sequence[str], rows: slice = slice(None)) -> GroupTable:
-        merged = fine.merged(labels.shape, axis).rows(rows)
-        return GroupTable.from_sums(
-            names, merged.sums(), reference_range, correlation, total_sq, fine.scale
-        )
-
-    window_sums = fine.merged(labels.shape, 0).sums()
-    windows = GroupTable.from_sums(
-        labels.window_labels, window_sums, reference_range, correlation, total_sq, fine.scale
+    """One signal's tables over every grouping of ``labels``; ``summed``: its groups' sums if
+    the core's main pass took them (``SignalCharacteristics.group_sums``)."""
+    grouping = labels.grouping
+    stacked = grouped_tables(ref, sim, grouping, summed=summed)
+    # Every table's rows, in one selection: their λ come from one vectorised call.
+    parts: list[tuple[Sequence[str], npt.NDArray[np.intp]]] = [
+        (labels.window_labels, _axis_rows(grouping, 0))
+    ]
+    if labels.phase_axis is not None:
+        parts.append((PHASES, _axis_rows(grouping, labels.phase_axis)))
+    # The condition's bit is 1 where it holds: rows reversed give (holds, rest).
+    for axis in labels.condition_axes.values():
+        parts.append((("holds", "rest"), _axis_rows(grouping, axis)[::-1]))
+    if labels.cell_axis is not None and labels.region is not None:
+        # Row 0 of the cell axis holds the samples outside the grid.
+        parts.append((labels.region["labels"], _axis_rows(grouping, labels.cell_axis)[1:]))
+    sums = stacked.rows(np.concatenate([rows for _, rows in parts])).sums()
+    window_sums = sums.rows(slice(0, labels.windows))
+    total_sq = float(window_sums.sq_error.sum())
+    tables = GroupTable.many(
+        [names for names, _ in parts],
+        sums,
+        reference_range,
+        correlation,
+        total_sq,
+        stacked.scale,
     )
     hot = concentration(
         window_sums, labels.window_starts, labels.window_stops, labels.dt, labels.start_s
     )
+    rest = iter(tables[1:])
     return LocalResult(
-        windows=windows,
+        windows=tables[0],
         spans_s=labels.spans_s,
         concentration={
             "sentence": concentration_sentence(hot),
@@ -259,19 +274,17 @@ def score_local(
             "windows": hot.windows,
             "spans_s": [list(span) for span in hot.spans_s],
         },
-        phases=table(labels.phase_axis, PHASES) if labels.phase_axis is not None else None,
-        # The condition's bit is 1 where it holds: rows reversed give (holds, rest).
-        conditions={
-            name: table(axis, ("holds", "rest"), slice(None, None, -1))
-            for name, axis in labels.condition_axes.items()
-        },
-        # Row 0 of the cell axis holds the samples outside the grid.
+        phases=next(rest) if labels.phase_axis is not None else None,
+        conditions={name: next(rest) for name in labels.condition_axes},
         regions=(
-            table(labels.cell_axis, labels.region["labels"], slice(1, None))
-            if labels.cell_axis is not None and labels.region is not None
-            else None
+            next(rest) if labels.cell_axis is not None and labels.region is not None else None
         ),
     )
+
+
+def _axis_rows(grouping: Grouping, axis: int) -> npt.NDArray[np.intp]:
+    rows = grouping.rows(axis)
+    return np.arange(rows.start, rows.stop, dtype=np.intp)
 
 
 def _gate(
