@@ -705,12 +705,13 @@ def _fused_characteristics(
             )
         except DegenerateSignalError as exc:
             return signature, exc.with_context(line=node.line, key=node.key), None
-        local = None
-        if labels is not None:
-            local = score_local(
-                labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
-            )
-        return signature, chars, local
+        if labels is None:
+            return signature, chars, None
+        local = score_local(
+            labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
+        )
+        # The group sums have served: a spec keeps its signals' characteristics to the end.
+        return signature, replace(chars, group_sums=None), local
 
     scored = _per_signal(score, list(unique.items()), n_workers)
     for _, outcome, _ in scored:
