@@ -237,7 +237,7 @@ def main_pass(  # type: ignore[no-untyped-def]
     """
     n = ref.shape[0]
     levels = ref4.shape[0] > 0
-    k = np.searchsorted(stops, first * chunk, side="right") if starts.shape[0] else 0
+    k = np.searchsorted(stops, first * chunk, side="right")
     for c in range(first, last):
         start = c * chunk
         stop = min(start + chunk, n)

@@ -619,11 +619,7 @@ def _rescale(ref: FloatArray, sim: FloatArray) -> float:
     if ref.shape[0] == 0:
         return 1.0
     with np.errstate(invalid="ignore"):
-        return _scale_of((ref.max(), ref.min(), sim.max(), sim.min()))
-
-
-def _scale_of(extremes: Sequence[float | np.floating]) -> float:
-    """:func:`_rescale` from (max, min) of the reference then of the simulation, as numpy
-    gives them (NaN where a signal holds a NaN)."""
+        extremes = (ref.max(), ref.min(), sim.max(), sim.min())
+    # NaN where a signal holds a NaN: no scale then.
     peak = max(abs(float(a)) for a in extremes)
     return power_of_two_scale(peak) if math.isfinite(peak) else 1.0

@@ -75,10 +75,6 @@ class Labels:
     cell_axis: int | None = None
     region: Mapping[str, Any] | None = None
 
-    @property
-    def shape(self) -> tuple[int, ...]:
-        return self.grouping.shape
-
 
 def _window_label(span: tuple[float, float]) -> str:
     return f"{span[0]:.0f}–{span[1]:.0f} s"
