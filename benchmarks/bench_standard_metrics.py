@@ -4,6 +4,7 @@
     python benchmarks/bench_standard_metrics.py --samples 4000 --repeat 5
     python benchmarks/bench_standard_metrics.py --long 14130 360000   # ours alone, long records
     python benchmarks/bench_standard_metrics.py --samples --banded 88   # banded vs exact, i3
+    python benchmarks/bench_standard_metrics.py --samples --engine 600   # through the engine
 
 ISO/TS 18571: ``objective-rating-metrics`` (``ISO18571(...).overall_rating()``, its numba
 compilation done once before timing) against ``iso18571_rating`` on the numpy path and, with
@@ -11,6 +12,11 @@ the ``fast`` extra, on the compiled kernel (compiled before timing), on the driv
 ``bench_core.py``, interleaved repetition by repetition; the ratio is taken per repetition and
 the two ratings are printed so that they can be compared. The other standard metrics are
 single passes; their times at the same size are printed for scale.
+
+``--engine N``: a spec of N signals × 1 h at 100 Hz (``bench_scale.py``'s end-to-end data)
+scored by the engine as ``hevval run`` scores it, without and with every standard metric but
+ISO/TS 18571 (``ENGINE_METRICS``), interleaved; wall and CPU time of each, and the metrics'
+share.
 """
 
 from __future__ import annotations
@@ -55,6 +61,46 @@ def _on_path(path: str, ref: np.ndarray, sim: np.ndarray) -> Any:
         del os.environ[KERNEL_ENV]
 
 
+#: The standard metrics ``--engine`` switches on: all but ISO/TS 18571, whose warping costs
+#: seconds per hour-long signal by itself.
+ENGINE_METRICS = "[theil, sprague_geers, russell, kge, kge2012, nse, cvrmse, nmbe]"
+
+
+def _engine(signals: int, repeat: int) -> None:
+    from bench_scale import e2e_data
+
+    from pytest_hevval.scoring.engine import evaluate_spec
+    from pytest_hevval.spec.load import load_spec
+
+    folder = e2e_data(signals, 3600.0, 100.0)
+    plain = folder / "parquet.hevval.yaml"
+    text = plain.read_text().replace(
+        "thresholds: {mae: 0.5}", f"thresholds: {{mae: 0.5}}\nmetrics: {ENGINE_METRICS}"
+    )
+    metrics = folder / "metrics.hevval.yaml"
+    metrics.write_text(text)
+    times: dict[str, list[tuple[float, float]]] = {"without": [], "with": []}
+    for _ in range(repeat):
+        for label, path in (("without", plain), ("with", metrics)):
+            spec = load_spec(path)
+            wall, cpu = time.perf_counter(), time.process_time()
+            evaluate_spec(spec)
+            times[label].append((time.perf_counter() - wall, time.process_time() - cpu))
+            print(
+                f"  {label:7s} metrics: {times[label][-1][0]:.2f} s wall, "
+                f"{times[label][-1][1]:.2f} s CPU",
+                flush=True,
+            )
+    best = {k: (min(w for w, _ in v), min(c for _, c in v)) for k, v in times.items()}
+    print(
+        f"{signals} signals × 1 h, best of {repeat}: without {best['without'][0]:.2f} s wall "
+        f"({best['without'][1]:.2f} s CPU), with {best['with'][0]:.2f} s wall "
+        f"({best['with'][1]:.2f} s CPU): the metrics add "
+        f"{best['with'][0] / best['without'][0] - 1:.0%} wall, "
+        f"{best['with'][1] / best['without'][1] - 1:.0%} CPU"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, nargs="*", default=[1000, 4000])
@@ -67,7 +113,10 @@ def main() -> None:
         default=[],
         help="warping half-bands: banded against exact rating on every signal of two i3 trips",
     )
+    parser.add_argument("--engine", type=int, default=0, help="signals scored by the engine")
     args = parser.parse_args()
+    if args.engine:
+        _engine(args.engine, args.repeat)
 
     from pytest_hevval.core import kernel
     from pytest_hevval.core.registry import STANDARD_CHARACTERISTICS, get_characteristic

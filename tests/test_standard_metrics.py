@@ -12,6 +12,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from pytest_hevval.core.characteristics import signal_characteristics
 from pytest_hevval.core.registry import (
     STANDARD_CHARACTERISTICS,
     compute_characteristic,
@@ -30,6 +31,8 @@ from pytest_hevval.core.standard import (
     sprague_geers,
     theil_u,
 )
+from pytest_hevval.core.standard._moments import Moments, moments_from_pass
+from pytest_hevval.core.standard.kge import nse_from_moments
 from pytest_hevval.errors import DegenerateSignalError
 from pytest_hevval.report.sentences import failure_lines
 from tests.strategies import signal_pairs
@@ -373,6 +376,124 @@ def test_mean_normalised_metrics_refuse_a_zero_mean_reference(name: str) -> None
     ref = np.sin(np.linspace(0, 2 * np.pi, 100, endpoint=False))
     with pytest.raises(DegenerateSignalError, match="mean is 0"):
         compute_characteristic(get_characteristic(name), ref - ref.mean(), ref + 0.1, 0.1)
+
+
+# --- from the λ pass's sums -----------------------------------------------------------------
+
+#: The metrics the engine scores from the λ pass's sums (all but ISO/TS 18571's warping).
+FROM_MOMENTS = tuple(
+    name
+    for name in STANDARD_CHARACTERISTICS
+    if getattr(get_characteristic(name).compute, "from_moments", False)
+)
+
+
+def _from_pass(ref: np.ndarray, sim: np.ndarray) -> Moments:
+    sums = signal_characteristics(ref, sim, dt=0.1, max_lag_s=0.0).sums
+    assert sums is not None
+    return moments_from_pass(sums, ref, sim)
+
+
+def test_every_standard_metric_but_the_warping_one_is_scored_from_moments() -> None:
+    assert set(FROM_MOMENTS) == set(STANDARD_CHARACTERISTICS) - {"iso18571"}
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    signal_pairs(min_size=12, max_size=300),
+    st.sampled_from([0.0, 1e3, -1e5, 3e7]),
+    st.sampled_from([-900, 0, 600]),
+)
+def test_metrics_from_the_pass_equal_those_from_the_samples(
+    pair: tuple[np.ndarray, np.ndarray], offset: float, exponent: int
+) -> None:
+    # Offsets far above the spread take the centring on the samples; powers of two far from 1
+    # take the λ pass's rescaled sums.
+    ref, sim = (np.ldexp(x + offset, exponent) for x in pair)
+    assume(np.ptp(ref) > 0)
+    moments = _from_pass(ref, sim)
+    for name in FROM_MOMENTS:
+        characteristic = get_characteristic(name)
+        try:
+            expected = compute_characteristic(characteristic, ref, sim, 0.1)
+        except DegenerateSignalError:
+            with pytest.raises(DegenerateSignalError):
+                compute_characteristic(characteristic, ref, sim, 0.1, moments)
+            continue
+        got = compute_characteristic(characteristic, ref, sim, 0.1, moments)
+        assert got.value == pytest.approx(expected.value, rel=1e-9, abs=1e-12), name
+        for part, value in expected.components.items():
+            scale = max(1.0, abs(value))
+            assert got.components[part] == pytest.approx(value, abs=1e-9 * scale), (name, part)
+
+
+def test_a_mean_that_dwarfs_the_spread_is_centred_on_the_samples() -> None:
+    # Σx² − (Σx)²/n would lose about 40 bits here: NSE from it would be wrong in the 4th digit.
+    t = np.linspace(0.0, 60.0, 6001)
+    ref = 1e6 + np.sin(t)
+    sim = 1e6 + 0.9 * np.sin(t - 0.05)
+    moments = _from_pass(ref, sim)
+    assert moments.ref_m2 == pytest.approx(float(np.sum((ref - ref.mean()) ** 2)), rel=1e-9)
+    assert nse_from_moments(moments) == pytest.approx(nse(ref, sim), rel=1e-9)
+
+
+def test_a_constant_reference_with_a_declared_range_is_refused_by_the_metrics() -> None:
+    # λ1–λ6 accept it with a range; the standard metrics refuse it as on the samples.
+    ref, sim = np.full(50, 3.0), np.linspace(2.0, 4.0, 50)
+    sums = signal_characteristics(ref, sim, dt=0.1, reference_range=1.0).sums
+    assert sums is not None
+    moments = moments_from_pass(sums, ref, sim)
+    for name in FROM_MOMENTS:
+        with pytest.raises(DegenerateSignalError, match="reference is constant"):
+            compute_characteristic(get_characteristic(name), ref, sim, 0.1, moments)
+
+
+REAL_SPEC = """\
+name: i3 B03 against itself, perturbed
+reference: {path: %s, time: "Time [s]"}
+model: {path: %s, time: "Time [s]"}
+metrics: [theil, sprague_geers, russell, kge, kge2012, nse, cvrmse, nmbe]
+sets:
+  - signal: voltage
+    ref: "`Battery Voltage [V]`"
+    sim: "1.002 * `Battery Voltage [V]` - 0.4"
+    children:
+      - signal: soc
+        ref: "`SoC [%%]`"
+        sim: "`SoC [%%]` + 0.3"
+      - signal: speed
+        ref: "`Velocity [km/h]`"
+        sim: "0.97 * `Velocity [km/h]` + 0.2 * `Throttle [%%]`"
+      - signal: cabin
+        ref: "`Battery Temperature [°C]` + 273.15"
+        sim: "`Ambient Temperature [°C]` + 280.0"
+"""
+
+
+# P = arccos(cos θ)/π: near θ = 0 a rounding δ of cos θ moves P by up to √(2δ)/π, about 5e-8
+# for δ = 1e-14, on the samples as on the sums.
+_PHASE_ROUNDING = 1e-7
+
+
+def test_the_engine_scores_metrics_on_a_real_trip_as_the_samples_do() -> None:
+    # Battery voltage and temperatures in kelvin have means far above their spread: they take
+    # the centring on the samples; speed does not.
+    from pytest_hevval.scoring.engine import evaluate_spec
+    from pytest_hevval.spec.load import parse_spec_text
+
+    trip = EXAMPLE / "data" / "i3" / "TripB03.parquet"
+    spec = parse_spec_text(REAL_SPEC % (trip, trip), EXAMPLE / "real.hevval.yaml")
+    evaluation = evaluate_spec(spec, keep_arrays=True, intervals=False)
+    assert len(evaluation.arrays) == 4
+    for signal in evaluation.result.signals:
+        ref, sim = evaluation.arrays[signal.path]
+        for name in FROM_MOMENTS:
+            expected = compute_characteristic(get_characteristic(name), ref, sim, 0.1)
+            assert signal.lambdas[name] == pytest.approx(expected.value, rel=1e-9), name
+            for part, value in expected.components.items():
+                assert signal.components[name][part] == pytest.approx(
+                    value, rel=1e-9, abs=_PHASE_ROUNDING if part.endswith("P") else 1e-12
+                ), (signal.path, name, part)
 
 
 # --- end to end ----------------------------------------------------------------------------

@@ -25,7 +25,13 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
 from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
-from .sums import _coefficient, lambdas_from_sums, normalised_error, zero_lag_correlation
+from .sums import (
+    RecordSums,
+    _coefficient,
+    lambdas_from_sums,
+    normalised_error,
+    zero_lag_correlation,
+)
 
 __all__ = [
     "CHARACTERISTICS",
@@ -91,6 +97,8 @@ class SignalCharacteristics:
     #: The sums of the groups of ``group_runs`` (see ``core.local.grouped_tables``) when the
     #: compiled main pass took them along, else None.
     group_sums: FloatArray | None = field(default=None, compare=False, repr=False)
+    #: The whole record's sums, from which the moment-based standard metrics are scored.
+    sums: RecordSums | None = field(default=None, compare=False, repr=False)
 
     @property
     def values(self) -> dict[str, float]:
@@ -182,6 +190,23 @@ class _Sums:
     sim_min: float = math.inf
     sim_max: float = -math.inf
     sign_matches: int = 0
+
+    def record(self, scale: float) -> RecordSums:
+        """The whole record's sums for the standard metrics, in the units times ``scale``."""
+        return RecordSums(
+            n=self.n,
+            ref_sum=self.ref_sum,
+            sim_sum=self.sim_sum,
+            ref_sq=self.ref_sq,
+            sim_sq=self.sim_sq,
+            cross=self.cross,
+            sq_error=self.sq_error,
+            error_sum=self.error_mean * self.n,
+            error_m2=self.error_m2,
+            ref_min=self.ref_min,
+            ref_max=self.ref_max,
+            scale=scale,
+        )
 
     def merge(self, other: _Sums) -> None:
         if other.n == 0:
@@ -685,6 +710,7 @@ def signal_characteristics(
         correlation=correlation,
         lag_search=search,
         group_sums=group_sums,
+        sums=sums.record(scale),
     )
 
 

@@ -202,21 +202,43 @@ class _StandardCompute:
 
     module: str
     function: str
+    #: The module also scores it from a pair's moments (``<function>_from_moments``), which the
+    #: engine takes from the λ pass instead of reading the pair again.
+    from_moments: bool = True
 
     def __call__(self, ref: Any, sim: Any, dt: float) -> CharacteristicValue:
-        found = importlib.import_module(f"{__package__}.standard.{self.module}")
-        result: CharacteristicValue = getattr(found, self.function)(ref, sim, dt)
+        result: CharacteristicValue = getattr(self._module(), self.function)(ref, sim, dt)
         return result
+
+    def with_moments(self, moments: Any) -> CharacteristicValue | None:
+        """The value from ``moments`` (``core.standard._moments.Moments``), or None when the
+        metric needs the samples themselves."""
+        if not self.from_moments:
+            return None
+        found: CharacteristicValue | None = getattr(
+            self._module(), f"{self.function}_from_moments"
+        )(moments)
+        return found
+
+    def _module(self) -> Any:
+        return importlib.import_module(f"{__package__}.standard.{self.module}")
 
 
 def _standard(
-    name: str, symbol: str, label: str, module: str, colour: str, order: int, **more: Any
+    name: str,
+    symbol: str,
+    label: str,
+    module: str,
+    colour: str,
+    order: int,
+    from_moments: bool = True,
+    **more: Any,
 ) -> Characteristic:
     return Characteristic(
         name=name,
         symbol=symbol,
         label=label,
-        compute=_StandardCompute(module, f"{name}_characteristic"),
+        compute=_StandardCompute(module, f"{name}_characteristic", from_moments),
         colour=colour,
         order=order,
         enabled_by_default=False,
@@ -228,7 +250,7 @@ def _standard(
 # Each scores in [0, 1]; its raw values are the components. Weight 1 in Φ where the score is a
 # rating; CV(RMSE) and NMBE are Guideline 14's pass/fail criteria, so they only gate.
 _STANDARD: tuple[Characteristic, ...] = (
-    _standard("iso18571", "ISO", "ISO/TS 18571 rating", "iso18571", "#332288", 20),
+    _standard("iso18571", "ISO", "ISO/TS 18571 rating", "iso18571", "#332288", 20, False),
     _standard("theil", "1−U", "Theil's U", "theil", "#117733", 21),
     _standard("sprague_geers", "1−C", "Sprague–Geers", "sprague_geers", "#44AA99", 22),
     _standard("russell", "1−RC", "Russell", "sprague_geers", "#88CCEE", 23),
@@ -390,16 +412,24 @@ def order_names(names: Iterable[str]) -> list[str]:
 
 
 def compute_characteristic(
-    characteristic: Characteristic, ref: Any, sim: Any, dt: float
+    characteristic: Characteristic, ref: Any, sim: Any, dt: float, moments: Any = None
 ) -> CharacteristicValue:
-    """Run a characteristic's ``compute`` and check that it returned a value in [0, 1]."""
+    """Run a characteristic's ``compute`` and check that it returned a value in [0, 1].
+
+    ``moments``: the pair's ``core.standard._moments.Moments``, from which a standard metric
+    built on them is scored without reading ``ref`` and ``sim``.
+    """
     compute = characteristic.compute
     if compute is None:
         raise CharacteristicError(
             f"characteristic {characteristic.name!r} has no compute function",
             key=characteristic.name,
         )
-    outcome = compute(ref, sim, dt)
+    outcome: Any = None
+    if moments is not None and isinstance(compute, _StandardCompute):
+        outcome = compute.with_moments(moments)
+    if outcome is None:
+        outcome = compute(ref, sim, dt)
     if isinstance(outcome, CharacteristicValue):
         value: Any = outcome.value
         components = {str(k): float(v) for k, v in dict(outcome.components).items()}

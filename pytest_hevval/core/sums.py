@@ -32,6 +32,7 @@ from ..errors import DegenerateSignalError
 
 __all__ = [
     "MIN_GROUP_SAMPLES",
+    "RecordSums",
     "SumLambdas",
     "from_shifted_sums",
     "lambdas_from_sums",
@@ -47,6 +48,28 @@ V = TypeVar("V", float, FloatArray)
 MIN_GROUP_SAMPLES = 3
 # Powers at or below this count as none (λ1's degenerate cases).
 _TINY = 1e-300
+
+
+@dataclass(frozen=True)
+class RecordSums:
+    """A whole record's sums as the λ pass leaves them, in the record's units times ``scale``
+    (a power of two, 1 unless the squares would leave the float range): what the standard
+    metrics built from moments take instead of reading the record again."""
+
+    n: int
+    ref_sum: float
+    sim_sum: float
+    ref_sq: float
+    sim_sq: float
+    cross: float
+    #: e = ref − sim.
+    sq_error: float
+    error_sum: float
+    #: Σ(e − ē)², merged over chunks as the λ pass merges it.
+    error_m2: float
+    ref_min: float
+    ref_max: float
+    scale: float
 
 
 class _Numbers:

@@ -19,7 +19,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.characteristics import SignalCharacteristics, signal_characteristics
-from ..core.registry import compute_characteristic
+from ..core.registry import Characteristic, compute_characteristic
+from ..core.standard._moments import Moments, moments_from_pass
 from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
 from ..core.uncertainty import BlockSums, block_sums_many
 from ..core.upooling import u_distribution_of
@@ -444,8 +445,8 @@ def _evaluate(
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
     labels = _labels(spec, aligned)
-    fused, local = _fused_characteristics(spec, unique, values, dt, workers, labels)
-    registered = _registered_characteristics(spec, unique, values, dt)
+    fused, local, standard = _fused_characteristics(spec, unique, values, dt, workers, labels)
+    registered = _registered_characteristics(spec, unique, values, dt, standard)
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
@@ -681,14 +682,22 @@ def _fused_characteristics(
     dt: float,
     workers: int | None,
     labels: Labels | None,
-) -> tuple[dict[Signature, SignalCharacteristics], dict[Signature, LocalResult]]:
+) -> tuple[
+    dict[Signature, SignalCharacteristics],
+    dict[Signature, LocalResult],
+    dict[Signature, dict[str, Scored]],
+]:
     """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass, and
     with ``labels`` the signal over the spec's windows, phases, conditions and cells: the same
     pass sums them, and their tables are built on the signal's thread while the other threads
-    score (most of it is Python, which takes turns)."""
+    score (most of it is Python, which takes turns). The spec's standard metrics are scored
+    on the same thread, those built on moments from the pass's sums."""
     n_workers = _scoring_threads(workers)
+    metrics = [c for c in spec.characteristics() if c.compute is not None and c.standard]
 
-    def score(item: tuple[Signature, SignalSpec]) -> tuple[Signature, Any, LocalResult | None]:
+    def score(
+        item: tuple[Signature, SignalSpec],
+    ) -> tuple[Signature, Any, LocalResult | None, dict[str, Scored]]:
         signature, node = item
         ref, sim = values[signature]
         group_runs = labels.grouping.runs(ref, sim) if labels is not None else None
@@ -704,22 +713,34 @@ def _fused_characteristics(
                 group_runs=group_runs,
             )
         except DegenerateSignalError as exc:
-            return signature, exc.with_context(line=node.line, key=node.key), None
+            return signature, exc.with_context(line=node.line, key=node.key), None, {}
+        standard: dict[str, Scored] = {}
+        if metrics and chars.sums is not None:
+            moments = moments_from_pass(chars.sums, ref, sim)
+            try:
+                standard = _characteristics_of(metrics, node, ref, sim, dt, moments)
+            except HevvalError as exc:
+                return signature, exc, None, {}
+        # The sums have served: a spec keeps its signals' characteristics to the end.
+        chars = replace(chars, sums=None)
         if labels is None:
-            return signature, chars, None
+            return signature, chars, None, standard
         local = score_local(
             labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
         )
-        # The group sums have served: a spec keeps its signals' characteristics to the end.
-        return signature, replace(chars, group_sums=None), local
+        return signature, replace(chars, group_sums=None), local, standard
 
     scored = _per_signal(score, list(unique.items()), n_workers)
-    for _, outcome, _ in scored:
+    for _, outcome, _, _ in scored:
         if isinstance(outcome, HevvalError):
             raise outcome
-    fused = {signature: chars for signature, chars, _ in scored}
-    local = {signature: found for signature, _, found in scored if found is not None}
-    return fused, local
+    fused = {signature: chars for signature, chars, _, _ in scored}
+    local = {signature: found for signature, _, found, _ in scored if found is not None}
+    standard = {signature: found for signature, _, _, found in scored}
+    return fused, local, standard
+
+
+Scored = tuple[float, dict[str, float]]
 
 
 def _registered_characteristics(
@@ -727,32 +748,53 @@ def _registered_characteristics(
     unique: dict[Signature, SignalSpec],
     values: dict[Signature, tuple[FloatArray, FloatArray]],
     dt: float,
-) -> dict[Signature, dict[str, tuple[float, dict[str, float]]]]:
-    """Each distinct signal's registered (non-built-in) characteristics: value and components."""
-    extra = [c for c in spec.characteristics() if c.compute is not None]
-    out: dict[Signature, dict[str, tuple[float, dict[str, float]]]] = {}
+    standard: Mapping[Signature, Mapping[str, Scored]],
+) -> dict[Signature, dict[str, Scored]]:
+    """Each distinct signal's registered (non-built-in) characteristics: value and components.
+
+    The standard metrics come scored from the fused pass's threads (``standard``); a user's
+    ``compute`` runs here, one signal after another, as its author may expect.
+    """
+    wanted = [c for c in spec.characteristics() if c.compute is not None]
+    users = [c for c in wanted if not c.standard]
+    out: dict[Signature, dict[str, Scored]] = {}
     for signature, node in unique.items():
         ref, sim = values[signature]
-        out[signature] = {}
-        for characteristic in extra:
-            try:
-                scored = compute_characteristic(characteristic, ref, sim, dt)
-            except CharacteristicError as exc:
-                raise CharacteristicError(
-                    f"{exc.problem} for signal {node.name!r}",
-                    line=node.line,
-                    key=node.key,
-                    hint=exc.hint,
-                ) from None
-            except Exception as exc:
-                raise CharacteristicError(
-                    f"characteristic {characteristic.name!r} failed on signal {node.name!r}: "
-                    f"{type(exc).__name__}: {exc}",
-                    line=node.line,
-                    key=node.key,
-                    hint="fix its compute(ref, sim, dt) function",
-                ) from exc
-            out[signature][characteristic.name] = (scored.value, dict(scored.components))
+        found = dict(standard.get(signature, {}))
+        found.update(_characteristics_of(users, node, ref, sim, dt))
+        out[signature] = {c.name: found[c.name] for c in wanted}
+    return out
+
+
+def _characteristics_of(
+    characteristics: list[Characteristic],
+    node: SignalSpec,
+    ref: FloatArray,
+    sim: FloatArray,
+    dt: float,
+    moments: Moments | None = None,
+) -> dict[str, Scored]:
+    """``characteristics`` of one signal pair, an error naming the signal's spec line."""
+    out: dict[str, Scored] = {}
+    for characteristic in characteristics:
+        try:
+            scored = compute_characteristic(characteristic, ref, sim, dt, moments)
+        except CharacteristicError as exc:
+            raise CharacteristicError(
+                f"{exc.problem} for signal {node.name!r}",
+                line=node.line,
+                key=node.key,
+                hint=exc.hint,
+            ) from None
+        except Exception as exc:
+            raise CharacteristicError(
+                f"characteristic {characteristic.name!r} failed on signal {node.name!r}: "
+                f"{type(exc).__name__}: {exc}",
+                line=node.line,
+                key=node.key,
+                hint="fix its compute(ref, sim, dt) function",
+            ) from exc
+        out[characteristic.name] = (scored.value, dict(scored.components))
     return out
 
 

@@ -44,11 +44,17 @@ def checked_pair(
                 hint="set a gap policy (nan: omit) or clean the data",
             )
     if float(np.ptp(ref)) == 0.0:
-        raise DegenerateSignalError(
-            f"{metric}: the reference is constant, so the metric is undefined",
-            hint="compare a signal that varies, or leave this metric off for it",
-        )
+        raise constant_reference(metric)
     return ref, sim
+
+
+def constant_reference(metric: str) -> DegenerateSignalError:
+    """The error for a constant reference: every standard metric normalises by its spread,
+    magnitude or slope."""
+    return DegenerateSignalError(
+        f"{metric}: the reference is constant, so the metric is undefined",
+        hint="compare a signal that varies, or leave this metric off for it",
+    )
 
 
 def power_of_two_exponent(peak: float) -> int:
@@ -62,18 +68,6 @@ def power_of_two_exponent(peak: float) -> int:
     if peak == 0.0 or not math.isfinite(peak):
         return 0
     return -math.frexp(peak)[1]
-
-
-# A mean below this fraction of the peak is round-off: a signal that swings about zero.
-_ZERO_MEAN = 1e-12
-
-
-def reference_mean(ref: FloatArray, metric: str, hint: str) -> float:
-    """The reference's mean, refused when it is 0 up to round-off (the metric divides by it)."""
-    mean = float(ref.mean())
-    if abs(mean) <= _ZERO_MEAN * float(np.max(np.abs(ref))):
-        raise degenerate(metric, "the reference's mean is 0, so the metric divides by zero", hint)
-    return mean
 
 
 def degenerate(metric: str, problem: str, hint: str) -> DegenerateSignalError:

@@ -21,12 +21,12 @@ Guideline 14's monthly limits apply to monthly totals, which a spec does not for
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair, reference_mean
+from ._inputs import FloatArray
+from ._moments import Moments, checked_moments, reference_mean
 
 __all__ = [
     "GUIDELINE14_HOURLY",
@@ -34,8 +34,11 @@ __all__ = [
     "GUIDELINE14_MONTHLY",
     "CalibrationErrors",
     "calibration_errors",
+    "calibration_errors_from_moments",
     "cvrmse_characteristic",
+    "cvrmse_characteristic_from_moments",
     "nmbe_characteristic",
+    "nmbe_characteristic_from_moments",
 ]
 
 #: Guideline 14's limits in percent: (|NMBE|, CV(RMSE)).
@@ -48,6 +51,7 @@ GUIDELINE14_HOURLY_THRESHOLDS = {
 }
 #: Parameters of a calibrated simulation (Guideline 14's p).
 _PARAMETERS = 1
+_METRIC = "cvrmse/nmbe"
 
 
 @dataclass(frozen=True)
@@ -62,16 +66,19 @@ class CalibrationErrors:
 
 
 def calibration_errors(reference: FloatArray, simulated: FloatArray) -> CalibrationErrors:
-    ref, sim = checked_pair(reference, simulated, metric="cvrmse/nmbe")
-    scale = float(np.max(np.abs(ref)))
-    y, y_hat = ref / scale, sim / scale
+    return calibration_errors_from_moments(checked_moments(reference, simulated, _METRIC))
+
+
+def calibration_errors_from_moments(m: Moments) -> CalibrationErrors:
+    """CV(RMSE) and NMBE from a pair's moments (:mod:`._moments`)."""
+    sums = m.check(_METRIC).sums
     mean = reference_mean(
-        y, "cvrmse/nmbe", "these metrics are for quantities with a natural zero; use theil"
+        m, _METRIC, "these metrics are for quantities with a natural zero; use theil"
     )
-    residual = y - y_hat
-    dof = y.shape[0] - _PARAMETERS
-    cv = float(np.sqrt(np.sum(residual**2) / dof)) / abs(mean) * 100.0
-    bias = float(np.sum(residual)) / (dof * abs(mean)) * 100.0
+    # The residual y − ŷ is the λ pass's e = ref − sim.
+    dof = sums.n - _PARAMETERS
+    cv = math.sqrt(sums.sq_error / dof) / abs(mean) * 100.0
+    bias = sums.error_sum / (dof * abs(mean)) * 100.0
     return CalibrationErrors(cv, bias)
 
 
@@ -87,7 +94,12 @@ def cvrmse_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``cvrmse``: 1 − CV(RMSE), with both errors and the criteria met."""
-    e = calibration_errors(reference, simulated)
+    return cvrmse_characteristic_from_moments(checked_moments(reference, simulated, _METRIC))
+
+
+def cvrmse_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`cvrmse_characteristic` from a pair's moments."""
+    e = calibration_errors_from_moments(m)
     return CharacteristicValue(min(1.0, max(0.0, 1.0 - e.cv_rmse / 100.0)), _components(e))
 
 
@@ -95,5 +107,10 @@ def nmbe_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``nmbe``: 1 − |NMBE|, with both errors and the criteria met."""
-    e = calibration_errors(reference, simulated)
+    return nmbe_characteristic_from_moments(checked_moments(reference, simulated, _METRIC))
+
+
+def nmbe_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`nmbe_characteristic` from a pair's moments."""
+    e = calibration_errors_from_moments(m)
     return CharacteristicValue(min(1.0, max(0.0, 1.0 - abs(e.nmbe) / 100.0)), _components(e))

@@ -25,19 +25,23 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair, degenerate, reference_mean
+from ._inputs import FloatArray, degenerate
+from ._moments import Moments, checked_moments, reference_mean
 
 __all__ = [
     "KlingGupta",
     "bounded_efficiency",
     "kge",
     "kge2012_characteristic",
+    "kge2012_characteristic_from_moments",
     "kge_characteristic",
+    "kge_characteristic_from_moments",
+    "kge_from_moments",
     "nse",
     "nse_characteristic",
+    "nse_characteristic_from_moments",
+    "nse_from_moments",
 ]
 
 
@@ -57,27 +61,33 @@ def bounded_efficiency(efficiency: float) -> float:
 
 
 def nse(reference: FloatArray, simulated: FloatArray) -> float:
-    ref, sim = checked_pair(reference, simulated, metric="nse")
-    scale = float(np.ptp(ref))
-    o, s = ref / scale, sim / scale
-    return 1.0 - float(np.sum((s - o) ** 2)) / float(np.sum((o - o.mean()) ** 2))
+    return nse_from_moments(checked_moments(reference, simulated, "nse"))
+
+
+def nse_from_moments(m: Moments) -> float:
+    """NSE from a pair's moments (:mod:`._moments`): 1 − Σe²/Σ(o − ō)²."""
+    return 1.0 - m.check("nse").sums.sq_error / m.ref_m2
 
 
 def kge(reference: FloatArray, simulated: FloatArray, *, form: int = 2009) -> KlingGupta:
     metric = "kge" if form == 2009 else "kge2012"
-    ref, sim = checked_pair(reference, simulated, metric=metric)
-    scale = float(np.max(np.abs(ref)))
-    o, s = ref / scale, sim / scale
-    mu_o = reference_mean(o, metric, "use nse or theil for signals that swing about zero")
-    mu_s = float(s.mean())
-    sigma_o, sigma_s = float(o.std()), float(s.std())
+    return kge_from_moments(checked_moments(reference, simulated, metric), form=form)
+
+
+def kge_from_moments(m: Moments, *, form: int = 2009) -> KlingGupta:
+    """KGE from a pair's moments (:mod:`._moments`)."""
+    metric = "kge" if form == 2009 else "kge2012"
+    m.check(metric)
+    mu_o = reference_mean(m, metric, "use nse or theil for signals that swing about zero")
+    mu_s = m.sim_mean
+    sigma_o, sigma_s = math.sqrt(m.ref_m2 / m.n), math.sqrt(m.sim_m2 / m.n)
     if sigma_s == 0.0:
         raise degenerate(
             metric,
             "the simulated signal is constant, so its correlation r is undefined",
             "check the model output's column",
         )
-    r = float(np.mean((o - mu_o) * (s - mu_s))) / (sigma_o * sigma_s)
+    r = (m.co_m2 / m.n) / (sigma_o * sigma_s)
     beta = mu_s / mu_o
     if form == 2009:
         variability = sigma_s / sigma_o
@@ -97,7 +107,12 @@ def nse_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``nse``: 1/(2 − NSE), with NSE as the component."""
-    value = nse(reference, simulated)
+    return nse_characteristic_from_moments(checked_moments(reference, simulated, "nse"))
+
+
+def nse_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`nse_characteristic` from a pair's moments."""
+    value = nse_from_moments(m)
     return CharacteristicValue(bounded_efficiency(value), {"NSE": value})
 
 
@@ -110,11 +125,21 @@ def kge_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``kge``: 1/(2 − KGE) of the 2009 form, with KGE, r, α and β."""
-    return _kge_value(kge(reference, simulated, form=2009), "alpha")
+    return kge_characteristic_from_moments(checked_moments(reference, simulated, "kge"))
+
+
+def kge_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`kge_characteristic` from a pair's moments."""
+    return _kge_value(kge_from_moments(m, form=2009), "alpha")
 
 
 def kge2012_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``kge2012``: 1/(2 − KGE′), with KGE′, r, γ and β."""
-    return _kge_value(kge(reference, simulated, form=2012), "gamma")
+    return kge2012_characteristic_from_moments(checked_moments(reference, simulated, "kge2012"))
+
+
+def kge2012_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`kge2012_characteristic` from a pair's moments."""
+    return _kge_value(kge_from_moments(m, form=2012), "gamma")

@@ -26,13 +26,16 @@ import numpy as np
 
 from ..registry import CharacteristicValue
 from ._inputs import FloatArray, checked_pair, degenerate
+from ._moments import Moments
 
 __all__ = [
     "MagnitudePhase",
     "russell",
     "russell_characteristic",
+    "russell_characteristic_from_moments",
     "sprague_geers",
     "sprague_geers_characteristic",
+    "sprague_geers_characteristic_from_moments",
 ]
 
 
@@ -57,8 +60,15 @@ def _energy_ratio_and_phase(
             "check the model output's column and scale",
         )
     m, c = ref / ref_peak, sim / sim_peak
-    mm, cc, mc = float(m @ m), float(c @ c), float(m @ c)
-    ratio = (sim_peak / ref_peak) * math.sqrt(cc / mm)
+    return _ratio_and_phase(float(m @ m), float(c @ c), float(m @ c), sim_peak / ref_peak, metric)
+
+
+def _ratio_and_phase(
+    mm: float, cc: float, mc: float, peak_ratio: float, metric: str
+) -> tuple[float, float]:
+    """√(ψ_cc/ψ_mm) and P from the sums of signals scaled by peaks whose ratio (sim over ref) is
+    ``peak_ratio``."""
+    ratio = peak_ratio * math.sqrt(cc / mm)
     if not (math.isfinite(ratio) and ratio > 0.0 and math.isfinite(1.0 / ratio)):
         raise degenerate(
             metric,
@@ -69,18 +79,38 @@ def _energy_ratio_and_phase(
     return ratio, math.acos(cosine) / math.pi
 
 
-def sprague_geers(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
-    ratio, phase = _energy_ratio_and_phase(reference, simulated, "sprague_geers")
+# Sums of squares below this may have lost digits to underflow: the arrays decide instead.
+_NORMAL_POWER = 2.0**-900
+
+
+def _from_pass(m: Moments, metric: str) -> tuple[float, float] | None:
+    """√(ψ_cc/ψ_mm) and P from the λ pass's sums, or None when the arrays must decide (a
+    simulated signal that is zero, or sums near the ends of the float range)."""
+    sums = m.check(metric).sums
+    powers = (sums.ref_sq, sums.sim_sq)
+    if not all(math.isfinite(p) and p >= _NORMAL_POWER for p in powers):
+        return None
+    return _ratio_and_phase(sums.ref_sq, sums.sim_sq, sums.cross, 1.0, metric)
+
+
+def _sprague_geers(ratio: float, phase: float) -> MagnitudePhase:
     magnitude = ratio - 1.0
     return MagnitudePhase(magnitude, phase, math.hypot(magnitude, phase))
 
 
-def russell(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
-    ratio, phase = _energy_ratio_and_phase(reference, simulated, "russell")
+def _russell(ratio: float, phase: float) -> MagnitudePhase:
     # (ψ_cc − ψ_mm)/√(ψ_cc ψ_mm) = q − 1/q with q = √(ψ_cc/ψ_mm).
     relative = ratio - 1.0 / ratio
     magnitude = math.copysign(math.log10(1.0 + abs(relative)), relative)
     return MagnitudePhase(magnitude, phase, math.sqrt(math.pi / 4.0 * (magnitude**2 + phase**2)))
+
+
+def sprague_geers(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
+    return _sprague_geers(*_energy_ratio_and_phase(reference, simulated, "sprague_geers"))
+
+
+def russell(reference: FloatArray, simulated: FloatArray) -> MagnitudePhase:
+    return _russell(*_energy_ratio_and_phase(reference, simulated, "russell"))
 
 
 def _scored(e: MagnitudePhase, prefix: str) -> CharacteristicValue:
@@ -101,3 +131,15 @@ def russell_characteristic(
 ) -> CharacteristicValue:
     """The registry's ``russell``: 1 − RC, with RM, RP and RC as components."""
     return _scored(russell(reference, simulated), "R")
+
+
+def sprague_geers_characteristic_from_moments(m: Moments) -> CharacteristicValue | None:
+    """:func:`sprague_geers_characteristic` from the λ pass's sums; None: take the arrays."""
+    found = _from_pass(m, "sprague_geers")
+    return None if found is None else _scored(_sprague_geers(*found), "")
+
+
+def russell_characteristic_from_moments(m: Moments) -> CharacteristicValue | None:
+    """:func:`russell_characteristic` from the λ pass's sums; None: take the arrays."""
+    found = _from_pass(m, "russell")
+    return None if found is None else _scored(_russell(*found), "R")

@@ -22,12 +22,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..registry import CharacteristicValue
-from ._inputs import FloatArray, checked_pair
+from ._inputs import FloatArray
+from ._moments import Moments, checked_moments
 
-__all__ = ["TheilU", "theil_characteristic", "theil_u"]
+__all__ = [
+    "TheilU",
+    "theil_characteristic",
+    "theil_characteristic_from_moments",
+    "theil_from_moments",
+    "theil_u",
+]
 
 
 @dataclass(frozen=True)
@@ -41,22 +46,24 @@ class TheilU:
 
 
 def theil_u(reference: FloatArray, simulated: FloatArray) -> TheilU:
-    ref, sim = checked_pair(reference, simulated, metric="theil")
-    error = sim - ref
-    mse = float(np.mean(error * error))
-    # Scaled by the reference's peak so that squares of large values cannot overflow.
-    scale = float(np.max(np.abs(ref)))
-    rs, ss = ref / scale, sim / scale
-    denominator = math.sqrt(float(np.mean(ss * ss))) + math.sqrt(float(np.mean(rs * rs)))
-    u = math.sqrt(float(np.mean((ss - rs) ** 2))) / denominator
-    if mse == 0.0:
+    return theil_from_moments(checked_moments(reference, simulated, "theil"))
+
+
+def theil_from_moments(m: Moments) -> TheilU:
+    """U and its proportions from a pair's moments (:mod:`._moments`)."""
+    sums = m.check("theil").sums
+    if sums.sq_error == 0.0:
         return TheilU(0.0, 0.0, 0.0, 0.0)
-    sigma_s = float(np.std(sim))
-    sigma_r = float(np.std(ref))
-    bias = (float(np.mean(sim)) - float(np.mean(ref))) ** 2
+    n = sums.n
+    # √mean(e²)/(√mean(s²) + √mean(r²)): the n cancels.
+    u = math.sqrt(sums.sq_error) / (math.sqrt(sums.sim_sq) + math.sqrt(sums.ref_sq))
+    sigma_s = math.sqrt(m.sim_m2 / n)
+    sigma_r = math.sqrt(m.ref_m2 / n)
+    # e = r − s, so s̄ − r̄ = −ē.
+    bias = (sums.error_sum / n) ** 2
     variance = (sigma_s - sigma_r) ** 2
     # 2(1 − ρ)σ_sσ_r = σ_s² + σ_r² − 2cov = var(s − r) − (σ_s − σ_r)²: no division by σ.
-    covariance = max(0.0, float(np.var(error)) - variance)
+    covariance = max(0.0, sums.error_m2 / n - variance)
     total = bias + variance + covariance
     return TheilU(min(1.0, u), bias / total, variance / total, covariance / total)
 
@@ -65,7 +72,12 @@ def theil_characteristic(
     reference: FloatArray, simulated: FloatArray, dt: float
 ) -> CharacteristicValue:
     """The registry's ``theil``: 1 − U, with U, U_M, U_S and U_C as components."""
-    t = theil_u(reference, simulated)
+    return theil_characteristic_from_moments(checked_moments(reference, simulated, "theil"))
+
+
+def theil_characteristic_from_moments(m: Moments) -> CharacteristicValue:
+    """:func:`theil_characteristic` from a pair's moments."""
+    t = theil_from_moments(m)
     return CharacteristicValue(
         1.0 - t.u, {"U": t.u, "U_M": t.bias, "U_S": t.variance, "U_C": t.covariance}
     )
