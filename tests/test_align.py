@@ -327,3 +327,66 @@ def test_columns_of_one_time_base_are_interpolated_together(kernel_path: str) ->
         aligned.column("model", "other", "linear"),
         np.interp(aligned.time, other_time, sim.channels["other"].values),
     )
+
+
+# --- off-grid columns put on the grid where they are scored --------------------------------
+
+DEFERRED_SPEC = """\
+name: deferred
+reference: {path: ref.parquet, time: t}
+model: {path: sim.parquet, time: t}
+alignment: {max_lag_s: 1, nan: omit}
+local: {window_s: 20}
+regions: {by: [c0], bins: [4]}
+metrics: [nse, iso18571]
+sets:
+  - signal: c0
+    children:
+      - {signal: c1}
+      - {signal: c2}
+      - {signal: c3, sim: "c3 * 2"}
+      - {signal: c4, sim_unit: kW, ref_unit: kW, unit: W}
+"""
+
+
+def _deferred_files(folder: Path, n: int, gap: bool) -> None:
+    rng = np.random.default_rng(5)
+    t = np.arange(n) * 0.01
+    ref = {f"c{i}": np.cumsum(rng.normal(size=n)) + 50.0 for i in range(5)}
+    pd.DataFrame({"t": t, **ref}).to_parquet(folder / "ref.parquet")
+    jittered = t + rng.uniform(-0.003, 0.003, n)
+    sim = {k: v + rng.normal(scale=0.5, size=n) for k, v in ref.items()}
+    if gap:
+        sim["c2"][n // 3 : n // 3 + 40] = np.nan
+    pd.DataFrame({"t": jittered, **sim}).to_parquet(folder / "sim.parquet")
+
+
+def _scored(folder: Path, deferred: bool, monkeypatch: pytest.MonkeyPatch) -> dict[str, object]:
+    from pytest_hevval.data.align import AlignedData
+
+    with monkeypatch.context() as patch:
+        if not deferred:
+            patch.setattr(AlignedData, "deferred_column", lambda *args: None)
+        spec = parse_spec_text(DEFERRED_SPEC, folder / "deferred.hevval.yaml")
+        evaluation = evaluate_spec(spec, figures=True, workers=2)
+    cached = {key[1] for key in evaluation.aligned._cache if key[0] == "model"}
+    return {"result": evaluation.result.to_dict(), "cached": cached}
+
+
+@pytest.mark.parametrize("n", [6000, 70_000], ids=["stacked-blocks", "blocks-per-signal"])
+@pytest.mark.parametrize("gap", [False, True], ids=["whole", "gap"])
+def test_off_grid_columns_scored_where_used_give_the_same_results(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kernel_path: str, n: int, gap: bool
+) -> None:
+    """A model column off the grid is put on it in the scoring pass, into a buffer each thread
+    reuses, instead of a full-length copy per column: λ, intervals, windows and regions,
+    standard metrics and figures are those of the copies, bit for bit, on both kernel paths,
+    with the fine blocks summed per signal or as a stack, and with a gap (then every signal is
+    copied around it, as before)."""
+    _deferred_files(tmp_path, n, gap)
+    scored = _scored(tmp_path, True, monkeypatch)
+    copied = _scored(tmp_path, False, monkeypatch)
+    assert scored["result"] == copied["result"]
+    assert copied["cached"] == {"c0", "c1", "c2", "c3", "c4"}
+    # Kept in full: the expression's column (c3 * 2), the converted one and the one with NaN.
+    assert scored["cached"] == ({"c2", "c3", "c4"} if gap else {"c3", "c4"})

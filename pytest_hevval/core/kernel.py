@@ -706,6 +706,27 @@ def interpolate(
     return interpolate_columns(module, [values], index, offset, step, workers)[0]
 
 
+def interpolate_into(
+    module: ModuleType,
+    values: AnyFloatArray,
+    index: npt.NDArray[np.intp],
+    offset: FloatArray,
+    step: FloatArray,
+    out: FloatArray,
+) -> FloatArray:
+    """One column through an interpolation plan into ``out``, on the calling thread."""
+    module.interpolate(
+        _read_only(values),
+        _read_only(index, np.intp),
+        _read_only(offset),
+        _read_only(step),
+        out,
+        0,
+        int(index.shape[0]),
+    )
+    return out
+
+
 def interpolate_columns(
     module: ModuleType,
     columns: Sequence[AnyFloatArray],

@@ -61,6 +61,7 @@ __all__ = [
     "block_length",
     "block_sums",
     "block_sums_many",
+    "block_sums_stacked",
     "coarsen",
     "fine_block_size",
     "fine_labels",
@@ -232,6 +233,12 @@ def block_sums(
 ) -> BlockSums:
     """A signal's rows of sums over fine blocks (one pass), with its residual's ρ."""
     return block_sums_many([(ref, sim)], compiled=compiled)[0]
+
+
+def block_sums_stacked(n: int) -> bool:
+    """Whether :func:`block_sums_many` sums the signals of a record of ``n`` samples as one
+    stack (numpy, short records), rather than signal by signal."""
+    return n <= STACK_SAMPLES and kernel.kernel_for(n, ("fine_block_sums",)) is None
 
 
 def block_sums_many(

@@ -26,6 +26,7 @@ from .record import Channel, Record
 __all__ = [
     "AlignedData",
     "Grid",
+    "Interpolation",
     "align_records",
     "find_offset",
     "median_step",
@@ -77,6 +78,8 @@ class AlignedData:
     declared: dict[str, tuple[str, ...]] = field(default_factory=dict)
     #: Columns interpolated beside another one, until they are asked for.
     _prepared: dict[tuple[str, str, Method], FloatArray] = field(default_factory=dict)
+    #: Columns handed out by ``deferred_column``: not interpolated beside another one.
+    _deferred: set[tuple[str, str, Method]] = field(default_factory=set)
     #: Columns interpolated so far (those on the grid are used as they are).
     interpolated: list[tuple[str, str]] = field(default_factory=list)
     #: Grid points that fall in a gap of any channel used so far (policy ``omit``).
@@ -113,11 +116,7 @@ class AlignedData:
             if prepared is not None:
                 self._cache[key] = prepared
                 return prepared
-            plan_key = (id(channel.time), shift, method)
-            plan = self._plans.get(plan_key)
-            if plan is None:
-                # Channels that share a time array share one plan: the search is done once.
-                plan = self._plans[plan_key] = _Plan.build(channel.time, shift, self.time, method)
+            plan = self._plan(channel.time, shift, method)
             values = np.asarray(channel.values, dtype=np.float64)
             if channel.finite:
                 # The other declared columns of this time base go through the plan in the same
@@ -144,6 +143,36 @@ class AlignedData:
         self._cache[key] = values
         return values
 
+    def _plan(self, time: FloatArray, shift: float, method: Method) -> _Plan:
+        key = (id(time), shift, method)
+        plan = self._plans.get(key)
+        if plan is None:
+            # Channels that share a time array share one plan: the search is done once.
+            plan = self._plans[key] = _Plan.build(time, shift, self.time, method)
+        return plan
+
+    def deferred_column(
+        self, side: Literal["reference", "model"], name: str, method: Method
+    ) -> Interpolation | None:
+        """A column to be interpolated where it is used, into a buffer the user keeps
+        (:meth:`Interpolation.into`), so that no full-length copy of it need exist beside the
+        others; None for a column that is on the grid, holds NaN or inf (its gaps must be known
+        first), or is interpolated already."""
+        key = (side, name, method)
+        if key in self._cache or key in self._prepared:
+            return None
+        record = self.reference if side == "reference" else self.model
+        channel = record.channel(name)
+        shift = self.offset_s if side == "model" else 0.0
+        if self._sampled_on_grid(channel.time, shift) or not channel.finite:
+            return None
+        if key not in self._deferred:
+            self._deferred.add(key)
+            self.interpolated.append((side, name))
+        return Interpolation(
+            self._plan(channel.time, shift, method), np.asarray(channel.values, dtype=np.float64)
+        )
+
     def _same_time_base(
         self, side: str, record: Record, time: FloatArray, name: str, method: Method
     ) -> dict[str, FloatArray]:
@@ -153,6 +182,8 @@ class AlignedData:
         for other in self.declared.get(side, ()):
             key = (side, other, method)
             if other == name or key in self._cache or key in self._prepared:
+                continue
+            if key in self._deferred:
                 continue
             channel = record.channel(other)
             if channel.time is not time:
@@ -511,6 +542,24 @@ class _Plan:
     def apply(self, values: FloatArray) -> FloatArray:
         return self.apply_all([values])[0]
 
+    def apply_into(self, values: FloatArray, out: FloatArray) -> FloatArray:
+        """One column (finite values of this time base) through the plan into ``out``, on the
+        calling thread: the same values as :meth:`apply`."""
+        if self.method == "previous":
+            return np.take(values, self.index, out=out)
+        assert self.offset is not None
+        assert self.step is not None
+        compiled = (
+            kernel.kernel_for(self.index.shape[0], ("interpolate",))
+            if kernel.accepts(values)
+            else None
+        )
+        if compiled is not None:
+            return kernel.interpolate_into(
+                compiled, values, self.index, self.offset, self.step, out
+            )
+        return self._numpy(values, out)
+
     def apply_all(self, columns: list[FloatArray]) -> list[FloatArray]:
         """Every column (finite values of this time base) through the plan, in one go."""
         if self.method == "previous":
@@ -527,7 +576,7 @@ class _Plan:
             return kernel.interpolate_columns(compiled, columns, self.index, self.offset, self.step)
         return [self._numpy(values) for values in columns]
 
-    def _numpy(self, values: FloatArray) -> FloatArray:
+    def _numpy(self, values: FloatArray, out: FloatArray | None = None) -> FloatArray:
         """np.interp's arithmetic, (right − left) / step · offset + left, a block at a time:
         two gathers and four in-place passes over buffers that stay in cache, each result
         written once into the column."""
@@ -535,7 +584,8 @@ class _Plan:
         assert self.offset is not None
         assert self.step is not None
         n = self.index.shape[0]
-        out = np.empty(n, dtype=np.float64)
+        if out is None:
+            out = np.empty(n, dtype=np.float64)
         width = min(n, _NUMPY_BLOCK)
         left = np.empty(width, dtype=np.float64)
         part = np.empty(width, dtype=np.float64)
@@ -551,6 +601,20 @@ class _Plan:
                 np.multiply(part[:m], self.offset[a:b], out=part[:m])
                 np.add(part[:m], left[:m], out=out[a:b])
         return out
+
+
+@dataclass(frozen=True)
+class Interpolation:
+    """A column's values and the plan that puts them on the grid, applied where it is used."""
+
+    plan: _Plan
+    values: FloatArray
+
+    def into(self, out: FloatArray | None = None) -> FloatArray:
+        """The column on the grid, written into ``out`` (grid-long) or a new array."""
+        if out is None:
+            out = np.empty(self.plan.index.shape[0], dtype=np.float64)
+        return self.plan.apply_into(self.values, out)
 
 
 #: Grid points per block of the numpy interpolation: its two scratch buffers stay in a 1 MiB

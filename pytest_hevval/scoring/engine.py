@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -22,9 +22,9 @@ from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.registry import Characteristic, compute_characteristic
 from ..core.standard._moments import Moments, moments_from_pass
 from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
-from ..core.uncertainty import BlockSums, block_sums_many
+from ..core.uncertainty import BlockSums, block_sums_many, block_sums_stacked
 from ..core.upooling import u_distribution_of
-from ..data.align import AlignedData, align_records
+from ..data.align import AlignedData, Interpolation, align_records
 from ..data.digest import DEFAULT_HASH, file_digest
 from ..data.quality import assess, fail_on, mask_on_grid
 from ..data.record import Record, SourceOptions, model_column_error
@@ -445,8 +445,18 @@ def _evaluate(
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
     labels = _labels(spec, aligned)
-    fused, local, standard = _fused_characteristics(spec, unique, values, dt, workers, labels)
-    registered = _registered_characteristics(spec, unique, values, dt, standard)
+    scored = _fused_characteristics(
+        spec,
+        unique,
+        values,
+        dt,
+        workers,
+        labels,
+        intervals,
+        aligned if figures else None,
+    )
+    fused, local = scored.characteristics, scored.local
+    registered = _registered_characteristics(spec, unique, values, dt, scored.standard)
     node_specs = {path: node for _, path, node in nodes}
     roots = _score_trees(spec, node_specs, fused, registered)
     failures = _gate(spec, roots, node_specs)
@@ -462,7 +472,6 @@ def _evaluate(
         node = node_specs[scored_node.path]
         signature = _signature(node)
         chars = fused[signature]
-        ref, sim = values[signature]
         signals.append(
             _signal_result(
                 spec,
@@ -471,24 +480,25 @@ def _evaluate(
                 chars,
                 {name: parts for name, (_, parts) in registered[signature].items() if parts},
                 failures,
-                _figures(ref, sim, chars, aligned) if figures else None,
+                scored.figures.get(signature),
                 local.get(signature),
                 missed_locally,
             )
         )
         characteristics[signals[-1].path] = chars
         if keep_arrays:
-            arrays[signals[-1].path] = (ref, sim)
+            arrays[signals[-1].path] = values[signature]
     for signal in signals:
         signal.within_uncertainty = within.get(signal.path, [])
     result = _spec_result(spec, signals, aligned, model_info, cache)
     if intervals:
-        _add_intervals(spec, result, roots, node_specs, fused, _block_sums(values, workers))
+        blocks = _block_sums({k: values[k] for k in values if k not in scored.blocks}, workers)
+        _add_intervals(spec, result, roots, node_specs, fused, {**scored.blocks, **blocks})
     result.local = spec_local_summary(
         spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
     )
     if spec.campaign is not None:
-        _add_campaign_facts(spec, result, values, node_specs)
+        _add_campaign_facts(spec, result, scored.u_distributions, node_specs)
     return Evaluation(
         spec=spec,
         result=result,
@@ -636,27 +646,98 @@ def _add_intervals(
         signal.block_samples = confidence.block_samples[node.path]
 
 
+Side = FloatArray | Interpolation
+
+
+class _SignalArrays(Mapping[Signature, tuple[FloatArray, FloatArray]]):
+    """Each distinct signal's aligned (reference, simulated) arrays, gaps removed.
+
+    A side that is an off-grid column as logged is kept as its :class:`Interpolation` and put
+    on the grid where it is used: into a thread's buffers by :meth:`pair` (the scoring pass),
+    into new arrays by ``self[signature]`` (whatever reads a signal after it). So a spec of
+    many interpolated columns never holds them all at full length, and the memory they are
+    written into is written once per thread, not once per column.
+    """
+
+    def __init__(self, sides: dict[Signature, tuple[Side, Side]], n: int) -> None:
+        self._sides = sides
+        self._n = n
+
+    def __getitem__(self, signature: Signature) -> tuple[FloatArray, FloatArray]:
+        ref, sim = self._sides[signature]
+        return _on_grid(ref, None), _on_grid(sim, None)
+
+    def __iter__(self) -> Iterator[Signature]:
+        return iter(self._sides)
+
+    def __len__(self) -> int:
+        return len(self._sides)
+
+    def pair(self, signature: Signature, buffers: threading.local) -> tuple[FloatArray, FloatArray]:
+        """The signal's arrays, an interpolated side written into this thread's buffer for
+        that side (valid until the thread's next call)."""
+        ref, sim = self._sides[signature]
+        if not hasattr(buffers, "sides"):
+            buffers.sides = (np.empty(0), np.empty(0))
+        out = list(buffers.sides)
+        for k, side in enumerate((ref, sim)):
+            if isinstance(side, Interpolation) and out[k].shape[0] != self._n:
+                out[k] = np.empty(self._n, dtype=np.float64)
+        buffers.sides = (out[0], out[1])
+        return _on_grid(ref, out[0]), _on_grid(sim, out[1])
+
+
+def _on_grid(side: Side, buffer: FloatArray | None) -> FloatArray:
+    return side.into(buffer) if isinstance(side, Interpolation) else side
+
+
 def _signal_arrays(
     nodes: list[tuple[int, NodePath, SignalSpec]], aligned: AlignedData, reference: Record
-) -> tuple[dict[Signature, SignalSpec], dict[Signature, tuple[FloatArray, FloatArray]]]:
+) -> tuple[dict[Signature, SignalSpec], _SignalArrays]:
     """The aligned (reference, simulated) arrays of each distinct signal, gaps removed."""
     # Evaluate each distinct signal once, even when it appears in several sets.
     unique: dict[Signature, SignalSpec] = {}
     for _, _, node in nodes:
         unique.setdefault(_signature(node), node)
-    values: dict[Signature, tuple[FloatArray, FloatArray]] = {}
+    sides: dict[Signature, tuple[Side, Side]] = {}
     for signature, node in unique.items():
-        pair = []
+        pair: list[Side] = []
         for side, expression, key in (("reference", node.ref, "ref"), ("model", node.sim, "sim")):
             try:
-                pair.append(_signal_values(aligned, side, expression, node))
+                deferred = _deferred_values(aligned, side, expression, node)
+                pair.append(
+                    deferred
+                    if deferred is not None
+                    else _signal_values(aligned, side, expression, node)
+                )
             except ExpressionError as exc:
                 raise exc.with_context(line=node.line, key=f"{node.key}.{key}") from None
-        values[signature] = (pair[0], pair[1])
+        sides[signature] = (pair[0], pair[1])
     if aligned.gap_mask is not None and aligned.gap_mask.any():
+        # Scoring around gaps copies every signal anyway.
         keep = ~aligned.gap_mask
-        values = {k: (r[keep], s[keep]) for k, (r, s) in values.items()}
-    return unique, values
+        sides = {
+            k: (_on_grid(r, None)[keep], _on_grid(s, None)[keep]) for k, (r, s) in sides.items()
+        }
+    # Sides put on the grid where they are used exist only without gaps: grid-long.
+    return unique, _SignalArrays(sides, aligned.grid.n_samples)
+
+
+def _deferred_values(
+    aligned: AlignedData, side: str, expression: Expression, node: SignalSpec
+) -> Interpolation | None:
+    """A side that is a logged column as it is, off the grid: put on the grid where it is used."""
+    record = aligned.reference if side == "reference" else aligned.model
+    names = _columns_of(expression, record)
+    if not (expression.is_column or names == (expression.source,)):
+        return None
+    unit_from = node.ref_unit if side == "reference" else node.sim_unit
+    scale = node.ref_scale if side == "reference" else node.sim_scale
+    offset = node.ref_offset if side == "reference" else node.sim_offset
+    if (unit_from and node.unit and unit_from != node.unit) or scale != 1.0 or offset != 0.0:
+        return None
+    method = node.interpolation or record.meta.get("interpolation", "linear")
+    return aligned.deferred_column(side, names[0], method)  # type: ignore[arg-type]
 
 
 def _scoring_threads(workers: int | None) -> int:
@@ -675,31 +756,56 @@ def _per_signal(score: Callable[[T], R], items: list[T], threads: int) -> list[R
     return [score(item) for item in items]
 
 
+Scored = tuple[float, dict[str, float]]
+
+
+@dataclass
+class _SignalPass:
+    """What one distinct signal's pass on its scoring thread found."""
+
+    characteristics: dict[Signature, SignalCharacteristics] = field(default_factory=dict)
+    local: dict[Signature, LocalResult] = field(default_factory=dict)
+    #: The standard metrics: value and components by name.
+    standard: dict[Signature, dict[str, Scored]] = field(default_factory=dict)
+    #: Fine-block sums for the intervals, of records not summed as a stack.
+    blocks: dict[Signature, BlockSums] = field(default_factory=dict)
+    #: The report's figure data, when asked for.
+    figures: dict[Signature, dict[str, Any]] = field(default_factory=dict)
+    #: A campaign recording's u-pooling distributions.
+    u_distributions: dict[Signature, list[float]] = field(default_factory=dict)
+
+
 def _fused_characteristics(
     spec: Spec,
     unique: dict[Signature, SignalSpec],
-    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
     dt: float,
     workers: int | None,
     labels: Labels | None,
-) -> tuple[
-    dict[Signature, SignalCharacteristics],
-    dict[Signature, LocalResult],
-    dict[Signature, dict[str, Scored]],
-]:
+    intervals: bool = False,
+    figures_of: AlignedData | None = None,
+) -> _SignalPass:
     """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass, and
     with ``labels`` the signal over the spec's windows, phases, conditions and cells: the same
     pass sums them, and their tables are built on the signal's thread while the other threads
     score (most of it is Python, which takes turns). The spec's standard metrics are scored
-    on the same thread, those built on moments from the pass's sums."""
+    on the same thread, those built on moments from the pass's sums, and with ``intervals``
+    the fine-block sums of a record not summed as a stack (``block_sums_stacked``) are taken
+    there too, while the signal is fresh in cache; so are the figures (with ``figures_of``,
+    the grid they are drawn on) and a campaign recording's u distributions. Nothing else reads
+    the signals' arrays unless asked, so a column put on the grid here (``_SignalArrays``)
+    goes into a buffer the thread keeps for its next signal."""
     n_workers = _scoring_threads(workers)
     metrics = [c for c in spec.characteristics() if c.compute is not None and c.standard]
+    found = _SignalPass()
+    buffers = threading.local()
 
-    def score(
-        item: tuple[Signature, SignalSpec],
-    ) -> tuple[Signature, Any, LocalResult | None, dict[str, Scored]]:
+    def score(item: tuple[Signature, SignalSpec]) -> HevvalError | None:
         signature, node = item
-        ref, sim = values[signature]
+        if isinstance(values, _SignalArrays):
+            ref, sim = values.pair(signature, buffers)
+        else:
+            ref, sim = values[signature]
         group_runs = labels.grouping.runs(ref, sim) if labels is not None else None
         try:
             chars = signal_characteristics(
@@ -713,40 +819,43 @@ def _fused_characteristics(
                 group_runs=group_runs,
             )
         except DegenerateSignalError as exc:
-            return signature, exc.with_context(line=node.line, key=node.key), None, {}
-        standard: dict[str, Scored] = {}
+            return exc.with_context(line=node.line, key=node.key)
         if metrics and chars.sums is not None:
             moments = moments_from_pass(chars.sums, ref, sim)
             try:
-                standard = _characteristics_of(metrics, node, ref, sim, dt, moments)
+                found.standard[signature] = _characteristics_of(
+                    metrics, node, ref, sim, dt, moments
+                )
             except HevvalError as exc:
-                return signature, exc, None, {}
+                return exc
+        if labels is not None:
+            found.local[signature] = score_local(
+                labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
+            )
+        if intervals and not block_sums_stacked(int(ref.shape[0])):
+            found.blocks[signature] = block_sums_many([(ref, sim)])[0]
+        if figures_of is not None:
+            found.figures[signature] = _figures(ref, sim, chars, figures_of)
+        if spec.campaign is not None:
+            u_distribution = _u_distribution(ref, sim)
+            if u_distribution is not None:
+                found.u_distributions[signature] = u_distribution
         # The sums have served: a spec keeps its signals' characteristics to the end.
-        chars = replace(chars, sums=None)
-        if labels is None:
-            return signature, chars, None, standard
-        local = score_local(
-            labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
-        )
-        return signature, replace(chars, group_sums=None), local, standard
+        found.characteristics[signature] = replace(chars, sums=None, group_sums=None)
+        return None
 
-    scored = _per_signal(score, list(unique.items()), n_workers)
-    for _, outcome, _, _ in scored:
-        if isinstance(outcome, HevvalError):
-            raise outcome
-    fused = {signature: chars for signature, chars, _, _ in scored}
-    local = {signature: found for signature, _, found, _ in scored if found is not None}
-    standard = {signature: found for signature, _, _, found in scored}
-    return fused, local, standard
-
-
-Scored = tuple[float, dict[str, float]]
+    # Each thread writes its own signals' entries; the errors are raised in signal order.
+    for error in _per_signal(score, list(unique.items()), n_workers):
+        if error is not None:
+            raise error
+    found.characteristics = {s: found.characteristics[s] for s in unique}
+    return found
 
 
 def _registered_characteristics(
     spec: Spec,
     unique: dict[Signature, SignalSpec],
-    values: dict[Signature, tuple[FloatArray, FloatArray]],
+    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
     dt: float,
     standard: Mapping[Signature, Mapping[str, Scored]],
 ) -> dict[Signature, dict[str, Scored]]:
@@ -759,9 +868,10 @@ def _registered_characteristics(
     users = [c for c in wanted if not c.standard]
     out: dict[Signature, dict[str, Scored]] = {}
     for signature, node in unique.items():
-        ref, sim = values[signature]
         found = dict(standard.get(signature, {}))
-        found.update(_characteristics_of(users, node, ref, sim, dt))
+        if users:
+            ref, sim = values[signature]
+            found.update(_characteristics_of(users, node, ref, sim, dt))
         out[signature] = {c.name: found[c.name] for c in wanted}
     return out
 
@@ -1006,7 +1116,7 @@ def _with_digest(model_info: dict[str, Any], cache: DataCache) -> dict[str, Any]
 def _add_campaign_facts(
     spec: Spec,
     result: SpecResult,
-    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+    u_distributions: Mapping[Signature, list[float]],
     node_specs: Mapping[NodePath, SignalSpec],
 ) -> None:
     """A campaign recording's result names its recording and keeps what pools over them."""
@@ -1024,11 +1134,17 @@ def _add_campaign_facts(
     if spec.campaign.unused_models:
         result.campaign["unused_models"] = list(spec.campaign.unused_models)
     for signal in result.signals:
-        ref, sim = values[_signature(node_specs[tuple(signal.path.split("/"))])]
-        finite = np.isfinite(ref)
-        if finite.any() and np.isfinite(sim).any():
-            distribution = u_distribution_of(ref[finite], sim[np.isfinite(sim)])
-            signal.u_distribution = [float(x) for x in distribution]
+        found = u_distributions.get(_signature(node_specs[tuple(signal.path.split("/"))]))
+        if found is not None:
+            signal.u_distribution = found
+
+
+def _u_distribution(ref: FloatArray, sim: FloatArray) -> list[float] | None:
+    """A campaign signal's u-pooling distribution (its finite samples), if it has any."""
+    finite = np.isfinite(ref)
+    if finite.any() and np.isfinite(sim).any():
+        return [float(x) for x in u_distribution_of(ref[finite], sim[np.isfinite(sim)])]
+    return None
 
 
 def _tree_of(node: SignalSpec) -> TreeNode:
