@@ -390,3 +390,20 @@ def test_off_grid_columns_scored_where_used_give_the_same_results(
     assert copied["cached"] == {"c0", "c1", "c2", "c3", "c4"}
     # Kept in full: the expression's column (c3 * 2), the converted one and the one with NaN.
     assert scored["cached"] == ({"c2", "c3", "c4"} if gap else {"c3", "c4"})
+
+
+def test_fine_blocks_summed_in_the_scoring_pass_give_the_intervals_of_a_pass_of_their_own(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, kernel_path: str
+) -> None:
+    """A long record's fine-block sums are taken on the signal's scoring thread; summed after
+    every signal instead (as records short enough to stack are), the intervals are the same."""
+    import pytest_hevval.scoring.engine as engine
+
+    _deferred_files(tmp_path, 70_000, False)
+    in_pass = _scored(tmp_path, True, monkeypatch)["result"]
+    with monkeypatch.context() as patch:
+        patch.setattr(engine, "block_sums_stacked", lambda n: True)
+        afterwards = _scored(tmp_path, True, monkeypatch)["result"]
+    assert in_pass == afterwards
+    signals = in_pass["signals"]  # type: ignore[index]
+    assert all(signal["intervals"] for signal in signals)
