@@ -52,3 +52,16 @@ def test_an_unknown_public_name_is_an_attribute_error() -> None:
 
     with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
         _ = pytest_hevval.no_such_name  # type: ignore[attr-defined]
+
+
+def test_scoring_loads_the_standard_metrics_only_for_a_spec_that_names_them() -> None:
+    # Their package imports scipy.signal (ISO/TS 18571's filter): a tenth of a second and tens
+    # of megabytes that a run without `metrics:` need not pay.
+    code = (
+        "import sys\n"
+        "import pytest_hevval.scoring.engine, pytest_hevval.scoring.run\n"
+        "print(','.join(m for m in ('pytest_hevval.core.standard', 'scipy.signal') "
+        "if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == ""

@@ -13,14 +13,13 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 
 from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.registry import Characteristic, compute_characteristic
-from ..core.standard._moments import Moments, moments_from_pass
 from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
 from ..core.uncertainty import BlockSums, block_sums_many, block_sums_stacked
 from ..core.upooling import u_distribution_of
@@ -53,6 +52,10 @@ from .local import (
 __all__ = ["DataCache", "Evaluation", "evaluate_spec", "file_digest"]
 
 FloatArray = npt.NDArray[np.float64]
+
+if TYPE_CHECKING:
+    from ..core.standard._moments import Moments
+
 T = TypeVar("T")
 R = TypeVar("R")
 
@@ -797,6 +800,9 @@ def _fused_characteristics(
     goes into a buffer the thread keeps for its next signal."""
     n_workers = _scoring_threads(workers)
     metrics = [c for c in spec.characteristics() if c.compute is not None and c.standard]
+    if metrics:
+        # Only then: the standard metrics' package imports scipy.signal, a tenth of a second.
+        from ..core.standard._moments import moments_from_pass
     found = _SignalPass()
     buffers = threading.local()
 
