@@ -31,6 +31,7 @@ Choices, each documented in ``docs/uncertainty.md``:
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from collections.abc import Mapping, Sequence
@@ -193,9 +194,13 @@ def fine_block_size(n: int) -> int:
     return max(1, math.ceil(n / FINE_BLOCKS))
 
 
+@functools.lru_cache(maxsize=4)
 def fine_labels(n: int, fine: int) -> IntArray:
-    """The fine block of every sample, shared by every signal of a record."""
-    return np.arange(n, dtype=np.int64) // max(1, fine)
+    """The fine block of every sample, shared by every signal of a record (and kept for the
+    next: the engine sums a long record's signals one at a time, on their scoring threads)."""
+    labels = np.arange(n, dtype=np.int64) // max(1, fine)
+    labels.flags.writeable = False
+    return labels
 
 
 @dataclass(frozen=True)
