@@ -549,11 +549,7 @@ class _Plan:
             return np.take(values, self.index, out=out)
         assert self.offset is not None
         assert self.step is not None
-        compiled = (
-            kernel.kernel_for(self.index.shape[0], ("interpolate",))
-            if kernel.accepts(values)
-            else None
-        )
+        compiled = self._compiled([values])
         if compiled is not None:
             return kernel.interpolate_into(
                 compiled, values, self.index, self.offset, self.step, out
@@ -567,14 +563,16 @@ class _Plan:
         assert self.right is not None
         assert self.offset is not None
         assert self.step is not None
-        compiled = (
-            kernel.kernel_for(self.index.shape[0], ("interpolate",))
-            if kernel.accepts(*columns)
-            else None
-        )
+        compiled = self._compiled(columns)
         if compiled is not None:
             return kernel.interpolate_columns(compiled, columns, self.index, self.offset, self.step)
         return [self._numpy(values) for values in columns]
+
+    def _compiled(self, columns: list[FloatArray]) -> Any:
+        """The kernel's module, when it runs this plan on these columns; else None."""
+        if not kernel.accepts(*columns):
+            return None
+        return kernel.kernel_for(self.index.shape[0], ("interpolate",))
 
     def _numpy(self, values: FloatArray, out: FloatArray | None = None) -> FloatArray:
         """np.interp's arithmetic, (right − left) / step · offset + left, a block at a time:

@@ -328,26 +328,37 @@ def _columns_of(expression: Expression, record: Record) -> tuple[str, ...]:
     return expression.columns
 
 
-def _signal_values(
+def _signal_side(
     aligned: AlignedData,
     side: str,
     expression: Expression,
     node: SignalSpec,
-) -> FloatArray:
+) -> Side:
+    """One side of a signal on the grid, or a logged column as it is, off the grid, as the
+    :class:`Interpolation` that puts it there where it is used (see ``_SignalArrays``)."""
     record = aligned.reference if side == "reference" else aligned.model
     # A CAN log's signals hold their value between frames; other sources are interpolated.
     method = node.interpolation or record.meta.get("interpolation", "linear")
     names = _columns_of(expression, record)
+    unit_from = node.ref_unit if side == "reference" else node.sim_unit
+    # The conversion, when its units differ: (from, to).
+    converted = (
+        (unit_from, node.unit) if unit_from and node.unit and unit_from != node.unit else None
+    )
+    scale = node.ref_scale if side == "reference" else node.sim_scale
+    offset = node.ref_offset if side == "reference" else node.sim_offset
+    as_logged = expression.is_column or names == (expression.source,)
+    if as_logged and converted is None and scale == 1.0 and offset == 0.0:
+        deferred = aligned.deferred_column(side, names[0], method)  # type: ignore[arg-type]
+        if deferred is not None:
+            return deferred
     columns = aligned.columns(side, names, method)  # type: ignore[arg-type]
-    if expression.is_column or names == (expression.source,):
+    if as_logged:
         values = columns[names[0]]
     else:
         values = np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
-    unit_from = node.ref_unit if side == "reference" else node.sim_unit
-    if unit_from and node.unit and unit_from != node.unit:
-        values = _convert_units(values, unit_from, node.unit, node, side)
-    scale = node.ref_scale if side == "reference" else node.sim_scale
-    offset = node.ref_offset if side == "reference" else node.sim_offset
+    if converted is not None:
+        values = _convert_units(values, *converted, node, side)
     if scale != 1.0 or offset != 0.0:
         values = values * scale + offset
     return values
@@ -680,14 +691,16 @@ class _SignalArrays(Mapping[Signature, tuple[FloatArray, FloatArray]]):
         """The signal's arrays, an interpolated side written into this thread's buffer for
         that side (valid until the thread's next call)."""
         ref, sim = self._sides[signature]
-        if not hasattr(buffers, "sides"):
-            buffers.sides = (np.empty(0), np.empty(0))
-        out = list(buffers.sides)
-        for k, side in enumerate((ref, sim)):
-            if isinstance(side, Interpolation) and out[k].shape[0] != self._n:
-                out[k] = np.empty(self._n, dtype=np.float64)
-        buffers.sides = (out[0], out[1])
-        return _on_grid(ref, out[0]), _on_grid(sim, out[1])
+        return self._into(ref, buffers, "ref"), self._into(sim, buffers, "sim")
+
+    def _into(self, side: Side, buffers: threading.local, name: str) -> FloatArray:
+        if not isinstance(side, Interpolation):
+            return side
+        out = getattr(buffers, name, None)
+        if out is None:
+            out = np.empty(self._n, dtype=np.float64)
+            setattr(buffers, name, out)
+        return side.into(out)
 
 
 def _on_grid(side: Side, buffer: FloatArray | None) -> FloatArray:
@@ -707,12 +720,7 @@ def _signal_arrays(
         pair: list[Side] = []
         for side, expression, key in (("reference", node.ref, "ref"), ("model", node.sim, "sim")):
             try:
-                deferred = _deferred_values(aligned, side, expression, node)
-                pair.append(
-                    deferred
-                    if deferred is not None
-                    else _signal_values(aligned, side, expression, node)
-                )
+                pair.append(_signal_side(aligned, side, expression, node))
             except ExpressionError as exc:
                 raise exc.with_context(line=node.line, key=f"{node.key}.{key}") from None
         sides[signature] = (pair[0], pair[1])
@@ -724,23 +732,6 @@ def _signal_arrays(
         }
     # Sides put on the grid where they are used exist only without gaps: grid-long.
     return unique, _SignalArrays(sides, aligned.grid.n_samples)
-
-
-def _deferred_values(
-    aligned: AlignedData, side: str, expression: Expression, node: SignalSpec
-) -> Interpolation | None:
-    """A side that is a logged column as it is, off the grid: put on the grid where it is used."""
-    record = aligned.reference if side == "reference" else aligned.model
-    names = _columns_of(expression, record)
-    if not (expression.is_column or names == (expression.source,)):
-        return None
-    unit_from = node.ref_unit if side == "reference" else node.sim_unit
-    scale = node.ref_scale if side == "reference" else node.sim_scale
-    offset = node.ref_offset if side == "reference" else node.sim_offset
-    if (unit_from and node.unit and unit_from != node.unit) or scale != 1.0 or offset != 0.0:
-        return None
-    method = node.interpolation or record.meta.get("interpolation", "linear")
-    return aligned.deferred_column(side, names[0], method)  # type: ignore[arg-type]
 
 
 def _scoring_threads(workers: int | None) -> int:
@@ -781,7 +772,7 @@ class _SignalPass:
 def _fused_characteristics(
     spec: Spec,
     unique: dict[Signature, SignalSpec],
-    values: Mapping[Signature, tuple[FloatArray, FloatArray]],
+    values: _SignalArrays,
     dt: float,
     workers: int | None,
     labels: Labels | None,
@@ -808,10 +799,7 @@ def _fused_characteristics(
 
     def score(item: tuple[Signature, SignalSpec]) -> HevvalError | None:
         signature, node = item
-        if isinstance(values, _SignalArrays):
-            ref, sim = values.pair(signature, buffers)
-        else:
-            ref, sim = values[signature]
+        ref, sim = values.pair(signature, buffers)
         group_runs = labels.grouping.runs(ref, sim) if labels is not None else None
         try:
             chars = signal_characteristics(
