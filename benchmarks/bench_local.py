@@ -12,8 +12,9 @@ repetition by repetition on the same arrays, on ``--threads`` threads as the eng
 * **global**: each signal's ``signal_characteristics`` (λ1–λ6, lag search);
 * **global + local**: labelling the samples once (30 s windows × a 10 × 10 region map over two
   operating variables: binning, the fine labels and their ``Grouping``), then each signal's
-  ``signal_characteristics`` followed by its one-pass sums and window and cell tables
-  (``score_local``), in the same task, as the engine scores a signal;
+  ``signal_characteristics`` followed by its one-pass sums (``local_sums``), in the same task,
+  and every signal's window and cell tables in one call after them (``local_results``), as the
+  engine scores a spec;
 
 and prints what local adds, (global + local − global) / global, in wall and in CPU time (the
 CPU time of the process is less moved by other jobs on a shared machine). The goal: at most
@@ -35,6 +36,7 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -44,6 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pytest_hevval.core import local
 from pytest_hevval.core.characteristics import signal_characteristics
 from pytest_hevval.core.local import fixed_windows, region_grid
+from pytest_hevval.scoring import local as scoring_local
 from pytest_hevval.scoring.local import Labels, score_local
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,6 +69,7 @@ def make_pairs(signals: int, n: int, seed: int = 0) -> list[tuple[np.ndarray, np
 #: Code before 2026-11-27 took the fine labels themselves and summed them in a pass of its
 #: own: kept to compare side by side.
 grouped = "grouping" in Labels.__dataclass_fields__
+batched = hasattr(scoring_local, "local_results")
 
 
 def operating_variables(n: int, dt: float, kind: str) -> list[np.ndarray]:
@@ -154,10 +158,10 @@ def main() -> None:
     def with_local() -> None:
         labels = make_labels(variables, dt, args.window_s, args.bins)
 
-        def one(pair: tuple[np.ndarray, np.ndarray]) -> None:
+        def one(pair: tuple[np.ndarray, np.ndarray]) -> Any:
             if not grouped:  # code before 2026-11-27: a pass of its own
                 score_local(labels, pair[0], pair[1], characteristics(pair), "xcorr")
-                return
+                return None
             # As the engine scores a signal: its groups summed along with λ.
             chars = signal_characteristics(
                 pair[0],
@@ -167,10 +171,15 @@ def main() -> None:
                 workers=1,
                 group_runs=labels.grouping.runs(pair[0], pair[1]),
             )
-            score_local(labels, *pair, chars.reference_range, "xcorr", chars.group_sums)
+            if not batched:  # code before 2026-11-28: each signal's tables on its thread
+                score_local(labels, *pair, chars.reference_range, "xcorr", chars.group_sums)
+                return None
+            return scoring_local.local_sums(labels, *pair, chars.reference_range, chars.group_sums)
 
         with ThreadPoolExecutor(args.threads) as pool:
-            list(pool.map(one, pairs))
+            sums = list(pool.map(one, pairs))
+        if batched:  # as the engine does: every signal's tables in one call after the pass
+            scoring_local.local_results(labels, sums, "xcorr")
 
     times: dict[str, list[float]] = {"global": [], "global + local": []}
     cpu: dict[str, list[float]] = {"global": [], "global + local": []}

@@ -183,6 +183,35 @@ def test_windows_and_cells_of_huge_or_tiny_signals_match_ordinary_ones(
     assert [f.where for f in scaled.local_failures] == [f.where for f in plain.local_failures]
 
 
+def test_each_signal_of_a_spec_gets_the_tables_it_gets_alone(tmp_path: Path) -> None:
+    """The tables of all signals come from one vectorised call: each signal keeps its own
+    shift, power-of-two scale and range, as if it were the spec's only signal."""
+    write_trip(tmp_path, stretch=True, fast=True)
+    signals = {
+        "P": "{signal: P, ref: power, sim: power, unit: kW}",
+        "huge": f"{{signal: huge, ref: power, sim: power, ref_scale: {2.0**600!r}, "
+        f"sim_scale: {2.0**600!r}}}",
+        "thrice": "{signal: thrice, ref: power, sim: power, ref_scale: 3.0, sim_scale: 2.9}",
+    }
+    head = SPEC.split("sets:")[0]
+
+    def spec_of(names: list[str]) -> str:
+        return head + "sets:\n" + "".join(f"  - {signals[name]}\n" for name in names)
+
+    together = _evaluate(tmp_path, spec_of(list(signals))).result.signals  # type: ignore[attr-defined]
+    assert len(together) == 3
+    for result in together:
+        (alone,) = _evaluate(tmp_path, spec_of([result.name])).result.signals  # type: ignore[attr-defined]
+        assert result.local.to_dict() == alone.local.to_dict(), result.name
+        assert result.local_failures == alone.local_failures
+    # The scales did reach the tables: the huge copy's errors are 2^600 times P's.
+    by_name = {s.name: s for s in together}
+    np.testing.assert_allclose(
+        np.array(by_name["huge"].local.windows.rms) / 2.0**600, by_name["P"].local.windows.rms
+    )
+    assert by_name["thrice"].local.windows.rms != by_name["P"].local.windows.rms
+
+
 @pytest.mark.parametrize(
     ("fragment", "key", "problem"),
     [

@@ -91,6 +91,27 @@ class GroupSums:
         """The sums of some of the groups only."""
         return GroupSums(**{f.name: getattr(self, f.name)[selection] for f in fields(self)})
 
+    @classmethod
+    def of_table(cls, table: FloatArray, shift: float | FloatArray) -> GroupSums:
+        """The sums of rows of :data:`SUM_COLUMNS` whose error sums are taken about ``shift``
+        (one for all rows, or one per row: the tables of several signals stacked)."""
+        n = np.rint(table[:, 0]).astype(np.int64)
+        shifted_sum, shifted_sq = table[:, 1], table[:, 2]
+        sq_error, error_m2 = from_shifted_sums(n, shifted_sum, shifted_sq, shift)
+        return cls(
+            n=n,
+            error_sum=shifted_sum + n.astype(np.float64) * shift,
+            abs_error=table[:, 3],
+            sq_error=sq_error,
+            error_m2=error_m2,
+            ref_sum=table[:, 4],
+            sim_sum=table[:, 5],
+            ref_sq=table[:, 6],
+            sim_sq=table[:, 7],
+            cross=table[:, 8],
+            sign_matches=np.rint(table[:, 9]).astype(np.int64),
+        )
+
 
 def derivative_signs(y: FloatArray) -> npt.NDArray[np.int8]:
     """sign(y[i+1] − y[i−1]) per sample, 0 at both ends: the core's λ2 convention."""
@@ -155,10 +176,11 @@ def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> 
 
 
 def group_lambdas(
-    sums: GroupSums, reference_range: float, correlation: CorrelationKind = "xcorr"
+    sums: GroupSums, reference_range: float | FloatArray, correlation: CorrelationKind = "xcorr"
 ) -> dict[str, FloatArray]:
     """λ1–λ6 per group, keyed by characteristic name; NaN for groups too small to judge
-    (fewer than :data:`MIN_GROUP_SAMPLES` samples)."""
+    (fewer than :data:`MIN_GROUP_SAMPLES` samples). ``reference_range``: one for every group,
+    or one per group."""
     return lambdas_from_sums(
         n=sums.n,
         abs_error=sums.abs_error,
@@ -382,23 +404,7 @@ class SumTable:
         return SumTable(self.values[selection], self.shift, self.scale)
 
     def sums(self) -> GroupSums:
-        table = self.values
-        n = np.rint(table[:, 0]).astype(np.int64)
-        shifted_sum, shifted_sq = table[:, 1], table[:, 2]
-        sq_error, error_m2 = from_shifted_sums(n, shifted_sum, shifted_sq, self.shift)
-        return GroupSums(
-            n=n,
-            error_sum=shifted_sum + n.astype(np.float64) * self.shift,
-            abs_error=table[:, 3],
-            sq_error=sq_error,
-            error_m2=error_m2,
-            ref_sum=table[:, 4],
-            sim_sum=table[:, 5],
-            ref_sq=table[:, 6],
-            sim_sq=table[:, 7],
-            cross=table[:, 8],
-            sign_matches=np.rint(table[:, 9]).astype(np.int64),
-        )
+        return GroupSums.of_table(self.values, self.shift)
 
 
 @dataclass(frozen=True)

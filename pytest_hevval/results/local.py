@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from ..core.local import (
     HOT_FACTOR,
@@ -29,6 +30,8 @@ __all__ = [
     "LocalResult",
     "concentration_sentence",
 ]
+
+FloatArray = npt.NDArray[np.float64]
 
 #: The failure message names at most this many windows or cells, worst first.
 NAMED_GROUPS = 3
@@ -66,22 +69,23 @@ class GroupTable:
         cls,
         labels: Sequence[Sequence[str]],
         sums: GroupSums,
-        reference_range: float,
+        reference_range: float | FloatArray,
         correlation: str,
-        total_sq: float,
-        scale: float = 1.0,
+        total_sq: float | FloatArray,
+        scale: float | FloatArray = 1.0,
     ) -> list[GroupTable]:
         """One table per entry of ``labels``, whose rows follow each other in ``sums``, as
-        :meth:`from_sums` of each: one vectorised call for them all."""
+        :meth:`from_sums` of each: one vectorised call for them all. ``reference_range``,
+        ``total_sq`` and ``scale``: one value, or one per row (the tables of several signals)."""
         kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
-        lambdas = group_lambdas(sums, reference_range * scale, kind)
+        lambdas = group_lambdas(sums, np.multiply(reference_range, scale), kind)
         n = sums.n.astype(np.float64)
         judged = sums.n >= MIN_GROUP_SAMPLES
         safe = np.maximum(n, 1.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             rms = np.where(judged, np.sqrt(sums.sq_error / safe) / scale, np.nan)
             mean = np.where(judged, sums.error_sum / safe / scale, np.nan)
-        share = sums.sq_error / total_sq if total_sq > 0 else np.zeros_like(n)
+            share = np.where(np.greater(total_sq, 0.0), sums.sq_error / total_sq, 0.0)
         # tolist() makes Python numbers in one call (a float() per value costs a signal of
         # many cells milliseconds).
         columns = {

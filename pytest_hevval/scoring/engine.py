@@ -43,9 +43,11 @@ from ..spec.model import SignalSpec, SourceSpec, Spec
 from .confidence import spec_confidence
 from .local import (
     Labels,
+    LocalSums,
     label_samples,
     local_failures,
-    score_local,
+    local_results,
+    local_sums,
     spec_local_summary,
 )
 
@@ -781,14 +783,14 @@ def _fused_characteristics(
 ) -> _SignalPass:
     """λ1–λ6 and the physical errors of each distinct signal, from the core's fused pass, and
     with ``labels`` the signal over the spec's windows, phases, conditions and cells: the same
-    pass sums them, and their tables are built on the signal's thread while the other threads
-    score (most of it is Python, which takes turns). The spec's standard metrics are scored
-    on the same thread, those built on moments from the pass's sums, and with ``intervals``
-    the fine-block sums of a record not summed as a stack (``block_sums_stacked``) are taken
-    there too, while the signal is fresh in cache; so are the figures (with ``figures_of``,
-    the grid they are drawn on) and a campaign recording's u distributions. Nothing else reads
-    the signals' arrays unless asked, so a column put on the grid here (``_SignalArrays``)
-    goes into a buffer the thread keeps for its next signal."""
+    pass sums them, and the tables' λ come from one vectorised call for all signals after the
+    pass (a call per signal took turns at the interpreter with the other threads). The spec's
+    standard metrics are scored on the same thread, those built on moments from the pass's
+    sums, and with ``intervals`` the fine-block sums of a record not summed as a stack
+    (``block_sums_stacked``) are taken there too, while the signal is fresh in cache; so are
+    the figures (with ``figures_of``, the grid they are drawn on) and a campaign recording's u
+    distributions. Nothing else reads the signals' arrays unless asked, so a column put on the
+    grid here (``_SignalArrays``) goes into a buffer the thread keeps for its next signal."""
     n_workers = _scoring_threads(workers)
     metrics = [c for c in spec.characteristics() if c.compute is not None and c.standard]
     if metrics:
@@ -796,6 +798,7 @@ def _fused_characteristics(
         from ..core.standard._moments import moments_from_pass
     found = _SignalPass()
     buffers = threading.local()
+    local: dict[Signature, LocalSums] = {}
 
     def score(item: tuple[Signature, SignalSpec]) -> HevvalError | None:
         signature, node = item
@@ -823,9 +826,7 @@ def _fused_characteristics(
             except HevvalError as exc:
                 return exc
         if labels is not None:
-            found.local[signature] = score_local(
-                labels, ref, sim, chars.reference_range, spec.correlation, chars.group_sums
-            )
+            local[signature] = local_sums(labels, ref, sim, chars.reference_range, chars.group_sums)
         if intervals and not block_sums_stacked(int(ref.shape[0])):
             found.blocks[signature] = block_sums_many([(ref, sim)])[0]
         if figures_of is not None:
@@ -843,6 +844,10 @@ def _fused_characteristics(
         if error is not None:
             raise error
     found.characteristics = {s: found.characteristics[s] for s in unique}
+    if labels is not None:
+        found.local = dict(
+            zip(local, local_results(labels, list(local.values()), spec.correlation), strict=True)
+        )
     return found
 
 

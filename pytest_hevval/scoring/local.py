@@ -2,9 +2,10 @@
 
 The samples of a spec's record are labelled once (time window × driving phase × conditions ×
 region cell, one *fine* label per sample, shared by every signal) and sorted into the groups
-they visit (:class:`pytest_hevval.core.local.Grouping`); each signal's tables (windows, phases,
-conditions, cells) come from one pass of :func:`pytest_hevval.core.local.grouped_tables`, and
-their λ from one vectorised call. The tables, the
+they visit (:class:`pytest_hevval.core.local.Grouping`); each signal's sums over them (windows,
+phases, conditions, cells) come from one pass of :func:`pytest_hevval.core.local.grouped_tables`
+on its scoring thread (:func:`local_sums`), and the λ of every signal's tables from one
+vectorised call after the pass (:func:`local_results`). The tables, the
 concentration of the error and the window and cell gates end up in each signal's result; the
 grid, the coverage and Φ per window and per cell in the spec's.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -23,6 +25,8 @@ from ..core.local import (
     LOCAL_CHARACTERISTICS,
     PHASES,
     Grouping,
+    GroupSums,
+    SumTable,
     concentration,
     driving_phases,
     grouped_tables,
@@ -35,9 +39,12 @@ from ..spec.model import LocalGate, SignalSpec, Spec
 
 __all__ = [
     "Labels",
+    "LocalSums",
     "label_samples",
     "local_failures",
     "local_phi",
+    "local_results",
+    "local_sums",
     "score_local",
     "spec_local_summary",
 ]
@@ -74,6 +81,26 @@ class Labels:
     window_condition: tuple[str | None, ...] = ()
     cell_axis: int | None = None
     region: Mapping[str, Any] | None = None
+
+    @cached_property
+    def tables(self) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.intp]]:
+        """Each table's row labels (windows, then phases, conditions and cells, as
+        :class:`LocalResult` holds them) and their rows in the grouping's stacked table, all
+        tables' one after the other."""
+        grouping = self.grouping
+        parts: list[tuple[Sequence[str], npt.NDArray[np.intp]]] = [
+            (self.window_labels, _axis_rows(grouping, 0))
+        ]
+        if self.phase_axis is not None:
+            parts.append((PHASES, _axis_rows(grouping, self.phase_axis)))
+        # The condition's bit is 1 where it holds: rows reversed give (holds, rest).
+        for axis in self.condition_axes.values():
+            parts.append((("holds", "rest"), _axis_rows(grouping, axis)[::-1]))
+        if self.cell_axis is not None and self.region is not None:
+            # Row 0 of the cell axis holds the samples outside the grid.
+            parts.append((self.region["labels"], _axis_rows(grouping, self.cell_axis)[1:]))
+        names = tuple(tuple(labels) for labels, _ in parts)
+        return names, np.concatenate([rows for _, rows in parts])
 
 
 def _window_label(span: tuple[float, float]) -> str:
@@ -221,6 +248,91 @@ def label_samples(
 # -- scoring one signal ----------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class LocalSums:
+    """One signal's sums over the rows of its labels' tables (:attr:`Labels.tables`), taken
+    on its scoring thread; :func:`local_results` turns the sums of every signal into tables
+    at once."""
+
+    table: SumTable
+    #: The signal's normalising range R, in its unit.
+    reference_range: float
+
+
+def local_sums(
+    labels: Labels,
+    ref: FloatArray,
+    sim: FloatArray,
+    reference_range: float,
+    summed: FloatArray | None = None,
+) -> LocalSums:
+    """One signal's sums over every grouping of ``labels``; ``summed``: its groups' sums if the
+    core's main pass took them (``SignalCharacteristics.group_sums``)."""
+    stacked = grouped_tables(ref, sim, labels.grouping, summed=summed)
+    return LocalSums(stacked.rows(labels.tables[1]), reference_range)
+
+
+def local_results(
+    labels: Labels, signals: Sequence[LocalSums], correlation: str
+) -> list[LocalResult]:
+    """The tables of every signal of a spec and where its error concentrates, from their
+    :func:`local_sums`: their λ come from one vectorised call over all signals' rows (a call
+    per signal spent more time in numpy's overhead, holding the interpreter, than in the
+    arithmetic)."""
+    if not signals:
+        return []
+    names, table_rows = labels.tables
+    rows = table_rows.shape[0]
+    shifts = np.array([s.table.shift for s in signals], dtype=np.float64)
+    scales = np.array([s.table.scale for s in signals], dtype=np.float64)
+    sums = GroupSums.of_table(
+        np.concatenate([s.table.values for s in signals]), np.repeat(shifts, rows)
+    )
+    # The windows' squared error of each signal: the share of it in each group.
+    window_sq = sums.sq_error.reshape(len(signals), rows)[:, : labels.windows].sum(axis=1)
+    ranges = np.array([s.reference_range for s in signals], dtype=np.float64)
+    tables = GroupTable.many(
+        names * len(signals),
+        sums,
+        np.repeat(ranges, rows),
+        correlation,
+        np.repeat(window_sq, rows),
+        np.repeat(scales, rows),
+    )
+    out = []
+    for k in range(len(signals)):
+        signal_tables = iter(tables[k * len(names) : (k + 1) * len(names)])
+        window_table = next(signal_tables)
+        hot = concentration(
+            sums.rows(slice(k * rows, k * rows + labels.windows)),
+            labels.window_starts,
+            labels.window_stops,
+            labels.dt,
+            labels.start_s,
+        )
+        out.append(
+            LocalResult(
+                windows=window_table,
+                spans_s=labels.spans_s,
+                concentration={
+                    "sentence": concentration_sentence(hot),
+                    "error_share": hot.error_share,
+                    "time_share": hot.time_share,
+                    "windows": hot.windows,
+                    "spans_s": [list(span) for span in hot.spans_s],
+                },
+                phases=next(signal_tables) if labels.phase_axis is not None else None,
+                conditions={name: next(signal_tables) for name in labels.condition_axes},
+                regions=(
+                    next(signal_tables)
+                    if labels.cell_axis is not None and labels.region is not None
+                    else None
+                ),
+            )
+        )
+    return out
+
+
 def score_local(
     labels: Labels,
     ref: FloatArray,
@@ -229,53 +341,10 @@ def score_local(
     correlation: str,
     summed: FloatArray | None = None,
 ) -> LocalResult:
-    """One signal's tables over every grouping of ``labels``; ``summed``: its groups' sums if
-    the core's main pass took them (``SignalCharacteristics.group_sums``)."""
-    grouping = labels.grouping
-    stacked = grouped_tables(ref, sim, grouping, summed=summed)
-    # Every table's rows, in one selection: their λ come from one vectorised call.
-    parts: list[tuple[Sequence[str], npt.NDArray[np.intp]]] = [
-        (labels.window_labels, _axis_rows(grouping, 0))
-    ]
-    if labels.phase_axis is not None:
-        parts.append((PHASES, _axis_rows(grouping, labels.phase_axis)))
-    # The condition's bit is 1 where it holds: rows reversed give (holds, rest).
-    for axis in labels.condition_axes.values():
-        parts.append((("holds", "rest"), _axis_rows(grouping, axis)[::-1]))
-    if labels.cell_axis is not None and labels.region is not None:
-        # Row 0 of the cell axis holds the samples outside the grid.
-        parts.append((labels.region["labels"], _axis_rows(grouping, labels.cell_axis)[1:]))
-    sums = stacked.rows(np.concatenate([rows for _, rows in parts])).sums()
-    window_sums = sums.rows(slice(0, labels.windows))
-    total_sq = float(window_sums.sq_error.sum())
-    tables = GroupTable.many(
-        [names for names, _ in parts],
-        sums,
-        reference_range,
-        correlation,
-        total_sq,
-        stacked.scale,
-    )
-    hot = concentration(
-        window_sums, labels.window_starts, labels.window_stops, labels.dt, labels.start_s
-    )
-    rest = iter(tables[1:])
-    return LocalResult(
-        windows=tables[0],
-        spans_s=labels.spans_s,
-        concentration={
-            "sentence": concentration_sentence(hot),
-            "error_share": hot.error_share,
-            "time_share": hot.time_share,
-            "windows": hot.windows,
-            "spans_s": [list(span) for span in hot.spans_s],
-        },
-        phases=next(rest) if labels.phase_axis is not None else None,
-        conditions={name: next(rest) for name in labels.condition_axes},
-        regions=(
-            next(rest) if labels.cell_axis is not None and labels.region is not None else None
-        ),
-    )
+    """One signal's tables over every grouping of ``labels`` (:func:`local_sums` and
+    :func:`local_results` of it alone)."""
+    sums = local_sums(labels, ref, sim, reference_range, summed)
+    return local_results(labels, [sums], correlation)[0]
 
 
 def _axis_rows(grouping: Grouping, axis: int) -> npt.NDArray[np.intp]:
