@@ -171,7 +171,7 @@ def main() -> None:
                 workers=1,
                 group_runs=labels.grouping.runs(pair[0], pair[1]),
             )
-            if not batched:  # code before 2026-11-28: each signal's tables on its thread
+            if not batched:  # code before e0a7683: each signal's tables on its thread
                 score_local(labels, *pair, chars.reference_range, "xcorr", chars.group_sums)
                 return None
             return scoring_local.local_sums(labels, *pair, chars.reference_range, chars.group_sums)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
@@ -51,6 +53,28 @@ def test_one_group_over_the_whole_record_is_the_global_result(
     for name, expected in zip(LOCAL_CHARACTERISTICS, whole.lambdas, strict=True):
         tolerance = 1e-9 * (anomaly_scale if name == "anomaly" else 1.0)
         assert local[name][0] == pytest.approx(expected, rel=1e-9, abs=tolerance), name
+
+
+def test_a_bias_far_above_the_spread_leaves_the_groups_spread_exact() -> None:
+    """Σ(e − ē)² per group, with a bias of 10^11 times the spread (a case hypothesis found):
+    the same σ as exact rational arithmetic on the same errors, to rounding."""
+    n = 47
+    ref = np.zeros(n)
+    ref[0] = 2.0**-14
+    sim = np.full(n, 932068.2474171163)
+    errors = [Fraction(float(x)) for x in ref - sim]
+    mean = sum(errors) / n
+    exact_m2 = float(sum((x - mean) ** 2 for x in errors))
+    for starts, stops in (([0], [n]), ([0, 20], [20, n])):
+        sums = segment_sums(ref, sim, np.array(starts), np.array(stops))
+        if len(starts) == 1:
+            assert sums.error_m2[0] == pytest.approx(exact_m2, rel=1e-12)
+        else:
+            for k, (a, b) in enumerate(zip(starts, stops, strict=True)):
+                part = errors[a:b]
+                part_mean = sum(part) / len(part)
+                expected = float(sum((x - part_mean) ** 2 for x in part))
+                assert sums.error_m2[k] == pytest.approx(expected, rel=1e-12, abs=1e-30)
 
 
 @given(signal_pairs(min_size=10), st.integers(1, 40))

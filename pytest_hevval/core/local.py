@@ -157,9 +157,16 @@ def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> 
 
     n = np.bincount(labels, minlength=groups).astype(np.int64)
     error_sum = total(e)
+    # The spread about each group's first error: a bias much larger than the spread would
+    # otherwise leave the mean's rounding (of the order of the bias's ulp) in every centred
+    # value, and its square in Σ(e − ē)².
+    present, first = np.unique(labels, return_index=True)
+    shift = np.zeros(groups, dtype=np.float64)
+    shift[present] = e[first]
+    shifted = e - shift[labels]
     with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(n > 0, error_sum / np.maximum(n, 1), 0.0)
-    centred = e - mean[labels]
+        mean = np.where(n > 0, total(shifted) / np.maximum(n, 1), 0.0)
+    centred = shifted - mean[labels]
     return GroupSums(
         n=n,
         error_sum=error_sum,
@@ -434,7 +441,8 @@ class Grouping:
     offsets: IntArray
     #: How many samples belong to a group.
     samples: int
-    #: Where each group's sums go in the stacked table, flat: (group, axis, column) in C order.
+    #: Where each group's sums go in each axis's rows of the stacked table, flat: (axis,
+    #: group × column), the column index running fastest.
     placement: IntArray
 
     @classmethod
@@ -459,7 +467,7 @@ class Grouping:
         digits = np.stack(np.unravel_index(present, sizes), axis=1)
         offsets = np.concatenate(([0], np.cumsum(sizes[:-1]))).astype(np.int64)
         columns = len(SUM_COLUMNS)
-        placement = ((digits + offsets)[:, :, None] * columns + np.arange(columns)).reshape(-1)
+        placement = (digits.T[:, :, None] * columns + np.arange(columns)).reshape(len(sizes), -1)
         return cls(
             shape=sizes,
             starts=starts.astype(np.int64),
@@ -496,11 +504,16 @@ class Grouping:
         group order."""
         if len(self.shape) == 1 and self.groups == self.shape[0]:
             return sums  # every row visited, in order: nothing to add
-        axes = len(self.shape)
-        rows = sum(self.shape)
-        weights = np.repeat(sums, axes, axis=0).reshape(-1) if axes > 1 else sums.reshape(-1)
-        table = np.bincount(self.placement, weights=weights, minlength=rows * len(SUM_COLUMNS))
-        return np.asarray(table, dtype=np.float64).reshape(rows, len(SUM_COLUMNS))
+        columns = len(SUM_COLUMNS)
+        weights = np.ascontiguousarray(sums, dtype=np.float64).reshape(-1)
+        # One count per axis over the groups in group order: every row adds its groups in
+        # that order, whatever the path that summed them.
+        return np.concatenate(
+            [
+                np.bincount(placement, weights=weights, minlength=size * columns)
+                for placement, size in zip(self.placement, self.shape, strict=True)
+            ]
+        ).reshape(-1, columns)
 
 
 def grouped_tables(
