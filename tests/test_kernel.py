@@ -263,7 +263,7 @@ def test_each_compiled_function_has_one_signature_for_writable_and_read_only_inp
     kernel.lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, 510), 1)
     kernel.quarter_level(module, x, 1)
     kernel.grouped_sums(module, x, y, grouping.runs(x, y))
-    kernel.fine_block_sums(module, x, y, 4, 8, np.empty((10, 128)))
+    kernel.fine_block_sums(module, x, y, 4, 8, np.empty((128, 10)))
     kernel.dtw_path(module, x[:40], y[:40], 3)
     plan = np.arange(511, dtype=np.intp)
     plan.flags.writeable = False

@@ -529,62 +529,67 @@ def _lag1_correlation(r, s, scale, mean):  # type: ignore[no-untyped-def]
     return 0.0
 
 
-@numba.njit(cache=True, inline="always")
-def _fine_rows(r, s, fine, shift, scale, out):  # type: ignore[no-untyped-def]
-    """The rows of ``fine_block_sums`` at one scale, in one loop over the samples; returns
-    Σr² + Σs² (scaled), and Σd, Σd² and Σ d_j·d_(j−1) of the shifted errors d.
+#: Samples per span of the fine-block pass at most: the ρ products are taken of a span while it
+#: is in cache, right after its rows.
+_FINE_SPAN = 1 << 15
 
-    Inlined into each caller, so a literal scale of 1 folds the multiplications away.
+
+@numba.njit(cache=True)
+def _errors_into(r, s, lo, hi, out):  # type: ignore[no-untyped-def]
+    """out[:hi − lo] = r[lo:hi] − s[lo:hi]."""
+    now_r = r[lo:hi]
+    now_s = s[lo:hi]
+    for j in range(hi - lo):
+        out[j] = now_r[j] - now_s[j]
+
+
+@numba.njit(cache=True, fastmath=_GROUPED_FAST)
+def _lagged_products(errors, m, shift):  # type: ignore[no-untyped-def]
+    """Σ d_j·d_(j−1) over j in [1, m), d = errors − shift (reassociated: ρ only sets a block
+    length).
+
+    The errors come from memory: with fast-math, r − s − shift computed here could be
+    reassociated into r − (s + shift), losing a shift far below r's ulp, and numba compiles a
+    callee with its caller's fast-math flags, so a helper without them would not keep it.
     """
-    n = r.shape[0]
-    rows = out.shape[1]
-    power = 0.0
-    total = 0.0
-    total_sq = 0.0
+    now = errors[1:m]
+    before = errors[0 : m - 1]
     lagged = 0.0
-    before = 0.0
-    for row in range(rows):
-        first = row * fine
-        last = min(first + fine, n)
-        a1 = a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = 0.0
-        for j in range(first, last):
-            ri = r[j] * scale
-            si = s[j] * scale
-            e = ri - si
-            d = e - shift
-            a1 += d
-            a2 += d * d
-            a3 += abs(e)
-            a4 += ri
-            a5 += si
-            a6 += ri * ri
-            a7 += si * si
-            a8 += ri * si
-            lagged += d * before
-            before = d
-            if 0 < j < n - 1:
-                r2 = r[j + 1] * scale
-                r0 = r[j - 1] * scale
-                s2 = s[j + 1] * scale
-                s0 = s[j - 1] * scale
-                # No branch on the data: the signs of noisy signals agree at random.
-                a9 += ((r2 > r0) == (s2 > s0)) & ((r2 < r0) == (s2 < s0))
-            else:
-                a9 += 1.0
-        out[0, row] = last - first
-        out[1, row] = a1
-        out[2, row] = a2
-        out[3, row] = a3
-        out[4, row] = a4
-        out[5, row] = a5
-        out[6, row] = a6
-        out[7, row] = a7
-        out[8, row] = a8
-        out[9, row] = a9
-        total += a1
-        total_sq += a2
-        power += a6 + a7
-    return power, total, total_sq, lagged
+    for j in range(m - 1):
+        lagged += (now[j] - shift) * (before[j] - shift)
+    return lagged
+
+
+@numba.njit(cache=True)
+def _fine_rows(r, s, fine, shift, out):  # type: ignore[no-untyped-def]
+    """The rows of ``fine_block_sums`` (unscaled values), run by run as ``_grouped_span`` sums
+    windows and cells; returns Σ d_j·d_(j−1) of the shifted errors d."""
+    n = r.shape[0]
+    rows = out.shape[0]
+    starts = np.arange(rows) * fine
+    stops = np.minimum(starts + fine, n)
+    run_group = np.arange(rows)
+    # Spans of whole fine blocks, so a row never straddles two spans.
+    span = max(1, _FINE_SPAN // fine) * fine
+    errors = np.empty(span + 1, dtype=np.float64)
+    lagged = 0.0
+    k = 0
+    for lo in range(0, n, span):
+        hi = min(lo + span, n)
+        k = _grouped_span(r, s, lo, hi, shift, starts, stops, run_group, k, out)
+        # From the sample before the span: its product with the span's first.
+        first = max(lo - 1, 0)
+        _errors_into(r, s, first, hi, errors)
+        lagged += _lagged_products(errors, hi - first, shift)
+    return lagged
+
+
+@numba.njit(cache=True)
+def _column_total(out, column):  # type: ignore[no-untyped-def]
+    total = 0.0
+    for row in range(out.shape[0]):
+        total += out[row, column]
+    return total
 
 
 @numba.njit(cache=True, inline="always")
@@ -600,31 +605,36 @@ def _head_shift(r, s, scale, shift_samples):  # type: ignore[no-untyped-def]
 @numba.njit(cache=True, nogil=True)
 def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-def]
     """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples into ``out``
-    (10, rows); returns (scale, shift, ρ).
+    (rows, 10); returns (scale, shift, ρ).
 
     The scale is ``characteristics.power_of_two_scale`` of the peak magnitude and every sum is
     taken of the scaled values; the shift is the mean of the first ``shift_samples`` errors.
-    Each run's samples are added left to right from zero, as ``np.bincount`` adds them, so
-    every column the shift does not enter is bit-identical to the numpy pass.
+    The rows are summed as the windows and cells are (``_grouped_span``: reassociated, so the
+    loop over a block vectorises), and agree with the numpy pass's to rounding.
 
     One loop over the samples in the common case: the rows are summed unscaled, and the sum
     of squares tells whether the peak can ask for a scale (peak² ≤ Σx² ≤ n·peak²); only then
-    is the peak found and, if it asks, the rows summed again scaled. ρ comes from the same
-    loop's sums of the shifted errors unless their mean dwarfs their spread, when a second
-    loop centres them first.
+    is the peak found and, if it asks, the rows summed again of scaled copies. ρ comes from
+    the same spans' sums of the shifted errors unless their mean dwarfs their spread, when a
+    second loop centres them first.
     """
     n = r.shape[0]
     scale = 1.0
     shift = _head_shift(r, s, 1.0, shift_samples)
-    power, total, total_sq, lagged = _fine_rows(r, s, fine, shift, 1.0, out)
+    out[:] = 0.0
+    lagged = _fine_rows(r, s, fine, shift, out)
+    power = _column_total(out, 6) + _column_total(out, 7)
     if not SQUARES_LOW * max(n, 1) < power < SQUARES_HIGH:
         peak = _peak_magnitude(r, s)
         if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
             scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
             shift = _head_shift(r, s, scale, shift_samples)
-            power, total, total_sq, lagged = _fine_rows(r, s, fine, shift, scale, out)
+            out[:] = 0.0
+            lagged = _fine_rows(r * scale, s * scale, fine, shift, out)
     if n < 3:
         return scale, shift, 0.0
+    total = _column_total(out, 1)
+    total_sq = _column_total(out, 2)
     offset = total / n
     mean = shift + offset
     if offset * total > 0.5 * total_sq:

@@ -313,7 +313,7 @@ def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
         ),
         "grouped_sums": lambda: grouped_sums(module, x, y, _runs(n, fine)),
         "fine_block_sums": lambda: fine_block_sums(
-            module, x, y, fine, 8, np.empty((10, n // fine), dtype=np.float64)
+            module, x, y, fine, 8, np.empty((n // fine, 10), dtype=np.float64)
         ),
         "dtw_path": lambda: dtw_path(module, x[:32], y[:32], 3),
         "quality_steps": lambda: quality_steps(module, x),
@@ -826,7 +826,7 @@ def fine_block_sums(
     shift_samples: int,
     out: npt.NDArray[np.float64],
 ) -> tuple[float, float, float]:
-    """One signal's sums over runs of ``fine`` samples into ``out`` (10, rows), and its
+    """One signal's sums over runs of ``fine`` samples into ``out`` (rows, 10), and its
     (scale, shift, ρ), in one compiled call (see ``_fused.fine_block_sums``)."""
     scale, shift, rho = module.fine_block_sums(
         _read_only(ref),

@@ -288,12 +288,12 @@ def _compiled_block_sums(
     module: ModuleType, pairs: Sequence[tuple[FloatArray, FloatArray]], n: int
 ) -> list[BlockSums]:
     fine = fine_block_size(n)
-    # (signal, column, row): each signal's table one contiguous block, written once.
-    tables = np.empty((len(pairs), len(SUM_COLUMNS), math.ceil(n / fine)), dtype=np.float64)
+    # (signal, row, column): each signal's table one contiguous block, written once.
+    tables = np.empty((len(pairs), math.ceil(n / fine), len(SUM_COLUMNS)), dtype=np.float64)
     out: list[BlockSums] = []
     for table, (ref, sim) in zip(tables, pairs, strict=True):
         scale, shift, rho = kernel.fine_block_sums(module, ref, sim, fine, SHIFT_SAMPLES, table)
-        out.append(BlockSums(SumTable(table.T, shift, scale), fine, n, rho))
+        out.append(BlockSums(SumTable(table, shift, scale), fine, n, rho))
     return out
 
 
