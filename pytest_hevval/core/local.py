@@ -89,7 +89,7 @@ class GroupSums:
 
     def rows(self, selection: slice | npt.NDArray[np.intp]) -> GroupSums:
         """The sums of some of the groups only."""
-        return GroupSums(**{f.name: getattr(self, f.name)[selection] for f in fields(self)})
+        return GroupSums(*(getattr(self, name)[selection] for name in _GROUP_SUMS_FIELDS))
 
     @classmethod
     def of_table(cls, table: FloatArray, shift: float | FloatArray) -> GroupSums:
@@ -111,6 +111,10 @@ class GroupSums:
             cross=table[:, 8],
             sign_matches=np.rint(table[:, 9]).astype(np.int64),
         )
+
+
+#: GroupSums' fields in order (``dataclasses.fields`` builds them anew on every call).
+_GROUP_SUMS_FIELDS = tuple(f.name for f in fields(GroupSums))
 
 
 def derivative_signs(y: FloatArray) -> npt.NDArray[np.int8]:
