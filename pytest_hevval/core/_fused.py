@@ -561,14 +561,11 @@ def _lagged_products(errors, m, shift):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def _fine_rows(r, s, fine, shift, out):  # type: ignore[no-untyped-def]
-    """The rows of ``fine_block_sums`` (unscaled values), run by run as ``_grouped_span`` sums
-    windows and cells; returns Σ d_j·d_(j−1) of the shifted errors d."""
+def _fine_rows(r, s, fine, starts, stops, run_group, shift, out):  # type: ignore[no-untyped-def]
+    """The rows of ``fine_block_sums``, run by run (the fine blocks ``starts``, ``stops``,
+    ``run_group``) as ``_grouped_span`` sums windows and cells; returns Σ d_j·d_(j−1) of the
+    shifted errors d."""
     n = r.shape[0]
-    rows = out.shape[0]
-    starts = np.arange(rows) * fine
-    stops = np.minimum(starts + fine, n)
-    run_group = np.arange(rows)
     # Spans of whole fine blocks, so a row never straddles two spans.
     span = max(1, _FINE_SPAN // fine) * fine
     errors = np.empty(span + 1, dtype=np.float64)
@@ -582,6 +579,13 @@ def _fine_rows(r, s, fine, shift, out):  # type: ignore[no-untyped-def]
         _errors_into(r, s, first, hi, errors)
         lagged += _lagged_products(errors, hi - first, shift)
     return lagged
+
+
+@numba.njit(cache=True)
+def _clear(out):  # type: ignore[no-untyped-def]
+    for row in range(out.shape[0]):
+        for column in range(out.shape[1]):
+            out[row, column] = 0.0
 
 
 @numba.njit(cache=True)
@@ -603,51 +607,49 @@ def _head_shift(r, s, scale, shift_samples):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, nogil=True)
-def fine_block_sums(r, s, fine, shift_samples, out):  # type: ignore[no-untyped-def]
-    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples into ``out``
-    (rows, 10); returns (scale, shift, ρ).
+def fine_block_sums(r, s, fine, starts, stops, run_group, shift_samples, out):  # type: ignore[no-untyped-def]
+    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples (the fine blocks
+    ``starts``, ``stops``, ``run_group``, given as the windows' runs are, so the loops compile
+    once for both) into ``out`` (rows, 10); returns (1, shift, ρ), or (scale, 0, 0) when the
+    values need a power-of-two scale: the caller then sums copies scaled by it
+    (``kernel.fine_block_sums``), through the same signature.
 
-    The scale is ``characteristics.power_of_two_scale`` of the peak magnitude and every sum is
-    taken of the scaled values; the shift is the mean of the first ``shift_samples`` errors.
-    The rows are summed as the windows and cells are (``_grouped_span``: reassociated, so the
-    loop over a block vectorises), and agree with the numpy pass's to rounding.
+    The scale is ``characteristics.power_of_two_scale`` of the peak magnitude; the shift is the
+    mean of the first ``shift_samples`` errors. The rows are summed as the windows and cells
+    are (``_grouped_span``: reassociated, so the loop over a block vectorises), and agree with
+    the numpy pass's to rounding.
 
-    One loop over the samples in the common case: the rows are summed unscaled, and the sum
-    of squares tells whether the peak can ask for a scale (peak² ≤ Σx² ≤ n·peak²); only then
-    is the peak found and, if it asks, the rows summed again of scaled copies. ρ comes from
-    the same spans' sums of the shifted errors unless their mean dwarfs their spread, when a
+    One loop over the samples in the common case: the sum of squares tells whether the peak
+    can ask for a scale (peak² ≤ Σx² ≤ n·peak²); only then is the peak found. ρ comes from the
+    same spans' sums of the shifted errors unless their mean dwarfs their spread, when a
     second loop centres them first.
     """
     n = r.shape[0]
-    scale = 1.0
     shift = _head_shift(r, s, 1.0, shift_samples)
-    out[:] = 0.0
-    lagged = _fine_rows(r, s, fine, shift, out)
+    _clear(out)
+    lagged = _fine_rows(r, s, fine, starts, stops, run_group, shift, out)
     power = _column_total(out, 6) + _column_total(out, 7)
     if not SQUARES_LOW * max(n, 1) < power < SQUARES_HIGH:
         peak = _peak_magnitude(r, s)
         if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
-            scale = math.ldexp(1.0, min(-math.frexp(peak)[1], 1000))
-            shift = _head_shift(r, s, scale, shift_samples)
-            out[:] = 0.0
-            lagged = _fine_rows(r * scale, s * scale, fine, shift, out)
+            return math.ldexp(1.0, min(-math.frexp(peak)[1], 1000)), 0.0, 0.0
     if n < 3:
-        return scale, shift, 0.0
+        return 1.0, shift, 0.0
     total = _column_total(out, 1)
     total_sq = _column_total(out, 2)
     offset = total / n
     mean = shift + offset
     if offset * total > 0.5 * total_sq:
         # The mean error dwarfs the spread: the one-loop sums would cancel.
-        return scale, shift, _lag1_correlation(r, s, scale, mean)
+        return 1.0, shift, _lag1_correlation(r, s, 1.0, mean)
     # Centred on the mean instead of the shift: Σ(d−δ)² and Σ(d_j−δ)(d_(j−1)−δ), δ = Σd / n.
-    d_first = r[0] * scale - s[0] * scale - shift
-    d_last = r[n - 1] * scale - s[n - 1] * scale - shift
+    d_first = r[0] - s[0] - shift
+    d_last = r[n - 1] - s[n - 1] - shift
     spread = total_sq - offset * total
     centred_lagged = lagged - offset * (2.0 * total - d_first - d_last) + (n - 1) * offset * offset
     if spread > 0.0 and math.isfinite(spread):
-        return scale, shift, centred_lagged / spread
-    return scale, shift, 0.0
+        return 1.0, shift, centred_lagged / spread
+    return 1.0, shift, 0.0
 
 
 # -- data-quality scan ------------------------------------------------------------------------

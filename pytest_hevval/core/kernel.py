@@ -828,14 +828,31 @@ def fine_block_sums(
 ) -> tuple[float, float, float]:
     """One signal's sums over runs of ``fine`` samples into ``out`` (rows, 10), and its
     (scale, shift, ρ), in one compiled call (see ``_fused.fine_block_sums``)."""
+    blocks = _fine_runs(int(np.shape(ref)[0]), int(fine))
     scale, shift, rho = module.fine_block_sums(
-        _read_only(ref),
-        _read_only(sim),
-        int(fine),
-        int(shift_samples),
-        out,
+        _read_only(ref), _read_only(sim), int(fine), *blocks, int(shift_samples), out
     )
+    if scale != 1.0:
+        # Values beyond 2^±400: the sums are of copies scaled by a power of two (exactly the
+        # products a scaled loop would form), through the same compiled signature.
+        _, shift, rho = module.fine_block_sums(
+            _read_only(np.multiply(ref, scale, dtype=np.float64)),
+            _read_only(np.multiply(sim, scale, dtype=np.float64)),
+            int(fine),
+            *blocks,
+            int(shift_samples),
+            out,
+        )
     return float(scale), float(shift), float(rho)
+
+
+@functools.lru_cache(maxsize=4)
+def _fine_runs(n: int, fine: int) -> tuple[npt.NDArray[np.int64], ...]:
+    """The fine blocks of a record of ``n`` samples as runs (starts, stops, groups), read-only
+    as ``_run_arrays`` gives the windows': shared by every signal of the record."""
+    starts = np.arange(0, n, max(1, fine), dtype=np.int64)
+    stops = np.minimum(starts + fine, n)
+    return tuple(_read_only(a, np.int64) for a in (starts, stops, np.arange(starts.shape[0])))
 
 
 def dtw_path(
