@@ -501,8 +501,8 @@ def _peak_magnitude(r, s):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, fastmath=_FAST)
-def _lag1_correlation(r, s, scale, mean):  # type: ignore[no-untyped-def]
-    """Lag-1 autocorrelation of the error (r − s)·scale centred on ``mean``; 0 if constant.
+def _lag1_correlation(r, s, mean):  # type: ignore[no-untyped-def]
+    """Lag-1 autocorrelation of the error r − s centred on ``mean``; 0 if constant.
 
     Reassociated so the sums vectorise: ρ only sets a block length, and a rounding-level
     difference from ``uncertainty.lag1_autocorrelation`` cannot move it but at a boundary.
@@ -510,14 +510,14 @@ def _lag1_correlation(r, s, scale, mean):  # type: ignore[no-untyped-def]
     n = r.shape[0]
     if n < 3:
         return 0.0
-    first = r[0] * scale - s[0] * scale
+    first = r[0] - s[0]
     power = 0.0
     lagged = 0.0
     varies = False
     for j in range(1, n):
-        e = r[j] * scale - s[j] * scale
+        e = r[j] - s[j]
         centred = e - mean
-        before = r[j - 1] * scale - s[j - 1] * scale - mean
+        before = r[j - 1] - s[j - 1] - mean
         power += centred * centred
         lagged += centred * before
         varies |= e != first
@@ -597,12 +597,12 @@ def _column_total(out, column):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True, inline="always")
-def _head_shift(r, s, scale, shift_samples):  # type: ignore[no-untyped-def]
-    """The mean of the first ``shift_samples`` errors, at ``scale``."""
+def _head_shift(r, s, shift_samples):  # type: ignore[no-untyped-def]
+    """The mean of the first ``shift_samples`` errors."""
     head = min(shift_samples, r.shape[0])
     total = 0.0
     for j in range(head):
-        total += r[j] * scale - s[j] * scale
+        total += r[j] - s[j]
     return total / head if head else 0.0
 
 
@@ -625,7 +625,7 @@ def fine_block_sums(r, s, fine, starts, stops, run_group, shift_samples, out):  
     second loop centres them first.
     """
     n = r.shape[0]
-    shift = _head_shift(r, s, 1.0, shift_samples)
+    shift = _head_shift(r, s, shift_samples)
     _clear(out)
     lagged = _fine_rows(r, s, fine, starts, stops, run_group, shift, out)
     power = _column_total(out, 6) + _column_total(out, 7)
@@ -641,7 +641,7 @@ def fine_block_sums(r, s, fine, starts, stops, run_group, shift_samples, out):  
     mean = shift + offset
     if offset * total > 0.5 * total_sq:
         # The mean error dwarfs the spread: the one-loop sums would cancel.
-        return 1.0, shift, _lag1_correlation(r, s, 1.0, mean)
+        return 1.0, shift, _lag1_correlation(r, s, mean)
     # Centred on the mean instead of the shift: Σ(d−δ)² and Σ(d_j−δ)(d_(j−1)−δ), δ = Σd / n.
     d_first = r[0] - s[0] - shift
     d_last = r[n - 1] - s[n - 1] - shift

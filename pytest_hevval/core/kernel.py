@@ -850,9 +850,7 @@ def fine_block_sums(
 def _fine_runs(n: int, fine: int) -> tuple[npt.NDArray[np.int64], ...]:
     """The fine blocks of a record of ``n`` samples as runs (starts, stops, groups), read-only
     as ``_run_arrays`` gives the windows': shared by every signal of the record."""
-    starts = np.arange(0, n, max(1, fine), dtype=np.int64)
-    stops = np.minimum(starts + fine, n)
-    return tuple(_read_only(a, np.int64) for a in (starts, stops, np.arange(starts.shape[0])))
+    return _run_arrays(_runs(n, max(1, fine)))
 
 
 def dtw_path(
