@@ -27,15 +27,16 @@ from _env import timed_run, user_environment
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _run(python: str, project: Path, cache: Path, history: Path) -> float:
+def _run(python: str, project: Path, cache: Path, history: Path) -> tuple[float, float]:
+    """The run's wall and CPU seconds (its own process: the background compile is detached)."""
     env = user_environment(NUMBA_CACHE_DIR=str(cache))
     env.pop("HEVVAL_KERNEL", None)
     command = [python, "-m", "pytest", "--hevval", "-q", "-p", "no:cacheprovider"]
     command += [f"--hevval-history-dir={history}"]
-    seconds, _, done = timed_run(command, project, env)
+    seconds, cpu, done = timed_run(command, project, env)
     if done.returncode not in (0, 1):
         raise SystemExit(f"the example failed to run ({done.returncode}):\n{done.stdout[-2000:]}")
-    return seconds
+    return seconds, cpu
 
 
 def _wait_for_compile(cache: Path, limit_s: float = 120.0) -> None:
@@ -72,17 +73,24 @@ def main() -> None:
         first: list[float] = []
         second: list[float] = []
         third: list[float] = []
+        cpu: dict[str, list[float]] = {"first": [], "second": [], "third": []}
         for index in range(args.rounds):
             cache = work / f"numba-{index}"
             history = work / f"history-{index}"
-            first.append(_run(python, project, cache, history / "1"))
-            second.append(_run(python, project, cache, history / "2"))
+            for name, times in (("first", first), ("second", second)):
+                wall, used = _run(python, project, cache, history / name)
+                times.append(wall)
+                cpu[name].append(used)
             if args.third:
                 _wait_for_compile(cache)
-                third.append(_run(python, project, cache, history / "3"))
+                wall, used = _run(python, project, cache, history / "third")
+                third.append(wall)
+                cpu["third"].append(used)
             line = f"round {index + 1}: first {first[-1]:.2f} s, second {second[-1]:.2f} s"
             if third:
                 line += f", third (compiled) {third[-1]:.2f} s"
+            line += " (CPU " + ", ".join(f"{times[-1]:.2f}" for times in cpu.values() if times)
+            line += " s)"
             print(line, f"(first/second {first[-1] / second[-1]:.2f}×)", flush=True)
             _wait_for_compile(cache)
         ratios = [a / b for a, b in zip(first, second, strict=True)]

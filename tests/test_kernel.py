@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import math
 import os
 import subprocess
@@ -305,6 +306,11 @@ def test_hevval_kernel_compile_fills_an_empty_cache_for_every_record(tmp_path: P
     assert "(cache warm) once a run's work pays for loading it" in done.stdout
     assert "(every function)" in done.stdout
     cached = sorted(p.name for p in (tmp_path / "numba").rglob("*.nbc"))
+    # One entry per function, helpers included: a callee passed a literal (k = 0, a kind, a
+    # column) would compile once per value, each a fraction of a second of a first run.
+    entries = collections.Counter(name.split("-")[0] for name in cached)
+    assert entries
+    assert set(entries.values()) == {1}, entries
     script = (
         "import numpy as np, pyarrow as pa, pyarrow.parquet as pq\n"
         "from pytest_hevval.core import kernel\n"

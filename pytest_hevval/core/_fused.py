@@ -5,6 +5,11 @@ holding the GIL; the caller runs contiguous ranges on its threads and combines t
 chunk order, so a result depends on the chunk size but not on the thread count. Every
 function is called with one set of argument types (C-contiguous float64 arrays, float64
 scalars, int64 counts), so each compiles once and its cache holds one entry.
+
+Literals: numba compiles a callee once per literal argument it is passed from compiled code
+(``k = 0`` before a loop, a kind 0–3, a column number), each compile a tenth to a whole second
+of a fresh install's first run. Counts and indices passed on are therefore wrapped in
+``np.int64`` where they start as literals.
 """
 
 from __future__ import annotations
@@ -479,7 +484,7 @@ def grouped_sums(r, s, starts, stops, run_group, shift, chunk, sums):  # type: i
     """Adds every group's ``core.local.SUM_COLUMNS`` to its row of ``sums``, chunk by chunk
     as the main pass does (see ``_grouped_span``)."""
     n = r.shape[0]
-    k = 0
+    k = np.int64(0)  # not a literal 0 (see the module docstring)
     for start in range(0, n, chunk):
         stop = min(start + chunk, n)
         k = _grouped_span(r, s, start, stop, shift, starts, stops, run_group, k, sums)
@@ -570,7 +575,7 @@ def _fine_rows(r, s, fine, starts, stops, run_group, shift, out):  # type: ignor
     span = max(1, _FINE_SPAN // fine) * fine
     errors = np.empty(span + 1, dtype=np.float64)
     lagged = 0.0
-    k = 0
+    k = np.int64(0)  # not a literal 0 (see the module docstring)
     for lo in range(0, n, span):
         hi = min(lo + span, n)
         k = _grouped_span(r, s, lo, hi, shift, starts, stops, run_group, k, out)
@@ -589,11 +594,14 @@ def _clear(out):  # type: ignore[no-untyped-def]
 
 
 @numba.njit(cache=True)
-def _column_total(out, column):  # type: ignore[no-untyped-def]
-    total = 0.0
+def _error_totals(out):  # type: ignore[no-untyped-def]
+    """Σ d, Σ d² and Σ r² + Σ s² over the rows of ``fine_block_sums``."""
+    total = total_sq = power = 0.0
     for row in range(out.shape[0]):
-        total += out[row, column]
-    return total
+        total += out[row, 1]
+        total_sq += out[row, 2]
+        power += out[row, 6] + out[row, 7]
+    return total, total_sq, power
 
 
 @numba.njit(cache=True, inline="always")
@@ -628,15 +636,13 @@ def fine_block_sums(r, s, fine, starts, stops, run_group, shift_samples, out):  
     shift = _head_shift(r, s, shift_samples)
     _clear(out)
     lagged = _fine_rows(r, s, fine, starts, stops, run_group, shift, out)
-    power = _column_total(out, 6) + _column_total(out, 7)
+    total, total_sq, power = _error_totals(out)
     if not SQUARES_LOW * max(n, 1) < power < SQUARES_HIGH:
         peak = _peak_magnitude(r, s)
         if math.isfinite(peak) and (peak > _TOO_BIG or 0.0 < peak < _TOO_SMALL):
             return math.ldexp(1.0, min(-math.frexp(peak)[1], 1000)), 0.0, 0.0
     if n < 3:
         return 1.0, shift, 0.0
-    total = _column_total(out, 1)
-    total_sq = _column_total(out, 2)
     offset = total / n
     mean = shift + offset
     if offset * total > 0.5 * total_sq:
@@ -745,13 +751,17 @@ def _kind_runs(kind, v, m, widen, limit, value, time, seconds, out, count, edges
             edges[flips] = i
             flips += now != was
             was = now
-        count = _kept_pairs(kind, edges, flips, widen, time, seconds, out, count)
+        count = _kept_pairs(
+            np.int64(kind), edges, flips, np.int64(widen), time, seconds, out, np.int64(count)
+        )  # not literals (see the module docstring)
         if flips % 2:  # a run goes on into the next block
             edges[0] = edges[flips - 1]
         inside = was
     if inside:
         edges[1] = m
-        count = _kept_pairs(kind, edges, 2, widen, time, seconds, out, count)
+        count = _kept_pairs(
+            np.int64(kind), edges, np.int64(2), np.int64(widen), time, seconds, out, np.int64(count)
+        )
     return count
 
 
