@@ -94,8 +94,8 @@ OPTIONS: tuple[Option, ...] = (
     Option(
         "workers",
         "string",
-        "threads per spec for scoring signals (default 2; on an xdist worker, its share of "
-        "the cores)",
+        "threads per spec for scoring and diagnosing signals (default 2; on an xdist worker, "
+        "its share of the cores)",
         None,
     ),
     Option(

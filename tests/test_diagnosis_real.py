@@ -32,7 +32,9 @@ import json, re, sys
 from pathlib import Path
 import numpy as np
 from pytest_hevval.core.diagnosis import diagnose_residual
-from pytest_hevval.scoring.diagnosis import candidates_for, diagnose_signal
+from pytest_hevval.scoring.diagnosis import (
+    candidates_for, diagnose_failures, diagnose_origin, diagnose_signal,
+)
 from pytest_hevval.report.diagnosis import payload, summary
 from pytest_hevval.results.codec import plain_json
 from dataclasses import asdict
@@ -92,7 +94,19 @@ out["heater"] = {**plain_json(asdict(lacking)), "summary": summary(lacking)}
 out["heater_mean_kw"] = float(np.mean(load))
 
 v1 = "specs/i3-B03-winter-v1.hevval.yaml"
-out["minor"] = payload(diagnose_signal(evaluate(v1), POWER))
+v1_evaluation = evaluate(v1)
+out["minor"] = payload(diagnose_signal(v1_evaluation, POWER))
+# Every signal of the spec diagnosed on one thread and on two.
+side_by_side = [
+    {target: payload(found) for target, found in diagnose_failures(
+        v1_evaluation, "all", workers=workers).items()}
+    for workers in (1, 2)
+]
+out["threads"] = {
+    "serial": side_by_side[0],
+    "threaded": side_by_side[1],
+    "each": {target: payload(diagnose_origin(v1_evaluation, target)) for target in side_by_side[0]},
+}
 out["minor_all"] = payload(diagnose_signal(evaluate(v1, diagnosis={"min_share": 0.0}), POWER))
 print(json.dumps(out))
 """
@@ -197,3 +211,15 @@ def test_the_diagnosis_says_where_the_residual_concentrates(cases: dict[str, Any
     assert where["error_share"] > where["time_share"]
     first = next(e for e in found["effects"] if e["relevant"])
     assert 0.0 < first["hot_share"] <= 1.0
+
+
+def test_signals_diagnosed_side_by_side_are_diagnosed_as_one_at_a_time(
+    cases: dict[str, Any],
+) -> None:
+    serial, threaded = cases["threads"]["serial"], cases["threads"]["threaded"]
+    assert len(serial) >= 3
+    assert list(threaded) == list(serial)
+    assert threaded == serial
+    # Each signal diagnosed once for the spec gives what asking about each target alone gives.
+    assert serial == cases["threads"]["each"]
+    assert any(found["summary"].startswith("(in ") for found in serial.values())

@@ -27,7 +27,7 @@ from ..data.record import Record
 from ..errors import DataError, HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 from ..results.spec_result import SignalResult
-from .engine import Evaluation
+from .engine import Evaluation, per_item, scoring_threads
 
 __all__ = [
     "DIAGNOSE_MODES",
@@ -251,17 +251,34 @@ def diagnose_origin(evaluation: Evaluation, path: str) -> SignalDiagnosis:
     with the larger share is returned, else the one with the stronger significant finding,
     with ``asked`` naming the signal asked about.
     """
-    found = replace(diagnose_signal(evaluation, path), asked=path)
+    looked_at = [diagnose_signal(evaluation, signal) for signal in _looked_at(evaluation, path)]
+    return _chosen(path, *looked_at)
+
+
+def _looked_at(evaluation: Evaluation, path: str) -> tuple[str, ...]:
+    """The signals :func:`diagnose_origin` diagnoses for ``path``: itself, then its weakest
+    child when it has children."""
     result = evaluation.result
-    node = result.signal(path)
-    if node.children:
-        weakest = min(
-            (result.signal(child) for child in node.children),
-            key=lambda s: sum(s.lambdas[name] for name in FUSED_CHARACTERISTICS),
-        )
-        below = diagnose_signal(evaluation, weakest.path)
-        if _strongest_finding(below.diagnosis) > _strongest_finding(found.diagnosis):
-            return replace(below, asked=path)
+    node = next((s for s in result.signals if s.path == path), None)
+    if node is None or not node.children:
+        return (path,)  # an unknown path: diagnose_signal says which paths there are
+    weakest = min(
+        (result.signal(child) for child in node.children),
+        key=lambda s: sum(s.lambdas[name] for name in FUSED_CHARACTERISTICS),
+    )
+    return (path, weakest.path)
+
+
+def _chosen(
+    path: str, found: SignalDiagnosis, below: SignalDiagnosis | None = None
+) -> SignalDiagnosis:
+    """Of the diagnoses of ``path`` and of its weakest child, the one :func:`diagnose_origin`
+    returns."""
+    found = replace(found, asked=path)
+    if below is not None and _strongest_finding(below.diagnosis) > _strongest_finding(
+        found.diagnosis
+    ):
+        return replace(below, asked=path)
     return found
 
 
@@ -275,22 +292,47 @@ def diagnosis_target(signal: SignalResult) -> str:
 
 
 def diagnose_failures(
-    evaluation: Evaluation, mode: str = "failed"
+    evaluation: Evaluation, mode: str = "failed", workers: int | None = None
 ) -> dict[str, SignalDiagnosis | HevvalError]:
     """The diagnosis of every failing signal (every signal for ``mode="all"``), once per
     signal where an error appears, keyed by that signal's path; a signal that cannot be
-    diagnosed keeps the error that says why."""
-    found: dict[str, SignalDiagnosis | HevvalError] = {}
+    diagnosed keeps the error that says why.
+
+    The signals (each target and, where it has children, its weakest child: see
+    :func:`diagnose_origin`) are diagnosed side by side on the spec's scoring threads
+    (``workers``, as the engine counts them), each once: a diagnosis is independent of the
+    others, and most of its time is spent in numpy and LAPACK calls that release the GIL.
+    """
     if mode == "off" or evaluation.aligned is None:
-        return found
-    for signal in evaluation.result.signals:
-        if mode == "failed" and signal.passed:
-            continue
-        target = diagnosis_target(signal)
-        if target in found:
-            continue
+        return {}
+    targets = list(
+        dict.fromkeys(
+            diagnosis_target(signal)
+            for signal in evaluation.result.signals
+            if mode != "failed" or not signal.passed
+        )
+    )
+    looked_at = {target: _looked_at(evaluation, target) for target in targets}
+    # Each signal once, though it be one target's weakest child and another target itself.
+    signals = list(dict.fromkeys(s for paths in looked_at.values() for s in paths))
+    if len(signals) > 1:
+        _full_reference(evaluation)  # read once, before the threads ask for it
+
+    def one(signal: str) -> SignalDiagnosis | HevvalError:
         try:
-            found[target] = diagnose_origin(evaluation, target)
+            return diagnose_signal(evaluation, signal)
         except HevvalError as exc:
-            found[target] = exc
+            return exc
+
+    diagnosed = dict(zip(signals, per_item(one, signals, scoring_threads(workers)), strict=True))
+    found: dict[str, SignalDiagnosis | HevvalError] = {}
+    for target, paths in looked_at.items():
+        results = [diagnosed[p] for p in paths]
+        done = [r for r in results if isinstance(r, SignalDiagnosis)]
+        # A target whose own or weakest child's diagnosis fails keeps the first error.
+        found[target] = (
+            _chosen(target, *done)
+            if len(done) == len(results)
+            else next(r for r in results if isinstance(r, HevvalError))
+        )
     return found

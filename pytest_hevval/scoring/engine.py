@@ -542,16 +542,16 @@ def _align(
     alignment = spec.alignment
     # On the scoring threads: the channels' values are examined side by side.
     findings = assess(
-        reference, sorted(ref_columns), spec.data_quality, threads=_scoring_threads(workers)
+        reference, sorted(ref_columns), spec.data_quality, threads=scoring_threads(workers)
     )
     if spec.data_quality.action == "error":
         fail_on(findings, reference.source)
     # Whether each model column is finite, found side by side before the alignment asks column
     # by column (the checks above found the reference's).
-    _per_signal(
+    per_item(
         lambda channel: channel.finite,
         [model_record.channels[n] for n in sorted(model_columns) if n in model_record.channels],
-        _scoring_threads(workers),
+        scoring_threads(workers),
     )
     aligned = align_records(
         reference,
@@ -625,7 +625,7 @@ def _block_sums(
     if not values:
         return {}
     signatures = list(values)
-    threads = max(1, min(_scoring_threads(workers), len(signatures)))
+    threads = max(1, min(scoring_threads(workers), len(signatures)))
     size = -(-len(signatures) // threads)
     shares = [signatures[i : i + size] for i in range(0, len(signatures), size)]
 
@@ -633,7 +633,7 @@ def _block_sums(
         found = block_sums_many([values[signature] for signature in share])
         return list(zip(share, found, strict=True))
 
-    return dict(pair for share in _per_signal(sums, shares, threads) for pair in share)
+    return dict(pair for share in per_item(sums, shares, threads) for pair in share)
 
 
 def _add_intervals(
@@ -736,13 +736,14 @@ def _signal_arrays(
     return unique, _SignalArrays(sides, aligned.grid.n_samples)
 
 
-def _scoring_threads(workers: int | None) -> int:
-    """Threads a spec's signals are scored on: as asked, else up to two."""
+def scoring_threads(workers: int | None) -> int:
+    """Threads a spec's signals are scored (and its failing signals diagnosed) on: as asked,
+    else up to two."""
     return workers if workers is not None else min(2, os.cpu_count() or 1)
 
 
-def _per_signal(score: Callable[[T], R], items: list[T], threads: int) -> list[R]:
-    """``score`` of every item, on ``threads`` threads when there is more than one item.
+def per_item(score: Callable[[T], R], items: list[T], threads: int) -> list[R]:
+    """``score`` of every item in order, on ``threads`` threads when there is more than one.
 
     numpy's loops and the compiled kernel release the GIL, so signals score side by side.
     """
@@ -791,7 +792,7 @@ def _fused_characteristics(
     the figures (with ``figures_of``, the grid they are drawn on) and a campaign recording's u
     distributions. Nothing else reads the signals' arrays unless asked, so a column put on the
     grid here (``_SignalArrays``) goes into a buffer the thread keeps for its next signal."""
-    n_workers = _scoring_threads(workers)
+    n_workers = scoring_threads(workers)
     metrics = [c for c in spec.characteristics() if c.compute is not None and c.standard]
     if metrics:
         # Only then: the standard metrics' package imports scipy.signal, a tenth of a second.
@@ -840,7 +841,7 @@ def _fused_characteristics(
         return None
 
     # Each thread writes its own signals' entries; the errors are raised in signal order.
-    for error in _per_signal(score, list(unique.items()), n_workers):
+    for error in per_item(score, list(unique.items()), n_workers):
         if error is not None:
             raise error
     found.characteristics = {s: found.characteristics[s] for s in unique}

@@ -101,7 +101,7 @@ def _finish(outcome: Outcome, options: RunOptions) -> None:
         return
     _relative_result(outcome.result, options.rootdir)
     if options.diagnose != "off":
-        outcome.diagnoses = diagnose_failures(outcome, options.diagnose)
+        outcome.diagnoses = diagnose_failures(outcome, options.diagnose, options.workers)
     if not options.keep_arrays:
         outcome.arrays = {}
         outcome.aligned = None
