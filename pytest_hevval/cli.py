@@ -208,7 +208,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .errors import SpecError
     from .report.diagnosis import describe, payload
-    from .scoring.diagnosis import diagnose_signal
+    from .scoring.diagnosis import candidates_for, diagnose_signal
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
 
@@ -227,9 +227,8 @@ def _diagnose(args: argparse.Namespace) -> int:
     paths = args.signal or [s.path for s in evaluation.result.signals if s.origin]
     if not paths:
         print(f"{spec.name}: every signal passes; pass --signal PATH to diagnose one anyway")
-    findings = [
-        payload(diagnose_signal(evaluation, p, channels=not args.no_channels)) for p in paths
-    ]
+    candidates = candidates_for(evaluation, channels=not args.no_channels) if paths else []
+    findings = [payload(diagnose_signal(evaluation, p, candidates=candidates)) for p in paths]
     for found in findings:
         for line in describe(found):
             print(line)

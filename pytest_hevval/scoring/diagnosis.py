@@ -174,8 +174,16 @@ def diagnose_pair(
     )
 
 
-def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True) -> SignalDiagnosis:
-    """The full diagnosis of one signal (see docs/diagnosis.md)."""
+def diagnose_signal(
+    evaluation: Evaluation,
+    path: str,
+    *,
+    channels: bool = True,
+    candidates: Sequence[Candidate] | None = None,
+) -> SignalDiagnosis:
+    """The full diagnosis of one signal (see docs/diagnosis.md); ``candidates`` are
+    ``candidates_for(evaluation, channels=channels)`` when given (the same for every signal of
+    a spec, so a caller diagnosing several signals finds them once)."""
     if evaluation.aligned is None or path not in evaluation.arrays:
         known = ", ".join(repr(p) for p in evaluation.arrays) or "none kept"
         raise DataError(
@@ -189,7 +197,7 @@ def diagnose_signal(evaluation: Evaluation, path: str, *, channels: bool = True)
         evaluation,
         reference,
         simulated,
-        candidates_for(evaluation, channels=channels),
+        candidates_for(evaluation, channels=channels) if candidates is None else candidates,
         result.unit,
     )
     by_path = {s.path: s for s in evaluation.result.signals}
@@ -251,8 +259,9 @@ def diagnose_origin(evaluation: Evaluation, path: str) -> SignalDiagnosis:
     with the larger share is returned, else the one with the stronger significant finding,
     with ``asked`` naming the signal asked about.
     """
-    looked_at = [diagnose_signal(evaluation, signal) for signal in _looked_at(evaluation, path)]
-    return _chosen(path, *looked_at)
+    signals = _looked_at(evaluation, path)
+    candidates = candidates_for(evaluation) if len(signals) > 1 else None
+    return _chosen(path, *[diagnose_signal(evaluation, s, candidates=candidates) for s in signals])
 
 
 def _looked_at(evaluation: Evaluation, path: str) -> tuple[str, ...]:
@@ -315,12 +324,16 @@ def diagnose_failures(
     looked_at = {target: _looked_at(evaluation, target) for target in targets}
     # Each signal once, though it be one target's weakest child and another target itself.
     signals = list(dict.fromkeys(s for paths in looked_at.values() for s in paths))
+    # The candidates (and the full reference file they come from) once for every signal; if
+    # they cannot be found, each signal's diagnosis says why.
+    candidates = None
     if len(signals) > 1:
-        _full_reference(evaluation)  # read once, before the threads ask for it
+        with contextlib.suppress(HevvalError):
+            candidates = candidates_for(evaluation)
 
     def one(signal: str) -> SignalDiagnosis | HevvalError:
         try:
-            return diagnose_signal(evaluation, signal)
+            return diagnose_signal(evaluation, signal, candidates=candidates)
         except HevvalError as exc:
             return exc
 
