@@ -61,7 +61,7 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 def _run(args: argparse.Namespace) -> int:
     from . import __version__
-    from .core.kernel import compile_note, prepare
+    from .core.kernel import compile_note, finish_run
     from .data.remote import relative_to
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
@@ -72,7 +72,6 @@ def _run(args: argparse.Namespace) -> int:
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
 
-    prepare()
     rootdir = project_root(args.specs)
     publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
@@ -148,6 +147,7 @@ def _run(args: argparse.Namespace) -> int:
     )
     for line in published.annotations:
         print(line)
+    finish_run()
     kernel_note = compile_note()
     for note in [*notes, *published.notes, *([kernel_note] if kernel_note else [])]:
         print(note)

@@ -12,6 +12,7 @@ import types
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 
@@ -408,22 +409,91 @@ def test_a_loaded_kernel_serves_short_records_at_once(
     assert kernel.kernel_for(10) is None  # a function not cached would compile mid-run
 
 
-def test_a_cold_cache_starts_one_background_compile_and_the_run_goes_on(
+def test_a_cold_cache_is_compiled_in_the_background_when_the_run_ends(
     monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]], tmp_path: Path
 ) -> None:
+    """A run that would gain goes on on numpy without a compile beside it (which would share
+    its cores) and starts one compile as it ends, for the next runs."""
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
     cells = int(kernel.KERNEL_LOAD_S / kernel.NUMPY_EXTRA_S["dtw_path"]) + 1
     assert kernel.compile_note() is None
     assert kernel.kernel_for(cells, ("dtw_path",)) is None
     assert kernel.kernel_for(cells, ("dtw_path",)) is None
+    assert fresh_choice == []
+    kernel.finish_run()
+    kernel.finish_run()
     assert len(fresh_choice) == 1
     command = fresh_choice[0]
     marker = tmp_path / "cache" / ".hevval-compiling"
     assert command[0] == sys.executable
     assert command[3] == str(marker)
-    assert command[4:] == ["dtw_path", *(n for n in kernel.COMPILED if n != "dtw_path")]
+    assert command[4:] == [
+        *kernel.FIRST_COMPILED,
+        *(n for n in kernel.COMPILED if n not in kernel.FIRST_COMPILED),
+    ]
     assert marker.is_file()
     assert "compiled in the background" in (kernel.compile_note() or "")
+
+
+def test_a_process_that_lost_more_than_a_compile_to_numpy_compiles_at_once(
+    monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]]
+) -> None:
+    """A long campaign or a cluster worker: what it needs now first."""
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
+    cells = kernel.KERNEL_MIN_SAMPLES - 1  # each call on numpy by its size
+    calls = math.ceil(kernel.KERNEL_COMPILE_S / (cells * kernel.NUMPY_EXTRA_S["dtw_path"]))
+    for _ in range(calls - 1):
+        assert kernel.kernel_for(cells, ("dtw_path",)) is None
+    assert fresh_choice == []
+    assert kernel.kernel_for(cells, ("dtw_path",)) is None
+    assert len(fresh_choice) == 1
+    assert fresh_choice[0][4:] == ["dtw_path", *(n for n in kernel.COMPILED if n != "dtw_path")]
+
+
+def test_a_spec_long_enough_to_pay_alone_starts_the_compile_before_it_is_scored(
+    monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]]
+) -> None:
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
+    paying = math.ceil(kernel.KERNEL_LOAD_S / kernel.NUMPY_EXTRA_S["main_pass"])
+    kernel.expect(paying - 1)
+    assert fresh_choice == []
+    kernel.expect(paying)
+    assert len(fresh_choice) == 1
+    assert fresh_choice[0][4 : 4 + len(kernel.FIRST_COMPILED)] == list(kernel.FIRST_COMPILED)
+
+
+def test_the_engine_announces_each_spec_as_its_signals_times_its_samples(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    from pytest_hevval.scoring import engine
+    from pytest_hevval.spec.load import load_specs
+
+    announced: list[int] = []
+    monkeypatch.setattr(kernel, "expect", announced.append)
+    t = np.arange(1000) * 0.1
+    pd.DataFrame({"t": t, "a": np.sin(t), "b": np.cos(t)}).to_csv(tmp_path / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "a": np.sin(t), "b": np.cos(t)}).to_csv(tmp_path / "sim.csv", index=False)
+    (tmp_path / "s.hevval.yaml").write_text(
+        "name: s\nreference: {path: ref.csv, time: t}\nmodel: {path: sim.csv, time: t}\n"
+        "sets:\n  - {signal: A, ref: a, sim: a, children: [{signal: B, ref: b, sim: b}]}\n"
+    )
+    (spec,) = load_specs(tmp_path / "s.hevval.yaml")
+    engine.evaluate_spec(spec, intervals=False)
+    assert announced == [2 * 1000]
+
+
+def test_the_note_names_a_compile_another_process_of_the_run_started(
+    monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]], tmp_path: Path
+) -> None:
+    """Under pytest-xdist the workers score and compile; the controller writes the summary."""
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
+    marker = tmp_path / "cache" / ".hevval-compiling"
+    marker.parent.mkdir()
+    assert kernel.compile_note() is None
+    marker.touch()
+    assert "compiled in the background" in (kernel.compile_note() or "")
+    monkeypatch.setattr(kernel, "cache_warm", lambda names=(): True)
+    assert kernel.compile_note() is None  # it ended: nothing to say
 
 
 def test_a_compile_under_way_elsewhere_is_not_started_again(
@@ -441,23 +511,26 @@ def test_a_compile_under_way_elsewhere_is_not_started_again(
 
 
 @needs_kernel
-def test_a_run_starts_the_compile_at_once_unless_told_not_to(
+def test_a_run_ends_by_compiling_only_what_it_would_have_used(
     monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]]
 ) -> None:
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
+    kernel.finish_run()
+    assert fresh_choice == []  # a short run, which a warm kernel would not serve either
+    monkeypatch.setattr(kernel, "_would_save", [kernel.KERNEL_LOAD_S])
     monkeypatch.setenv(kernel.BACKGROUND_COMPILE_ENV, "0")
-    kernel.prepare()
+    kernel.finish_run()
     assert fresh_choice == []
     monkeypatch.delenv(kernel.BACKGROUND_COMPILE_ENV)
     monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
-    kernel.prepare()
+    kernel.finish_run()
     assert fresh_choice == []
     monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
-    kernel.prepare()
+    kernel.finish_run()
     assert len(fresh_choice) == 1
     monkeypatch.setattr(kernel, "_background", {})
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): True)
-    kernel.prepare()
+    kernel.finish_run()
     assert len(fresh_choice) == 1
 
 

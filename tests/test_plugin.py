@@ -13,6 +13,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from tests.conftest import needs_kernel
+
 pytest_plugins = ["pytester"]
 
 TREE_SPEC = """\
@@ -94,43 +96,74 @@ def test_passing_spec(project: pytest.Pytester) -> None:
     )
 
 
+# Loaded by every process of the run, the xdist workers too: the kernel's numpy time made large
+# enough for this small project to gain from the kernel (but not to compile mid-run), and a
+# stand-in for the compile's
+# process that leaves a line in a file instead.
+_GAINING_RUN_CONFTEST = """
+import os
+
+from pytest_hevval.core import kernel
+
+_saved = {}
+
+
+def pytest_configure(config):
+    _saved.update(
+        extra=dict(kernel.NUMPY_EXTRA_S), launch=kernel._launch, compile=kernel.KERNEL_COMPILE_S
+    )
+    kernel.KERNEL_COMPILE_S = float("inf")  # never at once: as the run ends
+    kernel.NUMPY_EXTRA_S.update(dict.fromkeys(kernel.NUMPY_EXTRA_S, float(os.environ["EXTRA_S"])))
+
+    def launch(command, **_):
+        with open(os.environ["STARTED"], "a") as file:
+            file.write(" ".join(command[4:]) + "\\n")
+
+    kernel._launch = launch
+
+
+def pytest_unconfigure(config):
+    kernel.NUMPY_EXTRA_S.update(_saved["extra"])
+    kernel._launch = _saved["launch"]
+    kernel.KERNEL_COMPILE_S = _saved["compile"]
+"""
+
+
+@needs_kernel
 @pytest.mark.parametrize("workers", [[], ["-n", "2"]], ids=["serial", "xdist"])
-def test_a_cold_kernel_cache_is_compiled_in_the_background_and_said_once(
+def test_a_cold_kernel_cache_is_compiled_in_the_background_as_the_run_ends_and_said_once(
     project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch, tmp_path: Path, workers: list[str]
 ) -> None:
-    """The run starts one compile (its lock file keeps the xdist workers from starting more),
-    scores on, and says so once at the end; nothing is started or said on the numpy path."""
+    """A run that would gain from the kernel starts one compile as it ends (its lock file keeps
+    the xdist workers from starting more) and says so once; a run too short to gain, or on
+    the numpy path, starts and says nothing."""
     from pytest_hevval.core import kernel
 
-    started: list[list[str]] = []
-
-    class Process:
-        def __init__(self, command: list[str], **_: object) -> None:
-            started.append(command)
-
     write_data(project.path)
+    project.makeconftest(_GAINING_RUN_CONFTEST)
+    started = tmp_path / "started.txt"
     cache = tmp_path / "empty-cache"
+    monkeypatch.setenv("STARTED", str(started))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     monkeypatch.setenv("HEVVAL_KERNEL", "auto")
     monkeypatch.delenv(kernel.BACKGROUND_COMPILE_ENV)
-    monkeypatch.setattr(kernel, "_background", {})
-    monkeypatch.setattr(kernel, "_numba_installed", lambda: True)
-    monkeypatch.setattr(kernel, "_launch", Process)
     note = "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy"
-    result = project.runpytest("--hevval", "-q", *workers)
-    result.stdout.fnmatch_lines(["*hevval validation summary*", note + "*"])
-    assert result.stdout.str().count(note) == 1
-    result.assert_outcomes(passed=6)
-    assert len(started) == 1
-    assert list(cache.rglob(".hevval-compiling"))
-    for path, installed in (("numpy", True), ("auto", False)):
+    runs = (("auto", "1e-9", False), ("numpy", "1.0", False), ("auto", "1.0", True))
+    for path, extra_s, compiles in runs:
         monkeypatch.setattr(kernel, "_background", {})
+        monkeypatch.setattr(kernel, "_would_save", [0.0])
         monkeypatch.setenv("HEVVAL_KERNEL", path)
-        monkeypatch.setattr(kernel, "_numba_installed", lambda installed=installed: installed)
-        result = project.runpytest("--hevval")
-        result.stdout.no_fnmatch_line(note + "*")
+        monkeypatch.setenv("EXTRA_S", extra_s)
+        result = project.runpytest("--hevval", "-q", *workers)
         result.assert_outcomes(passed=6)
-    assert len(started) == 1
+        assert result.stdout.str().count(note) == int(compiles), (path, extra_s)
+        assert started.exists() == compiles
+    result.stdout.fnmatch_lines(["*hevval validation summary*", note + "*"])
+    assert started.read_text().split() == [
+        *kernel.FIRST_COMPILED,
+        *(n for n in kernel.COMPILED if n not in kernel.FIRST_COMPILED),
+    ]
+    assert list(cache.rglob(".hevval-compiling"))
 
 
 def test_ini_switch_and_custom_glob(pytester: pytest.Pytester) -> None:

@@ -14,10 +14,17 @@ pay by surprise. On the ``auto`` path a process takes the kernel once it pays: w
 time the kernel would have saved so far in this process (estimated per function from
 :data:`NUMPY_EXTRA_S`) reaches what loading it costs (:data:`KERNEL_LOAD_S`), so a short run
 stays on numpy and a long one switches early. If numba's on-disk cache does not hold the
-kernel yet, the first run that would pay starts one compile in a separate, low-priority process
-(:func:`start_background_compile`) and goes on on numpy; it takes the kernel as soon as that
-process has cached it, and every later run finds it warm. Records of at least
-:data:`KERNEL_MIN_SAMPLES` samples take the kernel at once, compiling it in the run if need be.
+kernel yet, a run that would pay goes on on numpy and, when it ends (:func:`finish_run`),
+starts one compile in a separate, low-priority process (:func:`start_background_compile`), so
+that every later run finds it warm. Compiling while the run scores would slow the run by more
+than the kernel gains it: the compile's CPU time (:data:`KERNEL_COMPILE_S`) is more than most
+runs would save, and it shares the run's cores. Two kinds of run compile at once instead,
+and take the kernel as soon as it is cached: one about to score a spec whose scoring alone
+would pay for loading the kernel (:func:`expect`, once the spec's reference is read; the
+largest of the example project's specs is short of it by a factor of 350), and a process that has
+already lost more to numpy than compiling costs (a long campaign, a cluster worker). Records
+of at least :data:`KERNEL_MIN_SAMPLES` samples take the kernel at once, compiling it in the run
+if need be.
 numba writes its cache next to this module (``__pycache__``) or under ``NUMBA_CACHE_DIR``; CI
 keeps it between runs by caching that folder, and ``hevval kernel --compile``
 (:func:`compile_all`) fills it at once.
@@ -64,9 +71,10 @@ __all__ = [
     "compile_all",
     "compile_note",
     "describe",
+    "expect",
+    "finish_run",
     "kernel_for",
     "load_or_raise",
-    "prepare",
     "squares_rule_out_scale",
     "start_background_compile",
 ]
@@ -84,6 +92,9 @@ KERNEL_MIN_SAMPLES = 1 << 26
 #: loading the cached code, most of it on the first function (0.52 s); measured 2026-11-26,
 #: docs/performance.md.
 KERNEL_LOAD_S = 0.75
+#: CPU seconds a compile of every function costs (12.5–16 s on 2026-11-27's machine,
+#: docs/performance.md): a process that has lost this much to numpy compiles during its run.
+KERNEL_COMPILE_S = 15.0
 #: Seconds the numpy path spends beyond the compiled loop, per sample (per band cell for the
 #: warping path), for each function; the callers' work is weighed by the first function they
 #: name. Measured on records of 10^4–10^6 samples (docs/performance.md), rounded down: the
@@ -369,8 +380,9 @@ def kernel_for(
 
     On the auto path a record of :data:`KERNEL_MIN_SAMPLES` or more takes the kernel. A
     shorter one takes it once the kernel pays in this process (see the module's docstring) and
-    numba's cache holds every one of ``functions``; where it does not, a compile starts in the
-    background and this record stays on numpy.
+    numba's cache holds every one of ``functions``; where it does not, this record stays on
+    numpy and the compile waits for the run's end (:func:`finish_run`), unless this process has
+    lost more to numpy than compiling costs.
     """
     path = requested_path()
     if path == "numpy":
@@ -386,23 +398,38 @@ def kernel_for(
         return loaded  # the load is paid already
     with _lock:
         _would_save[0] += samples * NUMPY_EXTRA_S.get(functions[0], 0.0)
-        pays = _would_save[0] >= KERNEL_LOAD_S
-    if not pays:
+        saved = _would_save[0]
+    if saved < KERNEL_LOAD_S:
         return None
     if cache_warm(functions):
         return _load()
-    start_background_compile(functions)
+    if saved >= KERNEL_COMPILE_S:
+        start_background_compile(functions)
     return None
 
 
-def prepare() -> None:
-    """At the start of a run: where the auto path may take the kernel and numba's cache does not
-    hold it, start compiling it in the background now, while the run reads its data, so that
-    the run can take it as soon as it pays. Imports nothing."""
+def expect(samples: int) -> None:
+    """Before a piece of work of ``samples`` samples (a spec's signals times its record's
+    length): where numpy would lose more on it alone than loading the kernel costs and numba's
+    cache does not hold the kernel, start compiling it in the background now, so that it is
+    ready for most of that work (the rest of the reading overlaps the compile)."""
+    if samples * NUMPY_EXTRA_S["main_pass"] >= KERNEL_LOAD_S:
+        _compile_if_cold()
+
+
+def finish_run() -> None:
+    """At the end of a run (every process that scored): if the kernel would have paid in it and
+    numba's cache does not hold it, compile it in the background for the next runs. Imports
+    nothing where the run never reached the kernel."""
+    if _would_save[0] >= KERNEL_LOAD_S:
+        _compile_if_cold()
+
+
+def _compile_if_cold() -> None:
     try:
         if requested_path() != "auto":
             return
-    except HevvalError:  # a bad value: the scoring itself reports it, with its hint
+    except HevvalError:  # a bad value: the scoring reports it, with its hint
         return
     if _numba_installed() and not cache_warm(COMPILED):
         # What every spec scores first, then the intervals (on by default), then the options.
@@ -424,15 +451,13 @@ def start_background_compile(first: tuple[str, ...] = ()) -> bool:
             return False
         _background["asked"] = True
     folder = cache_folder()
-    marker = folder / ".hevval-compiling"
+    marker = _compile_marker()
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        try:
-            if time.time() - marker.stat().st_mtime < COMPILE_LOCK_S:
-                return False
-            marker.unlink()
-        except FileNotFoundError:
-            pass
+        if _compile_under_way():
+            return False
+        with contextlib.suppress(FileNotFoundError):
+            marker.unlink()  # left by a compile that died
         descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         os.close(descriptor)
     except OSError:
@@ -473,9 +498,22 @@ def _launch(command: list[str]) -> Any:
     )
 
 
+def _compile_marker() -> Path:
+    return cache_folder() / ".hevval-compiling"
+
+
+def _compile_under_way() -> bool:
+    """Whether a background compile of this cache (this process's or another's) is running."""
+    try:
+        return time.time() - _compile_marker().stat().st_mtime < COMPILE_LOCK_S
+    except OSError:
+        return False
+
+
 def background_compile_started() -> bool:
-    """Whether this process started a background compile (for the run's closing note)."""
-    return "process" in _background
+    """Whether this run's kernel is being compiled in the background: this process started it,
+    or another process of the run did (a pytest-xdist worker, for the controller's note)."""
+    return "process" in _background or (_compile_under_way() and not cache_warm(COMPILED))
 
 
 def active_path() -> str:
@@ -491,8 +529,8 @@ def compile_note() -> str | None:
     if not background_compile_started():
         return None
     return (
-        "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy "
-        "until it was ready; it is being compiled in the background for the next runs"
+        "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy; "
+        "it is being compiled in the background for the next runs"
     )
 
 
@@ -517,7 +555,7 @@ def describe() -> str:
         )
     return (
         f"kernel: numba {version} (cache cold: the first run that would gain compiles it in "
-        "the background; hevval kernel --compile fills it now); numpy until then"
+        "the background as it ends; hevval kernel --compile fills it now); numpy until then"
     )
 
 

@@ -138,9 +138,6 @@ class HevvalSession:
     # -- session start: the baseline --------------------------------------------------------
     def start(self) -> None:
         """Pick the baseline before this run records anything (every process reads it)."""
-        from ..core.kernel import prepare
-
-        prepare()
         _freeze_objects_at_exit()
         try:
             self.notes.extend(self.publisher.start(controller=self.is_controller))
@@ -319,7 +316,16 @@ class HevvalSession:
     def relative(self, path: str) -> str:
         return relative_to(self.rootdir, path)
 
-    # -- session end: controller only -------------------------------------------------------
+    # -- session end ------------------------------------------------------------------------
+    def end(self, session: pytest.Session) -> None:
+        """In every process: a kernel this run would have used is compiled for the next runs
+        (before a worker reports done, so that the controller's note finds it under way)."""
+        from ..core.kernel import finish_run
+
+        finish_run()
+        if self.is_controller:
+            self.finish(session)
+
     def finish(self, session: pytest.Session) -> None:
         """Judge deferred campaign gates; write reports, the comparison, the ratchet and the
         history record, once."""

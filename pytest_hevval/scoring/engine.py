@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
+from ..core import kernel
 from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.registry import Characteristic, compute_characteristic
 from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
@@ -455,8 +456,9 @@ def _evaluate(
     folders = [spec.path.parent] + ([rootdir] if rootdir else [])
     _check_model_output(spec)
     reference = cache.read(spec.reference, spec.reference_columns())
-    model_record, model_info = _load_model(spec, reference, cache, folders)
     nodes = list(spec.walk())
+    kernel.expect(len(nodes) * max((c.values.size for c in reference.channels.values()), default=0))
+    model_record, model_info = _load_model(spec, reference, cache, folders)
     aligned = _align(spec, nodes, reference, model_record, workers)
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
