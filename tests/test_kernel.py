@@ -492,6 +492,9 @@ def test_the_note_names_a_compile_another_process_of_the_run_started(
     assert kernel.compile_note() is None
     marker.touch()
     assert "compiled in the background" in (kernel.compile_note() or "")
+    monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
+    assert kernel.compile_note() is None  # a run told to stay on numpy is not told of it
+    monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): True)
     assert kernel.compile_note() is None  # it ended: nothing to say
 

@@ -513,7 +513,13 @@ def _compile_under_way() -> bool:
 def background_compile_started() -> bool:
     """Whether this run's kernel is being compiled in the background: this process started it,
     or another process of the run did (a pytest-xdist worker, for the controller's note)."""
-    return "process" in _background or (_compile_under_way() and not cache_warm(COMPILED))
+    if "process" in _background:
+        return True
+    try:
+        auto = requested_path() == "auto"
+    except HevvalError:  # a bad value: the scoring reported it
+        return False
+    return auto and _compile_under_way() and not cache_warm(COMPILED)
 
 
 def active_path() -> str:
