@@ -425,13 +425,17 @@ def finish_run() -> None:
         _compile_if_cold()
 
 
-def _compile_if_cold() -> None:
+def _on_auto_path() -> bool:
+    """Whether ``HEVVAL_KERNEL`` leaves the choice to the run (False for a bad value, which the
+    scoring reports with its hint)."""
     try:
-        if requested_path() != "auto":
-            return
-    except HevvalError:  # a bad value: the scoring reports it, with its hint
-        return
-    if _numba_installed() and not cache_warm(COMPILED):
+        return requested_path() == "auto"
+    except HevvalError:
+        return False
+
+
+def _compile_if_cold() -> None:
+    if _on_auto_path() and _numba_installed() and not cache_warm(COMPILED):
         # What every spec scores first, then the intervals (on by default), then the options.
         start_background_compile(FIRST_COMPILED)
 
@@ -515,11 +519,7 @@ def background_compile_started() -> bool:
     or another process of the run did (a pytest-xdist worker, for the controller's note)."""
     if "process" in _background:
         return True
-    try:
-        auto = requested_path() == "auto"
-    except HevvalError:  # a bad value: the scoring reported it
-        return False
-    return auto and _compile_under_way() and not cache_warm(COMPILED)
+    return _on_auto_path() and _compile_under_way() and not cache_warm(COMPILED)
 
 
 def active_path() -> str:
