@@ -122,20 +122,27 @@ def _run(args: argparse.Namespace) -> int:
         and not regressions
         and not errors
     )
-    payload = {
-        "schema_version": 1,
-        "hevval_version": __version__,
-        "passed": passed,
-        "specs": [r.to_dict() for r in results],
-        **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
-        **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
-    }
-    # The common single-spec case also exposes the spec's own fields at the top level.
-    if len(results) == 1:
-        payload.update(
-            {k: v for k, v in results[0].to_dict().items() if k not in ("schema_version",)}
-        )
+    made: list[list[dict[str, Any]]] = []
+
+    def dicts() -> list[dict[str, Any]]:
+        """The results as JSON data, made once for the JSON file and the publisher, and only
+        if one of them asks."""
+        if not made:
+            made.append([r.to_dict() for r in results])
+        return made[0]
+
     if args.json:
+        payload = {
+            "schema_version": 1,
+            "hevval_version": __version__,
+            "passed": passed,
+            "specs": dicts(),
+            **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
+            **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
+        }
+        # The common single-spec case also exposes the spec's own fields at the top level.
+        if len(results) == 1:
+            payload.update({k: v for k, v in dicts()[0].items() if k != "schema_version"})
         _write_json(args.json, payload)
     panels = diagnosis_panels(
         target_payload(evaluation.result.spec, target, found)
@@ -143,7 +150,7 @@ def _run(args: argparse.Namespace) -> int:
         for target, found in evaluation.diagnoses.items()
     )
     published = publisher.publish(
-        results, {relative_to(rootdir, spec.key): spec for spec in specs}, panels
+        results, {relative_to(rootdir, spec.key): spec for spec in specs}, panels, dicts
     )
     for line in published.annotations:
         print(line)

@@ -26,6 +26,9 @@ if TYPE_CHECKING:
 
 __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
+#: The results' JSON data as a step of :meth:`Publisher.publish` asks for it (made once).
+_Data = Callable[[], list[dict[str, Any]]]
+
 #: The title of every report a run writes.
 REPORT_TITLE = "hevval validation report"
 #: The summary's line for a run that was not recorded, and how to record one.
@@ -183,22 +186,34 @@ class Publisher:
         results: Sequence[SpecResult],
         specs: Mapping[str, Spec],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
-        dicts: Sequence[dict[str, Any]] | None = None,
+        dicts: Sequence[dict[str, Any]] | Callable[[], Sequence[dict[str, Any]]] | None = None,
     ) -> Publication:
         """Reports, comparison, ratchet and history record of a run's results, in that order.
 
         ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
         (spec, signal), as :func:`diagnosis_panels` gives them; ``dicts`` the results' JSON
-        data where the caller holds it already (``SpecResult.to_dict`` of each, in order).
+        data (``SpecResult.to_dict`` of each, in order) where the caller holds it already, or
+        a function that makes it. The data is made only if a step uses it: a run that writes
+        nothing does not pay for it (the tables of a spec with windows and regions cost
+        seconds to turn into JSON).
         """
         out = Publication()
         if not results:
             return out
-        dicts = [r.to_dict() for r in results] if dicts is None else list(dicts)
-        self._write_reports(dicts, diagnoses, out)
-        self._compare(dicts, out)
-        self._ratchet(dicts, specs, out)
-        self._record(dicts, out)
+        made: list[list[dict[str, Any]]] = []
+
+        def data() -> list[dict[str, Any]]:
+            if not made:
+                if dicts is None:
+                    made.append([r.to_dict() for r in results])
+                else:
+                    made.append(list(dicts() if callable(dicts) else dicts))
+            return made[0]
+
+        self._write_reports(data, diagnoses, out)
+        self._compare(data, out)
+        self._ratchet(data, specs, out)
+        self._record(data, out)
         return out
 
     def _relative(self, path: Path | str) -> str:
@@ -208,7 +223,7 @@ class Publisher:
 
     def _write_reports(
         self,
-        dicts: list[dict[str, Any]],
+        data: _Data,
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         out: Publication,
     ) -> None:
@@ -217,7 +232,7 @@ class Publisher:
 
             try:
                 written = write_reports(
-                    self._decorate(dicts, diagnoses),
+                    self._decorate(data(), diagnoses),
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
@@ -230,7 +245,7 @@ class Publisher:
         if os.environ.get("GITHUB_ACTIONS") == "true":
             from .report import github_annotations
 
-            out.annotations.extend(github_annotations(dicts, self.options.rootdir))
+            out.annotations.extend(github_annotations(data(), self.options.rootdir))
 
     def _decorate(
         self,
@@ -272,25 +287,23 @@ class Publisher:
             decorated.append({**result, "signals": signals})
         return decorated
 
-    def _compare(self, dicts: list[dict[str, Any]], out: Publication) -> None:
+    def _compare(self, data: _Data, out: Publication) -> None:
         if self.baseline is None or not self.options.compare:
             return
         from .history import compare, comparison_table, regressions
         from .history.compare import campaign_change_lines
 
-        comparison = compare(dicts, self.baseline, after_label=self.run_label)
+        comparison = compare(data(), self.baseline, after_label=self.run_label)
         found = regressions(comparison, self.rules) if self.rules else None
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))
 
-    def _ratchet(
-        self, dicts: list[dict[str, Any]], specs: Mapping[str, Spec], out: Publication
-    ) -> None:
+    def _ratchet(self, data: _Data, specs: Mapping[str, Spec], out: Publication) -> None:
         if self.margin is None:
             return
         from .history import ratchet_spec
 
-        for result in dicts:
+        for result in data():
             spec = specs.get(result["spec"])
             if spec is None:
                 continue
@@ -319,7 +332,7 @@ class Publisher:
                 continue
             out.notes.append(outcome.summary())
 
-    def _record(self, dicts: list[dict[str, Any]], out: Publication) -> None:
+    def _record(self, data: _Data, out: Publication) -> None:
         if not self.options.record:
             if self.options.use_history:
                 out.notes.append(NOT_RECORDED)
@@ -328,7 +341,7 @@ class Publisher:
 
         try:
             path = HistoryStore(self.options.history_dir).append(
-                make_record(dicts, model_version=self.model_version, started_utc=self.started)
+                make_record(data(), model_version=self.model_version, started_utc=self.started)
             )
         except (HevvalError, OSError) as exc:
             out.notes.append(f"history: error: the run was not recorded: {exc}")

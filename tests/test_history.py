@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from pytest_hevval import history as h
 from pytest_hevval.cli import main as cli_main
 from pytest_hevval.errors import SpecError
-from pytest_hevval.results.codec import plain_json
+from pytest_hevval.results.codec import dumps, json_number, json_numbers, plain_json
 from pytest_hevval.results.spec_result import SpecResult
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
@@ -128,6 +128,50 @@ def test_make_record_converts_nan_and_numpy_scalars() -> None:
     assert sig["mae"] == 2.0
     assert rec["specs"][0]["phi"] == 0.8
     assert type(rec["specs"][0]["phi"]) is float
+
+
+@given(
+    st.lists(
+        st.one_of(
+            st.floats(allow_nan=True, allow_infinity=True),
+            st.integers(-(2**52), 2**52),
+            st.none(),
+        ),
+        max_size=30,
+    )
+)
+def test_a_column_of_numbers_becomes_json_as_each_number_does(values: list[Any]) -> None:
+    """The tables' vectorised conversion agrees with the one for a single number: NaN, ±inf
+    and None become null, everything else a Python float."""
+    converted = json_numbers(values)
+    assert converted == [json_number(v) for v in values]
+    assert all(type(v) is float for v in converted if v is not None)
+    assert json_numbers(np.array(values, dtype=np.float64)) == converted
+
+
+_JSON_VALUES = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner),
+    max_leaves=20,
+)
+
+
+@given(_JSON_VALUES)
+def test_the_results_file_layout_says_what_the_standard_encoder_says(value: Any) -> None:
+    """``hevval run --json`` lays columns of numbers on one line; the text still reads back as
+    the data, as the standard library's own indented text does."""
+    assert json.loads(dumps(value)) == json.loads(json.dumps(value))
+    assert json.loads(dumps(value, indent=None)) == json.loads(json.dumps(value))
+
+
+def test_the_results_file_keeps_a_column_on_one_line_and_refuses_nan() -> None:
+    text = dumps({"b": {"rms": [1.5, None, 2.0]}, "a": [{"x": 1}], "spans": [[0.0, 30.0]]})
+    assert text == (
+        '{\n  "a": [\n    {\n      "x": 1\n    }\n  ],\n'
+        '  "b": {\n    "rms": [1.5, null, 2.0]\n  },\n  "spans": [[0.0, 30.0]]\n}\n'
+    )
+    with pytest.raises(ValueError, match="not JSON compliant"):
+        dumps({"rms": [float("nan")]})
 
 
 def test_make_record_converts_other_timezones_to_utc() -> None:

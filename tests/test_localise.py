@@ -158,6 +158,52 @@ def test_the_json_result_round_trips(tmp_path: Path) -> None:
     again = SpecResult.from_dict(data)
     assert again.to_dict() == data
     assert not again.signals[0].passed
+    # The tables read back equal the scored ones, NaN (a cell too small to judge) included.
+    scored, read = result.signals[0].local, again.signals[0].local
+    assert np.isnan(scored.regions.lambdas["mae"]).any()
+    assert read == scored
+    assert read.regions != scored.windows
+    assert not read.regions.rms.flags.writeable
+
+
+def test_a_table_cannot_be_changed_by_its_reader(tmp_path: Path) -> None:
+    """The tables of a spec's signals share the arrays they were computed in: a column is
+    read-only, so a reader changing one would fail rather than change every other table."""
+    write_trip(tmp_path, stretch=True, fast=True)
+    local = _evaluate(tmp_path).result.signals[0].local  # type: ignore[attr-defined]
+    for table in (local.windows, local.phases, local.regions):
+        for column in (table.n, table.rms, table.error_share, *table.lambdas.values()):
+            with pytest.raises(ValueError, match="read-only"):
+                column[0] = 0
+
+
+def test_hevval_run_turns_the_results_into_json_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The JSON file and the publisher share one copy of the results' data, and a run that
+    writes neither does not make it (a spec's tables cost seconds to turn into JSON)."""
+    from pytest_hevval.results.spec_result import SpecResult
+
+    write_trip(tmp_path, stretch=True, fast=True)
+    (tmp_path / "trip.hevval.yaml").write_text(SPEC)
+    made = []
+    to_dict = SpecResult.to_dict
+
+    def counted(self: SpecResult) -> dict[str, object]:
+        made.append(self.spec)
+        return to_dict(self)
+
+    monkeypatch.setattr(SpecResult, "to_dict", counted)
+    monkeypatch.chdir(tmp_path)
+    spec = str(tmp_path / "trip.hevval.yaml")
+    assert cli.main(["run", spec, "--no-history", "--quiet"]) == 1
+    assert made == []
+    out = tmp_path / "out.json"
+    assert cli.main(["run", spec, "--json", str(out), "--report", "md", "--quiet"]) == 1
+    assert len(made) == 1
+    data = json.loads(out.read_text())
+    assert data["specs"][0]["signals"][0]["local"]["windows"]["n"][0] == 300
+    assert "P" in (tmp_path / ".hevval" / "report" / "report.md").read_text()
 
 
 @pytest.mark.parametrize("exponent", [600, -600])
@@ -174,10 +220,10 @@ def test_windows_and_cells_of_huge_or_tiny_signals_match_ordinary_ones(
     scaled = _evaluate(tmp_path, scaled_spec).result.signals[0]  # type: ignore[attr-defined]
     for scope in ("windows", "phases", "regions"):
         before, after = getattr(plain.local, scope), getattr(scaled.local, scope)
-        assert after.n == before.n
+        np.testing.assert_array_equal(after.n, before.n)
         for name, values in before.lambdas.items():
             np.testing.assert_allclose(after.lambdas[name], values, rtol=1e-9, err_msg=name)
-        np.testing.assert_allclose(np.array(after.rms) / factor, before.rms, rtol=1e-9)
+        np.testing.assert_allclose(after.rms / factor, before.rms, rtol=1e-9)
         np.testing.assert_allclose(after.error_share, before.error_share, rtol=1e-9)
     assert scaled.local.concentration == plain.local.concentration
     assert [f.where for f in scaled.local_failures] == [f.where for f in plain.local_failures]
@@ -207,9 +253,9 @@ def test_each_signal_of_a_spec_gets_the_tables_it_gets_alone(tmp_path: Path) -> 
     # The scales did reach the tables: the huge copy's errors are 2^600 times P's.
     by_name = {s.name: s for s in together}
     np.testing.assert_allclose(
-        np.array(by_name["huge"].local.windows.rms) / 2.0**600, by_name["P"].local.windows.rms
+        by_name["huge"].local.windows.rms / 2.0**600, by_name["P"].local.windows.rms
     )
-    assert by_name["thrice"].local.windows.rms != by_name["P"].local.windows.rms
+    assert not np.array_equal(by_name["thrice"].local.windows.rms, by_name["P"].local.windows.rms)
 
 
 @pytest.mark.parametrize(

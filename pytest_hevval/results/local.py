@@ -21,7 +21,7 @@ from ..core.local import (
     GroupSums,
     group_lambdas,
 )
-from .codec import json_number, number_or_nan
+from .codec import json_numbers, number_or_nan
 
 __all__ = [
     "NAMED_GROUPS",
@@ -32,23 +32,53 @@ __all__ = [
 ]
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
 
 #: The failure message names at most this many windows or cells, worst first.
 NAMED_GROUPS = 3
 
 
-@dataclass(frozen=True)
+def _column(values: Sequence[float], dtype: type = np.float64) -> npt.NDArray[Any]:
+    """A table's column as a new read-only array: tables share their rows with the arrays
+    they were computed in, and no reader may change them under another."""
+    column: npt.NDArray[Any] = np.array(values, dtype=dtype)
+    column.flags.writeable = False
+    return column
+
+
+@dataclass(frozen=True, eq=False)
 class GroupTable:
-    """λ1–λ6 and the physical error of a set of groups (windows, phases, conditions, cells)."""
+    """λ1–λ6 and the physical error of a set of groups (windows, phases, conditions, cells).
+
+    The columns are read-only numpy arrays, one value per group (:meth:`many` and
+    :meth:`from_dict` make them so): the tables of a spec of many signals hold hundreds of
+    thousands of values, which as Python numbers cost more time to make (and memory to keep)
+    than scoring them did.
+    """
 
     labels: tuple[str, ...]
-    n: tuple[int, ...]
-    lambdas: Mapping[str, tuple[float, ...]]
+    n: IntArray
+    lambdas: Mapping[str, FloatArray]
     #: Share of the record's squared error that lies in each group.
-    error_share: tuple[float, ...]
+    error_share: FloatArray
     #: RMS and mean error (reference − simulated) per group, in the signal's unit.
-    rms: tuple[float, ...]
-    mean_error: tuple[float, ...]
+    rms: FloatArray
+    mean_error: FloatArray
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, GroupTable):
+            return NotImplemented
+        return (
+            self.labels == other.labels
+            and np.array_equal(self.n, other.n)
+            and self.lambdas.keys() == other.lambdas.keys()
+            and all(_same(v, other.lambdas[k]) for k, v in self.lambdas.items())
+            and _same(self.error_share, other.error_share)
+            and _same(self.rms, other.rms)
+            and _same(self.mean_error, other.mean_error)
+        )
+
+    __hash__ = None  # type: ignore[assignment]
 
     @classmethod
     def from_sums(
@@ -75,26 +105,24 @@ class GroupTable:
         scale: float | FloatArray = 1.0,
     ) -> list[GroupTable]:
         """One table per entry of ``labels``, whose rows follow each other in ``sums``, as
-        :meth:`from_sums` of each: one vectorised call for them all. ``reference_range``,
-        ``total_sq`` and ``scale``: one value, or one per row (the tables of several signals)."""
+        :meth:`from_sums` of each: one vectorised call for them all, whose arrays the tables
+        share. ``reference_range``, ``total_sq`` and ``scale``: one value, or one per row
+        (the tables of several signals)."""
         kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
         lambdas = group_lambdas(sums, np.multiply(reference_range, scale), kind)
-        n = sums.n.astype(np.float64)
-        judged = sums.n >= MIN_GROUP_SAMPLES
-        safe = np.maximum(n, 1.0)
+        count = np.asarray(sums.n, dtype=np.int64)
+        judged = count >= MIN_GROUP_SAMPLES
+        safe = np.maximum(count, 1).astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
             rms = np.where(judged, np.sqrt(sums.sq_error / safe) / scale, np.nan)
             mean = np.where(judged, sums.error_sum / safe / scale, np.nan)
             share = np.where(np.greater(total_sq, 0.0), sums.sq_error / total_sq, 0.0)
-        # tolist() makes Python numbers in one call (a float() per value costs a signal of
-        # many cells milliseconds).
-        columns = {
-            "n": np.asarray(sums.n, dtype=np.int64).tolist(),
-            "error_share": np.asarray(share, dtype=np.float64).tolist(),
-            "rms": np.asarray(rms, dtype=np.float64).tolist(),
-            "mean_error": np.asarray(mean, dtype=np.float64).tolist(),
-        }
-        values = {name: np.asarray(v, dtype=np.float64).tolist() for name, v in lambdas.items()}
+        columns = [count, share, rms, mean, *lambdas.values()]
+        for column in columns:
+            column.flags.writeable = False
+        total = sum(len(names) for names in labels)
+        if total != count.shape[0]:
+            raise ValueError(f"{total} labels for {count.shape[0]} groups")
         tables = []
         first = 0
         for names in labels:
@@ -103,40 +131,47 @@ class GroupTable:
             tables.append(
                 cls(
                     labels=tuple(names),
-                    n=tuple(columns["n"][part]),
-                    lambdas={name: tuple(v[part]) for name, v in values.items()},
-                    error_share=tuple(columns["error_share"][part]),
-                    rms=tuple(columns["rms"][part]),
-                    mean_error=tuple(columns["mean_error"][part]),
+                    n=count[part],
+                    lambdas={name: v[part] for name, v in lambdas.items()},
+                    error_share=share[part],
+                    rms=rms[part],
+                    mean_error=mean[part],
                 )
             )
-        if first != n.shape[0]:
-            raise ValueError(f"{first} labels for {n.shape[0]} groups")
         return tables
 
-    def judged(self, index: int, min_samples: int = MIN_GROUP_SAMPLES) -> bool:
-        return self.n[index] >= max(min_samples, MIN_GROUP_SAMPLES)
+    def judged(self, min_samples: int = MIN_GROUP_SAMPLES) -> list[int]:
+        """The groups with enough samples to be judged (never fewer than
+        :data:`~pytest_hevval.core.local.MIN_GROUP_SAMPLES`), in order."""
+        return [int(k) for k in np.flatnonzero(self.n >= max(min_samples, MIN_GROUP_SAMPLES))]
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "labels": list(self.labels),
-            "n": list(self.n),
-            "lambdas": {k: [json_number(v) for v in vs] for k, vs in self.lambdas.items()},
-            "error_share": [json_number(v) for v in self.error_share],
-            "rms": [json_number(v) for v in self.rms],
-            "mean_error": [json_number(v) for v in self.mean_error],
+            "n": self.n.tolist(),
+            "lambdas": {k: json_numbers(vs) for k, vs in self.lambdas.items()},
+            "error_share": json_numbers(self.error_share),
+            "rms": json_numbers(self.rms),
+            "mean_error": json_numbers(self.mean_error),
         }
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> GroupTable:
+        def numbers(values: Sequence[Any]) -> list[float]:
+            return [number_or_nan(v) for v in values]
+
         return cls(
             labels=tuple(data["labels"]),
-            n=tuple(int(v) for v in data["n"]),
-            lambdas={k: tuple(number_or_nan(v) for v in vs) for k, vs in data["lambdas"].items()},
-            error_share=tuple(number_or_nan(v) for v in data["error_share"]),
-            rms=tuple(number_or_nan(v) for v in data["rms"]),
-            mean_error=tuple(number_or_nan(v) for v in data["mean_error"]),
+            n=_column([int(v) for v in data["n"]], np.int64),
+            lambdas={k: _column(numbers(vs)) for k, vs in data["lambdas"].items()},
+            error_share=_column(numbers(data["error_share"])),
+            rms=_column(numbers(data["rms"])),
+            mean_error=_column(numbers(data["mean_error"])),
         )
+
+
+def _same(a: FloatArray, b: FloatArray) -> bool:
+    return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=True))
 
 
 @dataclass(frozen=True)
@@ -153,9 +188,11 @@ class LocalResult:
     regions: GroupTable | None = None
 
     def worst_windows(self, count: int = NAMED_GROUPS) -> list[int]:
-        """Indices of the windows holding the most squared error, worst first."""
-        order = sorted(range(len(self.windows.n)), key=lambda k: -self.windows.error_share[k])
-        return [k for k in order[:count] if self.windows.error_share[k] > 0]
+        """Indices of the windows holding the most squared error, worst first (the earlier of
+        two equal ones first)."""
+        share = self.windows.error_share
+        order = np.argsort(-share, kind="stable")[:count]
+        return [int(k) for k in order if share[k] > 0]
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {

@@ -33,7 +33,7 @@ from ..core.local import (
     region_grid,
 )
 from ..core.tree import global_metric_arrays
-from ..results.codec import json_number
+from ..results.codec import json_numbers
 from ..results.local import GroupTable, LocalFailure, LocalResult, concentration_sentence
 from ..spec.model import LocalGate, SignalSpec, Spec
 
@@ -359,12 +359,13 @@ def _gate(
     gate: LocalGate,
     min_samples: int,
 ) -> list[LocalFailure]:
-    judged = [k for k in range(len(table.n)) if table.judged(k, min_samples)]
+    judged = table.judged(min_samples)
+    values = {name: column.tolist() for name, column in table.lambdas.items()}
     missed: dict[str, list[tuple[float, float, str]]] = {}
     failed_groups: set[int] = set()
     for k in judged:
         for name, limit in thresholds_of(k).items():
-            value = table.lambdas[name][k]
+            value = values[name][k]
             if math.isfinite(value) and value < limit:
                 missed.setdefault(name, []).append((value - limit, value, table.labels[k]))
                 failed_groups.add(k)
@@ -424,7 +425,8 @@ def local_failures(
 
 
 def local_phi(
-    rows: Sequence[tuple[float, Mapping[str, tuple[float, ...]]]], weights: Mapping[str, float]
+    rows: Sequence[tuple[float, Mapping[str, Sequence[float] | FloatArray]]],
+    weights: Mapping[str, float],
 ) -> list[float | None]:
     """Φ (eq. 14) per group from every signal's λ1–λ6 per group (NaN groups: None)."""
     if not rows:
@@ -438,7 +440,7 @@ def local_phi(
         phi = global_metric_arrays(arrays, beta)
     except ValueError:
         return []
-    return [json_number(float(v)) for v in np.atleast_1d(phi)]
+    return json_numbers(np.atleast_1d(phi))
 
 
 def spec_local_summary(
