@@ -11,10 +11,10 @@ scipy.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING, Any
 
 from .errors import CharacteristicError, DataError, ExpressionError, HevvalError, SpecError
+from .lazy import import_own
 
 if TYPE_CHECKING:
     from .core import (
@@ -94,7 +94,7 @@ def __getattr__(name: str) -> Any:
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
+    value = getattr(import_own(module, __name__), name)
     globals()[name] = value  # later look-ups skip this function
     return value
 

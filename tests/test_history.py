@@ -150,7 +150,11 @@ def test_a_column_of_numbers_becomes_json_as_each_number_does(values: list[Any])
 
 
 _JSON_VALUES = st.recursive(
-    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=5),
+    st.none()
+    | st.booleans()
+    | st.integers()
+    | st.floats(allow_nan=False, allow_infinity=False)
+    | st.text(max_size=5),
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner),
     max_leaves=20,
 )
@@ -170,8 +174,9 @@ def test_the_results_file_keeps_a_column_on_one_line_and_refuses_nan() -> None:
         '{\n  "a": [\n    {\n      "x": 1\n    }\n  ],\n'
         '  "b": {\n    "rms": [1.5, null, 2.0]\n  },\n  "spans": [[0.0, 30.0]]\n}\n'
     )
-    with pytest.raises(ValueError, match="not JSON compliant"):
-        dumps({"rms": [float("nan")]})
+    for bad in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="not JSON compliant"):
+            dumps({"rms": [bad]})
 
 
 def test_make_record_converts_other_timezones_to_utc() -> None:

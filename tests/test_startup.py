@@ -65,3 +65,40 @@ def test_scoring_loads_the_standard_metrics_only_for_a_spec_that_names_them() ->
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == ""
+
+
+def test_the_package_imports_its_own_modules_one_thread_at_a_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Under pytest the plugin's modules are parsed by the assertion rewriter, which on Python
+    3.11 fails when two threads parse at once (specs evaluated side by side on Dask threads
+    import their readers on first use): the package's lazy imports take turns."""
+    import importlib
+    import threading
+    import time
+
+    from pytest_hevval import lazy
+
+    inside = [0]
+    most = [0]
+    guard = threading.Lock()
+
+    def slow_import(name: str, package: str | None = None) -> object:
+        with guard:
+            inside[0] += 1
+            most[0] = max(most[0], inside[0])
+        time.sleep(0.02)
+        with guard:
+            inside[0] -= 1
+        return object()
+
+    monkeypatch.setattr(importlib, "import_module", slow_import)
+    threads = [
+        threading.Thread(target=lazy.import_own, args=(f".readers.m{k}", "pytest_hevval.data"))
+        for k in range(4)
+    ]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert most[0] == 1

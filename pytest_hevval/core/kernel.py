@@ -56,6 +56,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import HevvalError, MissingExtraError
+from ..lazy import import_own
 
 __all__ = [
     "BACKGROUND_COMPILE_ENV",
@@ -205,7 +206,7 @@ def _load() -> ModuleType | None:
     with _lock:
         if "module" not in _loaded:
             try:
-                _loaded["module"] = importlib.import_module(f"{__package__}._fused")
+                _loaded["module"] = import_own(f"{__package__}._fused")
             except Exception as error:
                 _loaded["module"] = None
                 _failure["reason"] = f"{type(error).__name__}: {error}".splitlines()[0]

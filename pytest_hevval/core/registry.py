@@ -13,7 +13,6 @@ Pure Python: no numpy import at module level, no files, no pytest.
 
 from __future__ import annotations
 
-import importlib
 import math
 import re
 import threading
@@ -22,6 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 from ..errors import CharacteristicError, did_you_mean
+from ..lazy import import_own
 
 __all__ = [
     "CHARACTERISTIC_LABELS",
@@ -221,7 +221,7 @@ class _StandardCompute:
         return found
 
     def _module(self) -> Any:
-        return importlib.import_module(f"{__package__}.standard.{self.module}")
+        return import_own(f"{__package__}.standard.{self.module}")
 
 
 def _standard(

@@ -12,13 +12,13 @@ is in ``docs/data.md``. Adding a format: ``docs/extending.md``.
 
 from __future__ import annotations
 
-import importlib
 import os
 from collections.abc import Iterable, Sequence
 from typing import cast
 
 from ...errors import DataError, HevvalError, MissingExtraError, did_you_mean
 from ...files import check_input
+from ...lazy import import_own
 from ..record import Reader, Record, SourceOptions
 from ..remote import is_url, read_url
 
@@ -198,7 +198,7 @@ def _deferred(module: str, function: str) -> Reader:
     """A reader whose module is imported on first use, so the registry itself stays light."""
 
     def read(path: str, columns: Iterable[str] | None, options: SourceOptions) -> Record:
-        reader = getattr(importlib.import_module(f".{module}", __name__), function)
+        reader = getattr(import_own(f".{module}", __name__), function)
         return cast(Record, reader(path, columns, options))
 
     read.__name__ = f"{module}.{function}"
