@@ -177,6 +177,19 @@ def test_a_table_cannot_be_changed_by_its_reader(tmp_path: Path) -> None:
                 column[0] = 0
 
 
+def test_building_the_tables_leaves_the_callers_sums_writable() -> None:
+    from pytest_hevval.core.local import GroupSums
+    from pytest_hevval.results.local import GroupTable
+
+    table = np.zeros((2, 10))
+    table[:, 0] = [40, 50]
+    sums = GroupSums.of_table(table, 0.0)
+    (built,) = GroupTable.many([["a", "b"]], sums, 1.0, "xcorr", 1.0)
+    assert not built.n.flags.writeable
+    sums.n[0] = 41  # still the caller's to change
+    assert built.n.tolist() == [40, 50]
+
+
 def test_hevval_run_turns_the_results_into_json_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -110,7 +110,8 @@ class GroupTable:
         (the tables of several signals)."""
         kind: CorrelationKind = "pearson" if correlation == "pearson" else "xcorr"
         lambdas = group_lambdas(sums, np.multiply(reference_range, scale), kind)
-        count = np.asarray(sums.n, dtype=np.int64)
+        # A copy: the columns are made read-only below, and ``sums`` is the caller's.
+        count = np.array(sums.n, dtype=np.int64)
         judged = count >= MIN_GROUP_SAMPLES
         safe = np.maximum(count, 1).astype(np.float64)
         with np.errstate(invalid="ignore", divide="ignore"):
