@@ -17,6 +17,7 @@ Exit codes: 0 every spec passed, 1 a gate failed, 2 bad input or usage.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import sys
@@ -122,14 +123,12 @@ def _run(args: argparse.Namespace) -> int:
         and not regressions
         and not errors
     )
-    made: list[list[dict[str, Any]]] = []
 
+    @functools.cache
     def dicts() -> list[dict[str, Any]]:
         """The results as JSON data, made once for the JSON file and the publisher, and only
         if one of them asks."""
-        if not made:
-            made.append([r.to_dict() for r in results])
-        return made[0]
+        return [r.to_dict() for r in results]
 
     if args.json:
         payload = {

@@ -9,6 +9,7 @@ Results become JSON data here, where they are written, and nowhere before.
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -200,15 +201,12 @@ class Publisher:
         out = Publication()
         if not results:
             return out
-        made: list[list[dict[str, Any]]] = []
 
+        @functools.cache
         def data() -> list[dict[str, Any]]:
-            if not made:
-                if dicts is None:
-                    made.append([r.to_dict() for r in results])
-                else:
-                    made.append(list(dicts() if callable(dicts) else dicts))
-            return made[0]
+            if dicts is None:
+                return [r.to_dict() for r in results]
+            return list(dicts() if callable(dicts) else dicts)
 
         self._write_reports(data, diagnoses, out)
         self._compare(data, out)
