@@ -460,6 +460,7 @@ def _parser() -> argparse.ArgumentParser:
     _shared(run, "compare", metavar="VERSION")
     _shared(run, "compare-fail", metavar="EXPR")
     _shared(run, "create-baseline")
+    _shared(run, "accept")
     _shared(run, "ratchet", metavar="MARGIN")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -487,7 +488,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     compare.add_argument(
         "before",
-        help="run JSON, history record, history:latest, history:previous or history:<version>",
+        help="run JSON, history record, history:latest, history:previous, history:accepted "
+        "or history:<version>",
     )
     compare.add_argument("after", help="same forms as BEFORE")
     _shared(compare, "history-dir")

@@ -1,4 +1,5 @@
-"""Every ``--hevval-*`` option and its same-named ``hevval_*`` ini key, in one table.
+"""Every ``--hevval-*`` option and its same-named ``hevval_*`` ini key, in one table (an
+option given on the command line only, such as ``--hevval-accept``, has no ini key).
 
 Precedence: command line > ini file (pytest.ini / pyproject / tox.ini / setup.cfg) > built-in
 default. Values are validated when read, with messages that say what to do.
@@ -28,6 +29,9 @@ class Option:
     choices: tuple[str, ...] = ()
     #: For string options that may be given bare (``--hevval-compare``): the bare value.
     const: str | None = None
+    #: Given on the command line only, never by an ini key: an act of one run, which a
+    #: setting in a committed file must not make the rule for every run.
+    command_line_only: bool = False
 
     @property
     def flag(self) -> str:
@@ -72,7 +76,8 @@ OPTIONS: tuple[Option, ...] = (
     Option(
         "compare",
         "string",
-        "compare with a recorded run: VERSION or latest",
+        "compare with a recorded run: latest (the newest record, the default), accepted (the "
+        "newest record accepted as a baseline) or a model version",
         None,
         const="latest",
     ),
@@ -83,6 +88,14 @@ OPTIONS: tuple[Option, ...] = (
         None,
     ),
     Option("create-baseline", "bool", "record a baseline when none exists (also in CI)", False),
+    Option(
+        "accept",
+        "bool",
+        "record this run as an accepted baseline even when it regressed (regressions are "
+        "then reported, not failed); also records a first baseline (command line only)",
+        False,
+        command_line_only=True,
+    ),
     Option(
         "ratchet",
         "string",
@@ -132,7 +145,8 @@ def add_options(parser: pytest.Parser) -> None:
             group.addoption(
                 option.flag, action="store_true", default=None, dest=option.dest, help=option.help
             )
-            parser.addini(option.ini, option.help, type="bool", default=option.default)
+            if not option.command_line_only:
+                parser.addini(option.ini, option.help, type="bool", default=option.default)
             continue
         kwargs: dict[str, Any] = {"dest": option.dest, "default": None, "help": option.help}
         if option.choices:
@@ -157,6 +171,8 @@ def get_option(config: pytest.Config, name: str) -> Any:
     cli = config.getoption(option.dest, default=None)
     if cli is not None:
         return cli
+    if option.command_line_only:
+        return option.default
     value = config.getini(option.ini)
     if option.kind == "bool":
         return bool(value)

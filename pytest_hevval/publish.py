@@ -55,10 +55,12 @@ class PublishOptions:
     use_history: bool = True
     #: The model version as given (``None``: from the environment or git).
     model_version: str | None = None
-    #: The baseline to compare with (``latest`` or a model version), or ``None``.
+    #: The baseline to compare with (``latest``, ``accepted`` or a model version), or ``None``.
     compare: str | None = None
     compare_fail: str | None = None
     create_baseline: bool = False
+    #: Record this run as an accepted baseline whatever the comparison finds.
+    accept: bool = False
     #: The ratchet margin as given, or ``None`` for no ratchet.
     ratchet: str | None = None
 
@@ -79,7 +81,7 @@ class PublishOptions:
             report_dir=rootdir / str(option("report-dir")),
             history_dir=rootdir / str(option("history-dir")),
             record=records_this_run(
-                asked=bool(option("history")) or bool(option("create-baseline")),
+                asked=any(bool(option(name)) for name in ("history", "create-baseline", "accept")),
                 refused=bool(option("no-history")),
                 environ=os.environ,
             ),
@@ -88,6 +90,7 @@ class PublishOptions:
             compare=text("compare"),
             compare_fail=text("compare-fail"),
             create_baseline=bool(option("create-baseline")),
+            accept=bool(option("accept")),
             ratchet=text("ratchet"),
         )
 
@@ -139,6 +142,7 @@ class Publisher:
         the ``controller`` decides what a missing one means, and raises when it fails the run.
         """
         from .history import HistoryStore, is_ci, missing_baseline, resolve_model_version
+        from .history.load import baseline_record
 
         self.model_version = resolve_model_version(
             self.options.model_version, os.environ, self.options.rootdir
@@ -146,13 +150,12 @@ class Publisher:
         if not self.wants_comparison:
             return []
         wanted = self.options.compare or "latest"
-        store = HistoryStore(self.options.history_dir)
-        self.baseline = store.latest() if wanted == "latest" else store.find(wanted)
+        self.baseline = baseline_record(HistoryStore(self.options.history_dir), wanted)
         if self.baseline is not None or not controller:
             return []
         decision = missing_baseline(
             ci=is_ci(os.environ),
-            create_baseline=self.options.create_baseline,
+            create_baseline=self.options.create_baseline or self.options.accept,
             directory=self.options.history_dir,
             wanted=wanted,
             recorded=self.options.record,
@@ -161,26 +164,45 @@ class Publisher:
             raise HevvalError(decision.message)
         return [decision.message]
 
-    def regressions(self, result: SpecResult) -> list[Regression]:
+    def regressions(
+        self, result: SpecResult, data: Callable[[], Mapping[str, Any]] | None = None
+    ) -> list[Regression]:
         """Every rule of ``compare-fail`` the result breaks against the baseline; each result
-        is compared once, however many of its signals ask."""
+        is compared once, however many of its signals ask. ``data``: the result's JSON data,
+        where the caller holds it already."""
         if self.baseline is None or not self.rules:
             return []
         found = self._regressions.get(result.spec)
         if found is None:
             from .history import compare, regressions
 
-            found = regressions(compare([result.to_dict()], self.baseline), self.rules)
+            spec = result.to_dict() if data is None else data()
+            found = regressions(compare([spec], self.baseline), self.rules)
             self._regressions[result.spec] = found
         return found
 
     def regressions_for(self, result: SpecResult, signal: str | None) -> list[str]:
-        """Rules of ``compare-fail`` this signal (or Φ, for None) breaks against the baseline."""
+        """Rules of ``compare-fail`` this signal (or Φ, for None) breaks against the baseline,
+        as its item's failure; none under ``accept``, which reports them and fails nothing."""
+        if self.options.accept:
+            return []
         return [
             str(found)
             for found in self.regressions(result)
             if found.signal == signal and (signal is not None or found.field == "phi")
         ]
+
+    def acceptance(self, found: Sequence[Regression]) -> str:
+        """Why this run's record is, or is not, an accepted baseline (``ACCEPTANCE``)."""
+        from .history import acceptance
+
+        return acceptance(
+            compared=self.wants_comparison,
+            baseline_found=self.baseline is not None,
+            regressed=bool(found),
+            create_baseline=self.options.create_baseline,
+            accept=self.options.accept,
+        )
 
     def publish(
         self,
@@ -208,10 +230,15 @@ class Publisher:
                 return [r.to_dict() for r in results]
             return list(dicts() if callable(dicts) else dicts)
 
+        found = [
+            regression
+            for index, result in enumerate(results)
+            for regression in self.regressions(result, functools.partial(_item, data, index))
+        ]
         self._write_reports(data, diagnoses, out)
         self._compare(data, out)
         self._ratchet(data, specs, out)
-        self._record(data, out)
+        self._record(data, self.acceptance(found), out)
         return out
 
     def _relative(self, path: Path | str) -> str:
@@ -330,22 +357,40 @@ class Publisher:
                 continue
             out.notes.append(outcome.summary())
 
-    def _record(self, data: _Data, out: Publication) -> None:
+    def _record(self, data: _Data, acceptance: str, out: Publication) -> None:
         if not self.options.record:
             if self.options.use_history:
                 out.notes.append(NOT_RECORDED)
             return
-        from .history import HistoryStore, make_record
+        from .history import ACCEPTANCE, HistoryStore, make_record, resolve_commit
 
         try:
             path = HistoryStore(self.options.history_dir).append(
-                make_record(data(), model_version=self.model_version, started_utc=self.started)
+                make_record(
+                    data(),
+                    model_version=self.model_version,
+                    started_utc=self.started,
+                    acceptance=acceptance,
+                    commit=resolve_commit(self.options.rootdir),
+                    baseline=self.baseline,
+                )
             )
         except (HevvalError, OSError) as exc:
             out.notes.append(f"history: error: the run was not recorded: {exc}")
             out.failed = True
             return
-        out.notes.append(f"history: recorded {self.model_version} in {self._relative(path)}")
+        accepted = (
+            f"accepted as a baseline: {acceptance}"
+            if ACCEPTANCE[acceptance]
+            else f"not accepted as a baseline: {acceptance}"
+        )
+        out.notes.append(
+            f"history: recorded {self.model_version} in {self._relative(path)} ({accepted})"
+        )
+
+
+def _item(data: _Data, index: int) -> dict[str, Any]:
+    return data()[index]
 
 
 def diagnosis_panels(

@@ -78,9 +78,14 @@ def spec(
 
 
 def record(
-    version: str, when: datetime, specs: list[dict[str, Any]] | None = None
+    version: str,
+    when: datetime,
+    specs: list[dict[str, Any]] | None = None,
+    acceptance: str = "not-compared",
 ) -> dict[str, Any]:
-    return h.make_record(specs or [spec()], model_version=version, started_utc=when)
+    return h.make_record(
+        specs or [spec()], model_version=version, started_utc=when, acceptance=acceptance
+    )
 
 
 # -- records --------------------------------------------------------------------------------
@@ -90,7 +95,7 @@ def test_make_record_carries_versions_hashes_and_values() -> None:
     rec = h.make_record(
         [spec()], model_version=" v1.2 ", tool_versions={"fmpy": "0.3"}, started_utc=T0
     )
-    assert rec["schema_version"] == h.SCHEMA_VERSION == 3
+    assert rec["schema_version"] == h.SCHEMA_VERSION == 4
     assert rec["model_version"] == "v1.2"
     assert rec["started_utc"] == "2024-05-01T12:00:00.000000Z"
     assert {"pytest-hevval", "numpy", "scipy", "python", "fmpy"} <= set(rec["tool_versions"])
@@ -225,9 +230,10 @@ def _names() -> tuple[str, ...]:
     return CHARACTERISTICS
 
 
-def test_migrate_schema_1_to_3() -> None:
+def test_migrate_schema_1_to_4() -> None:
     migrated = h.migrate_record(v1_record())
-    assert migrated["schema_version"] == 3
+    assert migrated["schema_version"] == 4
+    assert (migrated["accepted"], migrated["acceptance"]) == (True, "earlier-schema")
     assert migrated["model_version"] == "v0.9"
     assert migrated["started_utc"] == "2024-04-30T12:00:00.000000Z"
     assert migrated["tool_versions"] == {"pytest-hevval": "0.0.9"}
@@ -236,9 +242,127 @@ def test_migrate_schema_1_to_3() -> None:
     )
 
 
-def test_migrate_schema_3_is_identity_after_validation() -> None:
+def test_migrate_schema_4_is_identity_after_validation() -> None:
     rec = record("v1", T0)
     assert h.migrate_record(json.loads(json.dumps(rec))) == rec
+
+
+def test_a_schema_3_record_reads_as_an_accepted_baseline() -> None:
+    schema3 = {
+        key: value
+        for key, value in record("v1", T0).items()
+        if key not in ("accepted", "acceptance", "commit", "baseline")
+    }
+    migrated = h.migrate_record({**schema3, "schema_version": 3}, file="old.json")
+    assert migrated == {
+        **record("v1", T0),
+        "tool_versions": schema3["tool_versions"],
+        "accepted": True,
+        "acceptance": "earlier-schema",
+    }
+
+
+@pytest.mark.parametrize(("reason", "accepted"), sorted(h.ACCEPTANCE.items()))
+def test_a_record_says_whether_it_is_an_accepted_baseline(reason: str, accepted: bool) -> None:
+    baseline = h.make_record([spec()], model_version="v0", started_utc=T0, commit="abc123")
+    rec = h.make_record(
+        [spec()],
+        model_version="v1",
+        started_utc=T0 + timedelta(hours=1),
+        acceptance=reason,
+        commit="def456",
+        baseline=baseline,
+    )
+    assert (rec["accepted"], rec["acceptance"]) == (accepted, reason)
+    assert rec["commit"] == "def456"
+    assert rec["baseline"] == {
+        "model_version": "v0",
+        "started_utc": "2024-05-01T12:00:00.000000Z",
+        "commit": "abc123",
+    }
+    assert h.migrate_record(json.loads(json.dumps(rec))) == rec
+
+
+def test_acceptance_that_contradicts_its_reason_names_the_file_and_key() -> None:
+    rec = {**record("v1", T0), "acceptance": "regressed"}  # still "accepted": true
+    with pytest.raises(h.HistoryError, match="acceptance 'regressed' means False") as info:
+        h.migrate_record(rec, file="r.json")
+    assert (info.value.file, info.value.key) == ("r.json", "accepted")
+    with pytest.raises(h.HistoryError, match="unknown acceptance 'fine'"):
+        h.migrate_record({**rec, "acceptance": "fine"}, file="r.json")
+    with pytest.raises(h.HistoryError, match="unknown acceptance"):
+        h.make_record([spec()], model_version="v1", started_utc=T0, acceptance="fine")
+
+
+@pytest.mark.parametrize(
+    ("compared", "found", "regressed", "create", "accept", "reason"),
+    [
+        (False, False, False, False, False, "not-compared"),
+        (True, True, False, False, False, "no-regression"),
+        (True, True, True, False, False, "regressed"),
+        (True, True, True, True, False, "regressed"),
+        (True, False, False, False, False, "no-baseline"),
+        (True, False, False, True, False, "first-baseline"),
+        (True, True, True, False, True, "manual"),
+        (True, False, False, False, True, "manual"),
+        (False, False, False, False, True, "manual"),
+    ],
+)
+def test_acceptance_rule(
+    compared: bool, found: bool, regressed: bool, create: bool, accept: bool, reason: str
+) -> None:
+    assert (
+        h.acceptance(
+            compared=compared,
+            baseline_found=found,
+            regressed=regressed,
+            create_baseline=create,
+            accept=accept,
+        )
+        == reason
+    )
+
+
+def test_the_newest_accepted_record_is_found_without_reading_the_others(
+    tmp_path: Path, reads: list[str]
+) -> None:
+    from pytest_hevval.history import index as history_index
+
+    store = h.HistoryStore(tmp_path)
+    for hour, (version, reason) in enumerate(
+        [("v1", "no-regression"), ("v2", "regressed"), ("v3", "no-baseline")]
+    ):
+        store.append(
+            h.make_record(
+                [spec()],
+                model_version=version,
+                started_utc=T0 + timedelta(hours=hour),
+                acceptance=reason,
+            )
+        )
+    assert store.latest()["model_version"] == "v3"  # latest keeps its meaning
+    store.trends()  # builds the index
+    index = history_index.load_index(tmp_path)
+    assert index is not None
+    assert {e.model_version: e.accepted for e in index.records.values()} == {
+        "v1": True,
+        "v2": False,
+        "v3": False,
+    }
+    reads.clear()
+    assert store.accepted()["model_version"] == "v1"
+    assert [name.split("_")[1] for name in reads] == ["v1"]
+    specs, label = h.load_side("history:accepted", tmp_path)
+    assert (label, specs[0]["phi"]) == ("v1", spec()["phi"])
+
+
+def test_history_accepted_names_what_to_do_when_nothing_is_accepted(tmp_path: Path) -> None:
+    h.HistoryStore(tmp_path).append(
+        h.make_record([spec()], model_version="v1", started_utc=T0, acceptance="regressed")
+    )
+    with pytest.raises(h.HistoryError, match=r"no record in .* is accepted") as info:
+        h.load_side("history:accepted", tmp_path)
+    assert "--hevval-accept" in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -491,12 +615,13 @@ def full_answers(directory: Path, limit: int, versions: list[str]) -> dict[str, 
             for v in versions
         },
         "versions": list(dict.fromkeys(e.record["model_version"] for e in entries)),
+        "accepted": next((e.record for e in newest if e.record["accepted"]), None),
         "problems": [(p.path.name, p.message) for p in store.problems],
         "middle": middle,
     }
 
 
-QUERIES = ("trends", "latest", "before", "newest2", "found", "versions")
+QUERIES = ("trends", "latest", "before", "newest2", "found", "versions", "accepted")
 
 
 def index_answers(
@@ -524,6 +649,8 @@ def index_answers(
             return [e.path.name for e in store.newest(2)], store.problems
         if query == "found":
             return {v: store.find(v) for v in versions}, store.problems
+        if query == "accepted":
+            return store.accepted(), store.problems
         return store.versions(), store.problems
 
     answers: dict[str, Any] = {"middle": middle}
@@ -566,7 +693,10 @@ def two_signal_record(
     signals = [signal("E_batt/P_batt", lambdas=[phi] * 7), signal("E_batt/U_batt")]
     if extra:
         signals.append(signal("E_batt/I_batt", lambdas=[phi / 2] * 7))
-    return record(version, when, [spec(phi=phi, signals=signals), spec("B", path="b.hevval.yaml")])
+    # Every fourth hour's run regressed: not every record is an accepted baseline.
+    acceptance = "regressed" if when.hour % 4 == 3 else "no-regression"
+    specs = [spec(phi=phi, signals=signals), spec("B", path="b.hevval.yaml")]
+    return record(version, when, specs, acceptance)
 
 
 def fill(directory: Path, count: int, start: int = 0) -> list[Path]:

@@ -228,7 +228,10 @@ def test_cli_and_pytest_publish_the_same(project: pytest.Pytester) -> None:
     for record in (*records["from-pytest"], *records["from-cli"]):
         for key in RUN_METADATA:
             record.pop(key)
+        if record["baseline"] is not None:  # each side's own v0, recorded at its own time
+            record["baseline"].pop("started_utc")
     assert records["from-cli"] == records["from-pytest"]
+    assert [r["acceptance"] for r in records["from-cli"]] == ["not-compared", "regressed"]
     assert [r["model_version"] for r in records["from-cli"]] == ["v0", "v1"]
 
 
@@ -273,3 +276,28 @@ def test_cli_compares_and_ratchets_as_pytest_does(
     pytest_lines = result.outlines
     for line in table:
         assert line in pytest_lines, line
+
+
+def test_cli_accepts_a_run_by_hand_and_compares_with_the_accepted_record(
+    project: pytest.Pytester, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`hevval run --accept` records an accepted baseline where none was; the next run compares
+    with it and is accepted, and `hevval compare history:accepted` names the newest accepted
+    record."""
+    run = ["run", "pack.hevval.yaml", "--history", "--quiet", "--compare", "accepted"]
+    assert cli.main([*run, "--model-version=v1", "--accept"]) == 0
+    assert "(accepted as a baseline: manual)" in capsys.readouterr().out
+    assert cli.main([*run, "--model-version=v2", "--compare-fail", "phi:0.01"]) == 0
+    assert "(accepted as a baseline: no-regression)" in capsys.readouterr().out
+    records = [
+        json.loads(p.read_text()) for p in sorted((project.path / ".hevval/history").glob("*.json"))
+    ]
+    assert [(r["model_version"], r["acceptance"]) for r in records] == [
+        ("v1", "manual"),
+        ("v2", "no-regression"),
+    ]
+    assert records[1]["baseline"]["model_version"] == "v1"
+    compared = ["compare", "history:accepted", "history:previous", "--format", "json"]
+    assert cli.main(compared) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert (document["comparison"]["before"], document["comparison"]["after"]) == ("v2", "v1")

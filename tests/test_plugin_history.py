@@ -69,15 +69,20 @@ def test_model_version_from_environment(
     assert records(project.path)[0]["model_version"] == "from-env"
 
 
-def test_gate_fails_on_regression_that_still_passes_thresholds(project: pytest.Pytester) -> None:
-    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
-    # A small extra error in the current: still far above the 0.97 MAE threshold.
+def worsen(root: Path) -> None:
+    """A small extra error in the model's current: still far above the 0.97 MAE threshold,
+    but a drop of λ3 that ``lambda:0.002`` fails."""
     import pandas as pd
 
-    frame = pd.read_csv(project.path / "data" / "sim.csv")
+    frame = pd.read_csv(root / "data" / "sim.csv")
     frame["I"] = frame["I"] + 0.8
     frame["P"] = frame["V"] * frame["I"]
-    frame.to_csv(project.path / "data" / "sim.csv", index=False)
+    frame.to_csv(root / "data" / "sim.csv", index=False)
+
+
+def test_gate_fails_on_regression_that_still_passes_thresholds(project: pytest.Pytester) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    worsen(project.path)
     plain = project.runpytest("--hevval", "--hevval-no-history")
     plain.assert_outcomes(passed=6)
     gated = project.runpytest(
@@ -211,3 +216,104 @@ def test_report_trends_show_the_newest_recorded_runs_of_a_long_history(
     assert len(expected) == TREND_RUNS + 1
     for trend in report_trends(project.path).values():
         assert [point["version"] for point in trend] == expected
+
+
+def acceptance_of(root: Path) -> list[tuple[str, bool, str]]:
+    return [(r["model_version"], r["accepted"], r["acceptance"]) for r in records(root)]
+
+
+GATE = "--hevval-compare-fail=lambda:0.002"
+
+
+def test_a_regressed_run_is_recorded_but_never_becomes_the_accepted_baseline(
+    project: pytest.Pytester,
+) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    worsen(project.path)
+    project.runpytest(
+        "--hevval", "--hevval-model-version=worse", "--hevval-compare=accepted", GATE
+    ).assert_outcomes(passed=3, failed=3)
+    # The same model again: against the newest accepted record it fails again.
+    accepted = project.runpytest(
+        "--hevval", "--hevval-model-version=again", "--hevval-compare=accepted", GATE
+    )
+    accepted.assert_outcomes(passed=3, failed=3)
+    accepted.stdout.fnmatch_lines(
+        ["compare good → again", "*(not accepted as a baseline: regressed)"]
+    )
+    # Against "latest", the newest record whatever it is, the regressed model finds itself.
+    latest = project.runpytest(
+        "--hevval", "--hevval-model-version=last", "--hevval-compare=latest", GATE
+    )
+    latest.assert_outcomes(passed=6)
+    latest.stdout.fnmatch_lines(["compare again → last"])
+    assert acceptance_of(project.path) == [
+        ("good", True, "not-compared"),
+        ("worse", False, "regressed"),
+        ("again", False, "regressed"),
+        ("last", True, "no-regression"),
+    ]
+    baselines = [r["baseline"] and r["baseline"]["model_version"] for r in records(project.path)]
+    assert baselines == [None, "good", "good", "again"]
+
+
+def test_accept_records_a_regression_as_the_baseline_and_reports_it(
+    project: pytest.Pytester,
+) -> None:
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    worsen(project.path)
+    result = project.runpytest(
+        "--hevval",
+        "--hevval-model-version=worse",
+        "--hevval-compare=accepted",
+        GATE,
+        "--hevval-accept",
+    )
+    # Accepting the regressions is the point: they are reported, and fail nothing.
+    result.assert_outcomes(passed=6)
+    result.stdout.fnmatch_lines(
+        [
+            "*regression(s):",
+            "  pack.hevval.yaml::E/P/I: λ3 mae dropped *",
+            "*(accepted as a baseline: manual)",
+        ]
+    )
+    # The accepted regression is the new baseline: the same model passes against it.
+    project.runpytest(
+        "--hevval", "--hevval-model-version=next", "--hevval-compare=accepted", GATE
+    ).assert_outcomes(passed=6)
+    assert acceptance_of(project.path) == [
+        ("good", True, "not-compared"),
+        ("worse", True, "manual"),
+        ("next", True, "no-regression"),
+    ]
+
+
+def test_a_missing_baseline_is_recorded_unaccepted_unless_created(
+    project: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    project.runpytest(
+        "--hevval", "--hevval-model-version=first", "--hevval-compare=accepted"
+    ).assert_outcomes(passed=6)
+    monkeypatch.setenv("CI", "true")
+    failed = project.runpytest("--hevval", "--hevval-compare=accepted", GATE)
+    assert failed.ret == pytest.ExitCode.USAGE_ERROR
+    failed.stderr.fnmatch_lines(["*no accepted baseline record in *history; comparison needs*"])
+    project.runpytest(
+        "--hevval",
+        "--hevval-model-version=base",
+        "--hevval-compare=accepted",
+        GATE,
+        "--hevval-create-baseline",
+    ).assert_outcomes(passed=6)
+    assert acceptance_of(project.path) == [
+        ("first", False, "no-baseline"),
+        ("base", True, "first-baseline"),
+    ]
+
+
+def test_accept_is_given_on_the_command_line_only(project: pytest.Pytester) -> None:
+    project.makeini("[pytest]\nhevval_history = true\nhevval_accept = true\n")
+    result = project.runpytest("--hevval", "--hevval-model-version=v1", "--hevval-compare")
+    result.assert_outcomes(passed=6)
+    assert acceptance_of(project.path) == [("v1", False, "no-baseline")]

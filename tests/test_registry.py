@@ -132,7 +132,7 @@ def test_conftest_characteristic_end_to_end(pytester: pytest.Pytester, xdist: bo
 
     records = sorted((pytester.path / ".hevval" / "history").glob("*.json"))
     stored = json.loads(records[-1].read_text())
-    assert stored["schema_version"] == 3
+    assert stored["schema_version"] == 4
     signal = next(s for s in stored["specs"][0]["signals"] if s["path"] == "P/I")
     assert signal["lambdas"]["peak_error"] == current["lambdas"]["peak_error"]
 
@@ -215,7 +215,8 @@ def test_compute_with_components() -> None:
 def test_stored_old_records_migrate_to_keyed_lambdas(stored: str) -> None:
     schema2 = json.loads((DATA / "schema2_camry_hwfet.json").read_text())
     migrated = migrate_record(json.loads((DATA / stored).read_text()), file=stored)
-    assert migrated["schema_version"] == 3
+    assert migrated["schema_version"] == 4
+    assert (migrated["accepted"], migrated["acceptance"]) == (True, "earlier-schema")
     assert migrated["model_version"] == "v1.0"
     assert migrated["started_utc"] == schema2["started_utc"]
     for old_spec, new_spec in zip(schema2["specs"], migrated["specs"], strict=True):

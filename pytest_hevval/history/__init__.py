@@ -15,6 +15,7 @@ from .compare import (
     Rule,
     SignalComparison,
     SpecComparison,
+    acceptance,
     compare,
     is_ci,
     missing_baseline,
@@ -39,6 +40,7 @@ from .ratchet import (
     write_sidecar,
 )
 from .records import (
+    ACCEPTANCE,
     MODEL_VERSION_ENV,
     SCHEMA_VERSION,
     default_tool_versions,
@@ -46,6 +48,7 @@ from .records import (
     make_record,
     migrate_record,
     parse_utc,
+    resolve_commit,
     resolve_model_version,
     validate_record,
 )
@@ -62,6 +65,7 @@ from .trends import (
 )
 
 __all__ = [
+    "ACCEPTANCE",
     "DEFAULT_HISTORY_DIR",
     "DEFAULT_MARGIN",
     "ERROR_FIELDS",
@@ -84,6 +88,7 @@ __all__ = [
     "StoreProblem",
     "StoredRecord",
     "Thresholds",
+    "acceptance",
     "compare",
     "comparison_json",
     "comparison_markdown",
@@ -111,6 +116,7 @@ __all__ = [
     "render_history_table",
     "render_sidecar",
     "report_problems",
+    "resolve_commit",
     "resolve_model_version",
     "sidecar_path",
     "slugify",

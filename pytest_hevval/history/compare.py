@@ -48,6 +48,7 @@ __all__ = [
     "Rule",
     "SignalComparison",
     "SpecComparison",
+    "acceptance",
     "campaign_change_lines",
     "campaign_changes",
     "compare",
@@ -923,13 +924,19 @@ def missing_baseline(
 ) -> BaselineDecision:
     """Decide what a missing baseline means: a failure in CI, a note locally.
 
-    ``--hevval-create-baseline`` turns both into "record this run as the baseline".
+    ``--hevval-create-baseline`` (and ``--hevval-accept``) turns both into "record this run
+    as the baseline".
     """
-    what = "no baseline record" if wanted == "latest" else f"no record of model version {wanted!r}"
+    what = {
+        "latest": "no baseline record",
+        "accepted": "no accepted baseline record",
+    }.get(wanted, f"no record of model version {wanted!r}")
     where = f"{what} in {directory}"
     if create_baseline:
         return BaselineDecision(
-            "record", f"{where}; this run is recorded as the baseline (--hevval-create-baseline)"
+            "record",
+            f"{where}; this run is recorded as the baseline "
+            "(--hevval-create-baseline or --hevval-accept)",
         )
     if ci:
         return BaselineDecision(
@@ -947,3 +954,22 @@ def missing_baseline(
         "note",
         f"{where}; nothing to compare against yet (the next run compares against this one)",
     )
+
+
+def acceptance(
+    *, compared: bool, baseline_found: bool, regressed: bool, create_baseline: bool, accept: bool
+) -> str:
+    """Why a run's record is, or is not, an accepted baseline (a key of ``ACCEPTANCE``).
+
+    ``--hevval-accept`` accepts whatever the comparison found; a run that compared nothing is
+    accepted, as every run was before records carried acceptance. A run that asked for a
+    comparison is accepted when it found a baseline and broke no rule of compare-fail, or when
+    it found none and ``--hevval-create-baseline`` made it the first.
+    """
+    if accept:
+        return "manual"
+    if not compared:
+        return "not-compared"
+    if not baseline_found:
+        return "first-baseline" if create_baseline else "no-baseline"
+    return "regressed" if regressed else "no-regression"

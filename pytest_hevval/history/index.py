@@ -3,9 +3,9 @@
 The records stay the only truth; this is what was learnt from them, kept in
 ``<history folder>/.index/index`` beside a ``.gitignore`` that keeps it out of git:
 
-* for every record file: its name, its size, its start time and model version, so that the
-  baseline (the newest record, or the newest of a version) is found without reading any
-  record and then read alone;
+* for every record file: its name, its size, its start time, model version and whether it is
+  an accepted baseline, so that the baseline (the newest record, the newest accepted one, or
+  the newest of a version) is found without reading any record and then read alone;
 * for every file that is not a record: its name, size and why, so that it is listed again
   without being read again;
 * for every (spec, signal): the points of its trend in the HTML report, the newest
@@ -64,7 +64,7 @@ _GITIGNORE = (
 TREND_RUNS = 20
 _FORMAT = "pytest-hevval history index"
 # Raise when what the index holds, or how it is read, changes: older indexes are rebuilt.
-_INDEX_VERSION = 1
+_INDEX_VERSION = 2
 _EPOCH = datetime(1, 1, 1, tzinfo=timezone.utc)
 _MICROSECOND = timedelta(microseconds=1)
 
@@ -89,6 +89,7 @@ class IndexedRecord(NamedTuple):
     size: int
     started_us: int
     model_version: str
+    accepted: bool
 
     @property
     def order(self) -> tuple[int, str]:
@@ -100,6 +101,7 @@ class IndexedRecord(NamedTuple):
         return (
             record["model_version"] == self.model_version
             and micros(parse_utc(record["started_utc"])) == self.started_us
+            and record["accepted"] is self.accepted
         )
 
 
@@ -163,7 +165,11 @@ class HistoryIndex:
     def add(self, name: str, size: int, record: Mapping[str, Any]) -> None:
         """Index a validated record read from (or just written to) the file ``name``."""
         entry = IndexedRecord(
-            name, size, micros(parse_utc(record["started_utc"])), record["model_version"]
+            name,
+            size,
+            micros(parse_utc(record["started_utc"])),
+            record["model_version"],
+            record["accepted"],
         )
         self.records[name] = entry
         for key, values in trend_values(record).items():
@@ -248,6 +254,7 @@ class HistoryIndex:
                 "size": [e.size for e in self.records.values()],
                 "started_us": [e.started_us for e in self.records.values()],
                 "model_version": [e.model_version for e in self.records.values()],
+                "accepted": [e.accepted for e in self.records.values()],
             },
             "unreadable": {
                 "name": list(self.unreadable),
@@ -275,13 +282,18 @@ class HistoryIndex:
         for key, value in expected.items():
             _check(document.get(key) == value, f"{key} is not {value!r}")
         index = cls(trend_runs)
-        names, sizes, started, versions = _columns(
-            document.get("records"), "name", "size", "started_us", "model_version"
+        names, sizes, started, versions, accepted = _columns(
+            document.get("records"), "name", "size", "started_us", "model_version", "accepted"
         )
         _check(_all(names, str) and all(names) and _all(versions, str) and all(versions), "a name")
         _check(_all(sizes, int) and min(sizes, default=0) >= 0 and _all(started, int), "a number")
+        _check(_all(accepted, bool), "an acceptance")
         index.records = dict(
-            zip(names, map(IndexedRecord, names, sizes, started, versions), strict=True)
+            zip(
+                names,
+                map(IndexedRecord, names, sizes, started, versions, accepted),
+                strict=True,
+            )
         )
         _check(len(index.records) == len(names), "a record listed twice")
         names, sizes, messages = _columns(document.get("unreadable"), "name", "size", "message")

@@ -16,10 +16,22 @@ from .compare import specs_of
 from .records import migrate_record
 from .store import HistoryStore
 
-__all__ = ["HISTORY_PREFIX", "load_side", "report_problems"]
+__all__ = ["HISTORY_PREFIX", "NAMED_BASELINES", "baseline_record", "load_side", "report_problems"]
 
 #: How a compare operand names a recorded run.
 HISTORY_PREFIX = "history:"
+#: The records ``--hevval-compare`` and ``history:`` name by a word, not a model version: the
+#: newest record, and the newest record accepted as a baseline.
+NAMED_BASELINES = ("latest", "accepted")
+
+
+def baseline_record(store: HistoryStore, wanted: str) -> dict[str, Any] | None:
+    """The record ``wanted`` names: ``latest``, ``accepted`` or a model version."""
+    if wanted == "latest":
+        return store.latest()
+    if wanted == "accepted":
+        return store.accepted()
+    return store.find(wanted)
 
 
 def report_problems(store: HistoryStore) -> None:
@@ -32,24 +44,31 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
     """Resolve a compare operand to (spec results, label).
 
     ``ref`` is ``history:latest``, ``history:previous`` (the record before the latest),
+    ``history:accepted`` (the newest record accepted as a baseline),
     ``history:<model version>`` (looked up in ``directory``),
     a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
     """
     if ref.startswith(HISTORY_PREFIX):
         wanted = ref[len(HISTORY_PREFIX) :]
         store = HistoryStore(directory)
-        if wanted in ("latest", "previous"):
-            count = 1 if wanted == "latest" else 2
-            newest = store.newest(count)
-            record = newest[-1].record if len(newest) == count else None
+        if wanted == "previous":
+            newest = store.newest(2)
+            record = newest[-1].record if len(newest) == 2 else None
         else:
-            record = store.find(wanted)
+            record = baseline_record(store, wanted)
         report_problems(store)
         if record is None and wanted == "previous" and store.versions():
             raise HistoryError(
                 f"only one readable record in {directory}",
                 key=ref,
                 hint="history:previous needs two recorded runs",
+            )
+        if record is None and wanted == "accepted" and store.versions():
+            raise HistoryError(
+                f"no record in {directory} is accepted as a baseline",
+                key=ref,
+                hint="accept a run with --hevval-accept (hevval run --accept), or compare "
+                "with history:latest",
             )
         if record is None:
             versions = store.versions()

@@ -2,14 +2,16 @@
 
 A record is plain JSON (see ``docs/history.md``)::
 
-    {"schema_version": 3, "model_version": "v1.4-3-gabc123", "started_utc": "...Z",
+    {"schema_version": 4, "model_version": "v1.4-3-gabc123", "started_utc": "...Z",
+     "commit": "<git commit>" | null, "accepted": true, "acceptance": "no-regression",
+     "baseline": {"model_version": ..., "started_utc": ..., "commit": ...} | null,
      "tool_versions": {"pytest-hevval": "...", "numpy": "...", "scipy": "...", "python": "..."},
      "specs": [<spec result>, ...]}
 
 Each signal's ``lambdas`` and each spec's ``weights`` map characteristic name to value.
-Schema 2 (λ values and weights as lists in paper order) and schema 1 (``version``,
-``timestamp`` in POSIX seconds, ``tools``, ``results``) are migrated on read; records are never
-rewritten on disk.
+Schema 3 (no acceptance, commit or baseline: read as accepted), schema 2 (λ values and weights
+as lists in paper order) and schema 1 (``version``, ``timestamp`` in POSIX seconds, ``tools``,
+``results``) are migrated on read; records are never rewritten on disk.
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from ..results.spec_result import ERROR_KEYS, MEASURED_NUMBERS
 from ._base import HistoryError
 
 __all__ = [
+    "ACCEPTANCE",
+    "EARLIER_SCHEMA",
     "MODEL_VERSION_ENV",
     "SCHEMA_VERSION",
     "default_tool_versions",
@@ -37,11 +41,25 @@ __all__ = [
     "migrate_record",
     "parse_utc",
     "record_time",
+    "resolve_commit",
     "resolve_model_version",
     "validate_record",
 ]
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
+#: Why a run was, or was not, accepted as a baseline (its record's ``acceptance``), and
+#: whether it was (its ``accepted``): one table, so the two fields never disagree.
+ACCEPTANCE: dict[str, bool] = {
+    "not-compared": True,  # the run asked for no comparison
+    "no-regression": True,  # compared with a baseline; no rule of compare-fail broken
+    "first-baseline": True,  # no baseline yet, and --hevval-create-baseline made this one
+    "manual": True,  # --hevval-accept, whatever the comparison found
+    "earlier-schema": True,  # written before records carried acceptance (schema 1 to 3)
+    "regressed": False,  # broke a rule of compare-fail against the baseline
+    "no-baseline": False,  # asked for a comparison and found nothing to compare with
+}
+#: The acceptance of a record written before records carried one.
+EARLIER_SCHEMA = "earlier-schema"
 MODEL_VERSION_ENV = "HEVVAL_MODEL_VERSION"
 _GIT_TIMEOUT_S = 5.0
 
@@ -151,9 +169,15 @@ def resolve_model_version(cli_value: str | None, env: Mapping[str, str], cwd: Pa
     for candidate in (cli_value, env.get(MODEL_VERSION_ENV)):
         if candidate is not None and candidate.strip():
             return candidate.strip()
+    return _git(cwd, "describe", "--always", "--dirty") or UNKNOWN_MODEL_VERSION
+
+
+def _git(cwd: Path, *arguments: str) -> str | None:
+    """What ``git ARGUMENTS`` prints in ``cwd``, or ``None`` when it cannot say (not a git
+    checkout, git missing, or git too slow)."""
     try:
         completed = subprocess.run(
-            ["git", "describe", "--always", "--dirty"],
+            ["git", *arguments],
             cwd=cwd,
             capture_output=True,
             text=True,
@@ -161,11 +185,23 @@ def resolve_model_version(cli_value: str | None, env: Mapping[str, str], cwd: Pa
             check=False,
         )
     except (OSError, subprocess.SubprocessError):
-        return UNKNOWN_MODEL_VERSION
-    described = completed.stdout.strip()
-    if completed.returncode != 0 or not described:
-        return UNKNOWN_MODEL_VERSION
-    return described
+        return None
+    printed = completed.stdout.strip()
+    return printed if completed.returncode == 0 and printed else None
+
+
+def resolve_commit(cwd: Path) -> str | None:
+    """The git commit checked out in ``cwd`` (``git rev-parse HEAD``), or ``None``."""
+    return _git(cwd, "rev-parse", "--verify", "-q", "HEAD")
+
+
+def baseline_summary(record: Mapping[str, Any]) -> dict[str, Any]:
+    """What a record keeps of the baseline its run was compared with."""
+    return {
+        "model_version": record["model_version"],
+        "started_utc": record["started_utc"],
+        "commit": record.get("commit"),
+    }
 
 
 def make_record(
@@ -174,11 +210,16 @@ def make_record(
     model_version: str,
     tool_versions: Mapping[str, str] | None = None,
     started_utc: datetime,
+    acceptance: str = "not-compared",
+    commit: str | None = None,
+    baseline: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Build a schema-2 history record from the run's spec results.
+    """Build a history record from the run's spec results.
 
     ``tool_versions`` is laid over :func:`default_tool_versions`, so the versions of
     pytest-hevval, numpy and scipy are always present. Non-finite numbers become ``null``.
+    ``acceptance`` is a key of :data:`ACCEPTANCE`; ``baseline`` the record the run was
+    compared with, if any.
     """
     if not isinstance(model_version, str) or not model_version.strip():
         raise HistoryError(
@@ -188,20 +229,29 @@ def make_record(
     versions = default_tool_versions()
     versions.update({str(k): str(v) for k, v in (tool_versions or {}).items()})
     specs = [_normalise_spec(spec, f"specs[{i}]", None) for i, spec in enumerate(spec_results)]
-    return {
+    record = {
         "schema_version": SCHEMA_VERSION,
         "model_version": model_version.strip(),
         "started_utc": format_utc(started_utc),
+        "commit": commit,
+        "accepted": ACCEPTANCE.get(acceptance),
+        "acceptance": acceptance,
+        "baseline": None if baseline is None else baseline_summary(baseline),
         "tool_versions": versions,
         "specs": specs,
     }
+    _check_acceptance(record, None)
+    return record
 
 
 def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
     """Return ``document`` as a validated schema-3 record, migrating older layouts.
 
-    Schema 2 differs from 3 only in that each signal's ``lambdas`` and each spec's ``weights``
-    were lists in paper order (λ1…λ7) rather than mappings by characteristic name.
+    Schema 3 differs from 4 in that it has no ``accepted``, ``acceptance``, ``commit`` or
+    ``baseline``: such a record is read as accepted (acceptance ``earlier-schema``), as every
+    record was a baseline then. Schema 2 differs from 3 only in that each signal's ``lambdas``
+    and each spec's ``weights`` were lists in paper order (λ1…λ7) rather than mappings by
+    characteristic name.
     Schema 1 differs from 2 in four places: ``version`` → ``model_version``; ``timestamp``
     (POSIX seconds) → ``started_utc`` (ISO 8601 UTC); ``tools`` → ``tool_versions``;
     ``results`` → ``specs``; and each signal's ``lambdas`` was a mapping by characteristic name
@@ -216,10 +266,13 @@ def migrate_record(document: Any, *, file: str | None = None) -> dict[str, Any]:
     version = document.get("schema_version")
     if version == SCHEMA_VERSION:
         return validate_record(document, file=file)
+    if version == 3:
+        return validate_record(_migrate_3_to_4(document), file=file)
     if version == 2:
-        return validate_record(_migrate_2_to_3(document), file=file)
+        return validate_record(_migrate_3_to_4(_migrate_2_to_3(document)), file=file)
     if version == 1:
-        return validate_record(_migrate_2_to_3(_migrate_1_to_2(document, file)), file=file)
+        migrated = _migrate_3_to_4(_migrate_2_to_3(_migrate_1_to_2(document, file)))
+        return validate_record(migrated, file=file)
     if isinstance(version, int) and not isinstance(version, bool) and version > SCHEMA_VERSION:
         raise HistoryError(
             f"schema_version {version} is newer than this pytest-hevval understands "
@@ -310,7 +363,19 @@ def _migrate_2_to_3(old: Mapping[str, Any]) -> dict[str, Any]:
                 for sig in signals
             ]
         specs.append(new_spec)
-    return {**old, "schema_version": SCHEMA_VERSION, "specs": specs if specs else old.get("specs")}
+    return {**old, "schema_version": 3, "specs": specs if specs else old.get("specs")}
+
+
+def _migrate_3_to_4(old: Mapping[str, Any]) -> dict[str, Any]:
+    """Every record before acceptance was a baseline: it reads as accepted."""
+    return {
+        **old,
+        "schema_version": SCHEMA_VERSION,
+        "commit": None,
+        "accepted": ACCEPTANCE[EARLIER_SCHEMA],
+        "acceptance": EARLIER_SCHEMA,
+        "baseline": None,
+    }
 
 
 def _paper_order(values: list[Any]) -> Any:
@@ -321,7 +386,8 @@ def _paper_order(values: list[Any]) -> Any:
 
 
 def validate_record(record: Mapping[str, Any], *, file: str | None = None) -> dict[str, Any]:
-    """Check a schema-3 record and return a normalised copy; errors name the file and key."""
+    """Check a record of the current schema and return a normalised copy; errors name the
+    file and key."""
     if record.get("schema_version") != SCHEMA_VERSION:
         raise HistoryError(
             f"expected schema_version {SCHEMA_VERSION} (got {record.get('schema_version')!r})",
@@ -356,12 +422,64 @@ def validate_record(record: Mapping[str, Any], *, file: str | None = None) -> di
             key="specs",
             hint=_HINT_CORRUPT,
         )
+    _check_acceptance(record, file)
+    commit = record.get("commit")
+    if commit is not None and (not isinstance(commit, str) or not commit):
+        raise HistoryError(
+            f"expected a commit string or null (got {commit!r})",
+            file=file,
+            key="commit",
+            hint=_HINT_CORRUPT,
+        )
     return {
         "schema_version": SCHEMA_VERSION,
         "model_version": model_version,
         "started_utc": format_utc(started),
+        "commit": commit,
+        "accepted": record["accepted"],
+        "acceptance": record["acceptance"],
+        "baseline": _checked_baseline(record.get("baseline"), file),
         "tool_versions": dict(tools),
         "specs": [_normalise_spec(spec, f"specs[{i}]", file) for i, spec in enumerate(specs)],
+    }
+
+
+def _check_acceptance(record: Mapping[str, Any], file: str | None) -> None:
+    """``acceptance`` is a known reason and ``accepted`` says what that reason means."""
+    reason = record.get("acceptance")
+    if reason not in ACCEPTANCE:
+        raise HistoryError(
+            f"unknown acceptance {reason!r}; expected one of {', '.join(ACCEPTANCE)}",
+            file=file,
+            key="acceptance",
+            hint=_HINT_CORRUPT if file else "pass a key of ACCEPTANCE",
+        )
+    if record.get("accepted") is not ACCEPTANCE[reason]:
+        raise HistoryError(
+            f"accepted is {record.get('accepted')!r} but acceptance {reason!r} means "
+            f"{ACCEPTANCE[reason]}",
+            file=file,
+            key="accepted",
+            hint=_HINT_CORRUPT,
+        )
+
+
+def _checked_baseline(raw: Any, file: str | None) -> dict[str, Any] | None:
+    if raw is None:
+        return None
+    if not isinstance(raw, Mapping) or not isinstance(raw.get("model_version"), str):
+        raise HistoryError(
+            "expected the baseline's model_version, started_utc and commit, or null",
+            file=file,
+            key="baseline",
+            hint=_HINT_CORRUPT,
+        )
+    started = parse_utc(raw.get("started_utc"), where="baseline.started_utc", file=file)
+    commit = raw.get("commit")
+    return {
+        "model_version": raw["model_version"],
+        "started_utc": format_utc(started),
+        "commit": commit if isinstance(commit, str) and commit else None,
     }
 
 

@@ -25,12 +25,20 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from ..defaults import HISTORY_DIR
 from ..files import fsync_directory, publish, read_json, write_temporary
 from ._base import HistoryError
-from .index import TREND_RUNS, HistoryIndex, IndexStale, load_index, micros, save_index
+from .index import (
+    TREND_RUNS,
+    HistoryIndex,
+    IndexedRecord,
+    IndexStale,
+    load_index,
+    micros,
+    save_index,
+)
 from .records import migrate_record, parse_utc, validate_record
 
 __all__ = ["DEFAULT_HISTORY_DIR", "HistoryStore", "StoreProblem", "StoredRecord", "slugify"]
@@ -171,27 +179,37 @@ class HistoryStore:
         return found[0].record if found else None
 
     def newest(
-        self, count: int, *, version: str | None = None, before: datetime | None = None
+        self,
+        count: int,
+        *,
+        version: str | None = None,
+        before: datetime | None = None,
+        accepted_only: bool = False,
     ) -> list[StoredRecord]:
         """Up to ``count`` records, newest first: of model version ``version`` when given,
-        started strictly before ``before`` when given. Only these records are read."""
+        started strictly before ``before`` when given, accepted as baselines with
+        ``accepted_only``. Only these records are read."""
         if before is not None and before.tzinfo is None:
             raise HistoryError(
                 "latest(before=...) needs a timezone-aware datetime",
                 hint="pass datetime.now(timezone.utc)",
             )
-        limit = None if before is None else micros(before)
-        found = self._pick(self._catalogue(), count, version, limit, strict=True)
+        wanted = _Wanted(version, None if before is None else micros(before), accepted_only)
+        found = self._pick(self._catalogue(), count, wanted, strict=True)
         if found is None:  # a file changed behind the index's back: read every record again
-            found = self._pick(self._catalogue(rebuild=True), count, version, limit, strict=False)
+            found = self._pick(self._catalogue(rebuild=True), count, wanted, strict=False)
         return found or []
+
+    def accepted(self) -> dict[str, Any] | None:
+        """The newest record accepted as a baseline, or ``None``."""
+        found = self.newest(1, accepted_only=True)
+        return found[0].record if found else None
 
     def _pick(
         self,
         index: HistoryIndex,
         count: int,
-        version: str | None,
-        limit: int | None,
+        wanted: _Wanted,
         *,
         strict: bool,
     ) -> list[StoredRecord] | None:
@@ -201,9 +219,7 @@ class HistoryStore:
         for entry in reversed(index.ordered()):
             if len(found) == count:
                 break
-            if version is not None and entry.model_version != version:
-                continue
-            if limit is not None and entry.started_us >= limit:
+            if not wanted.matches(entry):
                 continue
             read = _read(self.directory / entry.name)
             if isinstance(read, StoredRecord) and entry.describes(read.record):
@@ -298,6 +314,22 @@ class HistoryStore:
         if not isinstance(read, StoredRecord):
             raise IndexStale(name)
         return read.record
+
+
+class _Wanted(NamedTuple):
+    """Which records :meth:`HistoryStore.newest` returns."""
+
+    version: str | None
+    #: Started strictly before this time (whole microseconds), when given.
+    limit: int | None
+    accepted_only: bool
+
+    def matches(self, entry: IndexedRecord) -> bool:
+        return (
+            (self.version is None or entry.model_version == self.version)
+            and (self.limit is None or entry.started_us < self.limit)
+            and (entry.accepted or not self.accepted_only)
+        )
 
 
 def _listing(directory: Path) -> dict[str, int | None]:
