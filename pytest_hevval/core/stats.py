@@ -438,6 +438,79 @@ def effective_samples(u: FloatArray, order: int) -> float:
     return float(min(max(eff, 1.0), n))
 
 
+@dataclass(frozen=True)
+class BlockLength:
+    """Politis & White's (2004) automatic block lengths for a bootstrap of the mean of x.
+
+    Attributes
+    ----------
+    stationary:
+        Expected block length for the stationary bootstrap (Politis & Romano 1994).
+    circular:
+        Block length for the circular (and the moving) block bootstrap.
+    variance:
+        γ̂₀, the variance of x (divisor n).
+    long_run_variance:
+        The flat-top lag-window estimate Σ_{|k|≤M} λ(k/M) γ̂_k of Σ_k γ_k, the variance of
+        √n times the mean (it can come out at or below zero on a short, strongly
+        anti-persistent series).
+    bandwidth:
+        M, the lags that estimate used.
+    """
+
+    stationary: float
+    circular: float
+    variance: float
+    long_run_variance: float
+    bandwidth: int
+
+
+def politis_white(x: FloatArray) -> BlockLength:
+    """Block lengths by Politis & White (2004) with the correction of Patton, Politis & White
+    (2009), as ``arch.bootstrap.optimal_block_length`` computes them.
+
+    m̂ is the first lag from which k_n = max(5, ⌊log₁₀ n⌋) consecutive autocorrelations lie
+    within ±2√(log₁₀ n / n), M = 2 max(m̂, 1) (at most √n + k_n), and with the flat-top window
+    λ(t) = min(1, 2(1 − |t|)), Ĝ = Σ_{|k|≤M} λ(k/M)|k|γ̂_k and ĝ = Σ_{|k|≤M} λ(k/M)γ̂_k:
+    b = (2Ĝ² / (c ĝ²))^{1/3} n^{1/3}, c = 2 (stationary) or 4/3 (circular), at most
+    min(3√n, n/3). As in arch, the autocorrelation at lag i divides by the sums of squares of
+    the samples after the first i + 1 and before the last i + 1.
+    """
+    u = np.asarray(x, dtype=np.float64)
+    n = u.shape[0]
+    eps = u - float(np.mean(u))
+    kn = max(5, int(math.log10(n))) if n > 0 else 5
+    m_max = min(math.ceil(math.sqrt(n)) + kn, n - 2)
+    squares = np.cumsum(eps * eps)
+    if n < 3 or m_max < 1 or squares[-1] <= 0.0:
+        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
+    acv = autocovariances(eps[:, None], m_max)[:, 0] / n
+    lags = np.arange(m_max + 1)
+    after = squares[-1] - squares[lags]
+    before = squares[n - lags - 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.abs(acv * n) / np.sqrt(after * before)
+    inside = np.nan_to_num(corr, nan=np.inf) < 2.0 * math.sqrt(math.log10(n) / n)
+    runs = np.convolve(inside.astype(np.int64), np.ones(kn, dtype=np.int64), mode="valid")
+    first = np.flatnonzero(runs[: m_max - kn + 1] == kn)
+    m = min(2 * max(int(first[0]), 1), m_max) if first.shape[0] else m_max
+    k = np.arange(1, m + 1, dtype=np.float64)
+    window = np.minimum(1.0, 2.0 * (1.0 - k / m))
+    g = float(np.sum(2.0 * window * k * acv[1 : m + 1]))
+    long_run = float(acv[0] + np.sum(2.0 * window * acv[1 : m + 1]))
+    b_max = math.ceil(min(3.0 * math.sqrt(n), n / 3.0))
+    if long_run == 0.0:
+        return BlockLength(float(b_max), float(b_max), float(acv[0]), long_run, m)
+    ratio = 2.0 * g * g / (long_run * long_run) * n
+    return BlockLength(
+        stationary=min((ratio / 2.0) ** (1.0 / 3.0), b_max),
+        circular=min((ratio * 0.75) ** (1.0 / 3.0), b_max),
+        variance=float(acv[0]),
+        long_run_variance=long_run,
+        bandwidth=m,
+    )
+
+
 def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> Whiteness:
     """Ljung-Box (1978) portmanteau test of no autocorrelation up to each lag h.
 
