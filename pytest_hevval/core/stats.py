@@ -1,9 +1,11 @@
 """Time-series statistics for regressions on autocorrelated residuals.
 
-Pre-whitening by an AR model chosen by BIC, heteroscedasticity- and autocorrelation-consistent
-(Newey–West) covariances with the Andrews plug-in bandwidth, effective sample sizes and
-degrees of freedom, the Ljung–Box test and the dominant frequencies of a spectrum. Used by
-:mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+Feasible GLS: the data filtered by an AR model of the residual chosen by BIC (Cochrane–Orcutt),
+then heteroscedasticity- and autocorrelation-consistent (Newey–West) covariances with the
+Andrews plug-in bandwidth on the filtered regression; effective sample sizes and degrees of
+freedom, the Ljung–Box test, Politis–White block lengths and the dominant frequencies of a
+spectrum. Used by :mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+``tests/test_stats_reference.py`` checks each against statsmodels or arch.
 """
 
 from __future__ import annotations
@@ -21,8 +23,9 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Highest AR order tried by the pre-whitening filter (chosen by BIC).
 MAX_AR_ORDER = 10
-#: Andrews & Monahan (1992) bound the AR(1) coefficient of the scores so that the plug-in
-#: bandwidth stays finite when pre-whitening leaves a near-unit root.
+#: The AR(1) coefficient of the scores in the Andrews plug-in is bounded, as Andrews & Monahan
+#: (1992) bound their pre-whitening filter's, so that the bandwidth stays finite when the
+#: AR filter leaves a near-unit root.
 RHO_CAP = 0.97
 #: Relative singular-value cut-off of a design matrix whose columns were scaled to unit length:
 #: a direction of X whose singular value is under this fraction of the largest is null. The
