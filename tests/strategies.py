@@ -6,6 +6,7 @@ import numpy as np
 from hypothesis import assume
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from scipy import signal as sps
 
 from pytest_hevval.core.tree import TreeNode
 
@@ -16,7 +17,12 @@ __all__ = [
     "regression_terms",
     "signal_pairs",
     "signal_trees",
+    "time_series",
+    "time_series_of",
 ]
+
+#: The kinds of series the diagnosis's statistics are checked on against statsmodels and arch.
+SERIES_KINDS = ("persistent", "random_walk", "oscillating", "trending", "heavy_tailed")
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
@@ -126,3 +132,47 @@ def regression_terms(
             rows[j] = rng.standard_normal(3) @ latent + 0.3 * rng.standard_normal(n)
     y = rng.standard_normal(3) @ latent + draw(st.floats(-2.0, 2.0)) + rng.standard_normal(n)
     return y, rows
+
+
+def time_series_of(kind: str, n: int, seed: int, parameter: float = 0.5) -> np.ndarray:
+    """One series of ``kind`` (see :data:`SERIES_KINDS`); ``parameter`` in [0, 1] picks where
+    in the kind's range its persistence, oscillation or trend lies.
+
+    persistent: AR(1) with φ from 0.95 to 0.999 (near a unit root); random_walk: its φ = 1;
+    oscillating: AR(2) with complex roots of modulus 0.8–0.97 at 0.2–1.5 rad per sample;
+    trending: a linear trend of 1–10 innovation deviations over the record on AR(1) noise of
+    φ = 0.7; heavy_tailed: Student-t innovations with 3 degrees of freedom, AR(1) with φ from 0
+    to 0.9.
+    """
+    rng = np.random.default_rng(seed)
+    burn = 500
+    if kind == "heavy_tailed":
+        shocks = rng.standard_t(3, size=n + burn)
+    else:
+        shocks = rng.standard_normal(n + burn)
+    if kind == "persistent":
+        ar = [0.95 + 0.049 * parameter]
+    elif kind == "random_walk":
+        return np.cumsum(shocks[:n])
+    elif kind == "oscillating":
+        modulus, angle = 0.8 + 0.17 * parameter, 0.2 + 1.3 * (1.0 - parameter)
+        ar = [2.0 * modulus * np.cos(angle), -(modulus**2)]
+    elif kind == "trending":
+        ar = [0.7]
+    elif kind == "heavy_tailed":
+        ar = [0.9 * parameter]
+    else:
+        raise ValueError(f"unknown kind of series {kind!r}")
+    series = sps.lfilter([1.0], np.concatenate(([1.0], -np.asarray(ar))), shocks)[burn:]
+    if kind == "trending":
+        series = series + (1.0 + 9.0 * parameter) * np.linspace(0.0, 1.0, n)
+    return np.asarray(series, dtype=np.float64)
+
+
+@st.composite
+def time_series(draw: st.DrawFn, min_size: int = 200, max_size: int = 2000) -> np.ndarray:
+    """A persistent, random-walk, oscillating, trending or heavy-tailed series (see
+    :func:`time_series_of`), as residuals of vehicle models are."""
+    kind = draw(st.sampled_from(SERIES_KINDS))
+    n = draw(st.integers(min_size, max_size))
+    return time_series_of(kind, n, draw(st.integers(0, 2**32 - 1)), draw(st.floats(0.0, 1.0)))

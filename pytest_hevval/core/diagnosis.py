@@ -11,10 +11,11 @@ The residual r = reference − simulated is explained, in this order, by
    coefficient is significant under a test that stays valid for strongly autocorrelated
    residuals, with a family-wise correction over the candidates tried.
 
-Significance uses feasible GLS by AR(p) pre-whitening (Cochrane & Orcutt 1949) followed by a
-Newey-West (1987) HAC covariance with the Andrews (1991) plug-in bandwidth, which is the
-pre-whitened HAC estimator of Andrews & Monahan (1992). See ``docs/diagnosis.md`` for the
-formulas and the interpretation of every field.
+Significance uses feasible GLS: the data are filtered by an AR(p) model of the residual
+(Cochrane & Orcutt 1949), and the regression on the filtered data gets a Newey-West (1987) HAC
+covariance with the Andrews (1991) plug-in bandwidth. (This is not the pre-whitened HAC of
+Andrews & Monahan 1992, which keeps the OLS coefficients and filters only the scores.) See
+``docs/diagnosis.md`` for the formulas and the interpretation of every field.
 """
 
 from __future__ import annotations
@@ -526,8 +527,9 @@ def diagnose_residual(
     Kendall (1954) bias (1 + 3Σφ)/n added back to Σφ, capped at 1 − 1/n. The response and every
     regressor are filtered, y*_t = y_t − Σ_i φ_i y_{t−i}, and OLS on the filtered data gets the
     Newey & West (1987) variance (X*ᵀX*)⁻¹ S (X*ᵀX*)⁻¹, S = Σ_l w_l Γ_l with Bartlett weights
-    w_l = 1 − |l|/S_T and the Andrews (1991) AR(1) plug-in bandwidth S_T: the pre-whitened HAC
-    estimator of Andrews & Monahan (1992). Student-t with the effective degrees of freedom
+    w_l = 1 − |l|/S_T and the Andrews (1991) AR(1) plug-in bandwidth S_T (GLS coefficients, not
+    the OLS ones of Andrews & Monahan's 1992 pre-whitened HAC). Student-t with the effective
+    degrees of freedom
     ν = n (1 − φ̄ρ)/(1 + φ̄ρ) − k, φ̄ = Σφ and ρ the lag-one autocorrelation of the regressor
     (Bretherton et al. 1999), which keeps slowly varying regressors in persistent noise honest.
     """

@@ -1,9 +1,11 @@
 """Time-series statistics for regressions on autocorrelated residuals.
 
-Pre-whitening by an AR model chosen by BIC, heteroscedasticity- and autocorrelation-consistent
-(Newey–West) covariances with the Andrews plug-in bandwidth, effective sample sizes and
-degrees of freedom, the Ljung–Box test and the dominant frequencies of a spectrum. Used by
-:mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+Feasible GLS: the data filtered by an AR model of the residual chosen by BIC (Cochrane–Orcutt),
+then heteroscedasticity- and autocorrelation-consistent (Newey–West) covariances with the
+Andrews plug-in bandwidth on the filtered regression; effective sample sizes and degrees of
+freedom, the Ljung–Box test, Politis–White block lengths and the dominant frequencies of a
+spectrum. Used by :mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+``tests/test_stats_reference.py`` checks each against statsmodels or arch.
 """
 
 from __future__ import annotations
@@ -21,11 +23,19 @@ FloatArray = npt.NDArray[np.float64]
 
 #: Highest AR order tried by the pre-whitening filter (chosen by BIC).
 MAX_AR_ORDER = 10
-#: Andrews & Monahan (1992) bound the AR(1) coefficient of the scores so that the plug-in
-#: bandwidth stays finite when pre-whitening leaves a near-unit root.
+#: The AR(1) coefficient of the scores in the Andrews plug-in is bounded, as Andrews & Monahan
+#: (1992) bound their pre-whitening filter's, so that the bandwidth stays finite when the
+#: AR filter leaves a near-unit root.
 RHO_CAP = 0.97
-#: Relative singular-value cut-off when orthonormalising design matrices.
+#: Relative singular-value cut-off of a design matrix whose columns were scaled to unit length:
+#: a direction of X whose singular value is under this fraction of the largest is null. The
+#: cut-off is decided on the singular values of X itself, never on those of XᵀX (their squares).
 RCOND = 1e-10
+#: The normal equations of a column-scaled design are solved directly while its Gram matrix's
+#: smallest eigenvalue is at least this fraction of its largest (singular values of X within
+#: 10⁴ of each other): the solution's relative error is then at most about ε·10⁸ ≈ 2·10⁻⁸. A
+#: worse-conditioned design is solved through the SVD of X.
+GRAM_CONDITION = 1e-8
 #: How many spectral peaks :func:`dominant_frequencies` reports.
 N_PEAKS = 3
 
@@ -81,6 +91,70 @@ def lag_matrix(u: FloatArray, order: int) -> FloatArray:
     return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
 
 
+def column_lengths(x: FloatArray) -> FloatArray:
+    """The Euclidean length of every column of x; 1 for a zero column (it stays zero)."""
+    norms = np.sqrt(np.einsum("ti,ti->i", x, x))
+    return np.asarray(np.where(norms > 0.0, norms, 1.0), dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class LeastSquares:
+    """A least-squares fit y ≈ X β.
+
+    Attributes
+    ----------
+    coef:
+        β; one column per column of y when y is a matrix.
+    inverse:
+        (XᵀX)⁺ with the same directions left out as in β: the bread of a sandwich covariance.
+    rank:
+        How many directions of X were kept.
+    """
+
+    coef: FloatArray
+    inverse: FloatArray
+    rank: int
+
+
+def least_squares(x: FloatArray, y: FloatArray) -> LeastSquares:
+    """Least squares of y (a vector, or one series per column) on the columns of x.
+
+    The columns are scaled to unit length first, so a column's units never decide whether it is
+    kept: after pre-whitening by a filter whose persistence is 1 − 1/n, the constant column is
+    10⁻⁵ high next to a regressor in watts, and it is exactly as identified. Directions whose
+    singular value (of the scaled X, not of XᵀX) is under :data:`RCOND` of the largest are left
+    out, and β is the shortest solution in the scaled coordinates.
+
+    A design whose scaled Gram matrix is well conditioned (:data:`GRAM_CONDITION`), as all but
+    nearly collinear ones are, is solved through that k × k matrix, one pass over the samples;
+    any other through the SVD of X itself.
+    """
+    k = x.shape[1]
+    if k == 0:
+        return LeastSquares(coef=np.zeros((0, *y.shape[1:])), inverse=np.zeros((0, 0)), rank=0)
+    norms = column_lengths(x)
+    scale = np.outer(norms, norms)
+    eigval, eigvec = np.linalg.eigh(np.einsum("ti,tj->ij", x, x) / scale)
+    if eigval[-1] > 0.0 and eigval[0] >= GRAM_CONDITION * eigval[-1]:
+        inverse = (eigvec / eigval) @ eigvec.T / scale
+        coef = np.einsum("ij,j...->i...", inverse, np.einsum("tj,t...->j...", x, y))
+        rank = k
+    else:
+        u, s, vt = np.linalg.svd(x / norms, full_matrices=False)
+        keep = s > RCOND * max(float(s[0]), 1e-300)
+        u, s, vt = u[:, keep], s[keep], vt[keep]
+        inverse = (vt.T / s**2) @ vt / scale
+        # Uᵀy, not Xᵀy: the normal equations would square the condition number.
+        scaled = np.einsum("ji,j...->i...", vt / s[:, None], np.einsum("tj,t...->j...", u, y))
+        coef = np.einsum("i,i...->i...", 1.0 / norms, scaled)
+        rank = int(s.shape[0])
+    return LeastSquares(
+        coef=np.asarray(coef, dtype=np.float64),
+        inverse=np.asarray(inverse, dtype=np.float64),
+        rank=rank,
+    )
+
+
 def ar_order(u: FloatArray) -> int:
     """AR order by BIC (Schwarz 1978), all orders fitted on the same sample.
 
@@ -122,10 +196,7 @@ def ar_fit(u: FloatArray, order: int) -> FloatArray:
     y = u[order:]
     if dot(y, y) == 0.0:
         return np.zeros(0)
-    lagged = lag_matrix(u, order)
-    gram = np.einsum("ti,tj->ij", lagged, lagged)
-    fitted, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", lagged, y), rcond=RCOND)
-    phi = np.array(fitted, dtype=np.float64)
+    phi = np.array(least_squares(lag_matrix(u, order), y).coef, dtype=np.float64)
     persistence = float(np.sum(phi))
     if persistence > 0.0:
         # Σφ = 1 would null the constant column of the whitened design; 1 − 1/n keeps the
@@ -175,10 +246,11 @@ def whiten(x: FloatArray, phi: FloatArray) -> FloatArray:
 
 
 def orthonormal(x: FloatArray) -> FloatArray:
-    """Orthonormal basis of the column space of x, dropping numerically null directions."""
+    """Orthonormal basis of the column space of x, dropping the directions that
+    :func:`least_squares` drops (columns scaled to unit length first)."""
     if x.shape[1] == 0:
         return x
-    u, s, _ = np.linalg.svd(x, full_matrices=False)
+    u, s, _ = np.linalg.svd(x / column_lengths(x), full_matrices=False)
     keep = s > RCOND * max(float(s[0]), 1e-300)
     return np.asarray(u[:, keep], dtype=np.float64)
 
@@ -258,11 +330,12 @@ def hac_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
     cov(β) = (X*ᵀX*)⁺ S (X*ᵀX*)⁺ · n/(n−k), S = Γ₀ + Σ_l w_l (Γ_l + Γ_lᵀ), Γ_l = Σ_t g_t g_{t−l}ᵀ,
     g_t = x*_t e*_t.
     """
-    beta0, *_ = np.linalg.lstsq(x, y, rcond=None)
+    beta0 = least_squares(x, y).coef
     phi = ar_fit(y - np.einsum("tk,k->t", x, beta0), order)
     ys = whiten(y, phi)
     xs = whiten(x, phi)
-    beta, *_ = np.linalg.lstsq(xs, ys, rcond=RCOND)
+    fit = least_squares(xs, ys)
+    beta = fit.coef
     e = ys - np.einsum("tk,k->t", xs, beta)
     g = xs * e[:, None]
     n, k = xs.shape
@@ -275,8 +348,7 @@ def hac_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
             break
         gamma = np.einsum("ti,tj->ij", g[lag:], g[:-lag])
         s += weights[lag] * (gamma + gamma.T)
-    bread = np.linalg.pinv(np.einsum("ti,tj->ij", xs, xs), rcond=RCOND)
-    cov = bread @ s @ bread * (n / max(n - k, 1))
+    cov = fit.inverse @ s @ fit.inverse * (n / max(n - k, 1))
     return HacFit(
         beta=np.asarray(beta, dtype=np.float64),
         cov=np.asarray(cov, dtype=np.float64),
@@ -296,14 +368,10 @@ class Screen:
 
 
 def residualise(v: FloatArray, x: FloatArray) -> FloatArray:
-    """v minus its least-squares projection on the few columns of x (normal equations).
-
-    The design here is a constant and at most a handful of standardised candidates, so the
-    k × k system is well conditioned and far cheaper than a factorisation of the n × k matrix.
-    """
-    gram = np.einsum("ti,tj->ij", x, x)
-    coef, *_ = np.linalg.lstsq(gram, np.einsum("ti,t->i", x, v), rcond=RCOND)
-    return np.asarray(v - np.einsum("ti,i->t", x, coef), dtype=np.float64)
+    """v (a vector, or one series per column) minus its least-squares projection on the
+    columns of x."""
+    coef = least_squares(x, v).coef
+    return np.asarray(v - np.einsum("ti,i...->t...", x, coef), dtype=np.float64)
 
 
 def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> Screen:
@@ -331,9 +399,7 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
             continue
         phi = ar_fit(y_perp - b0[j] * z_perp[j], order)
         ys = whiten(y, phi)
-        zs = whiten(z_rows[j], phi)
-        y_t = residualise(ys, whiten(base, phi))
-        z_t = residualise(zs, whiten(base, phi))
+        y_t, z_t = residualise(np.column_stack([ys, whiten(z_rows[j], phi)]), whiten(base, phi)).T
         zz = dot(z_t, z_t)
         if zz <= 0.0:
             continue
@@ -373,6 +439,79 @@ def effective_samples(u: FloatArray, order: int) -> float:
         if sigma2 > 0.0:
             eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
     return float(min(max(eff, 1.0), n))
+
+
+@dataclass(frozen=True)
+class BlockLength:
+    """Politis & White's (2004) automatic block lengths for a bootstrap of the mean of x.
+
+    Attributes
+    ----------
+    stationary:
+        Expected block length for the stationary bootstrap (Politis & Romano 1994).
+    circular:
+        Block length for the circular (and the moving) block bootstrap.
+    variance:
+        γ̂₀, the variance of x (divisor n).
+    long_run_variance:
+        The flat-top lag-window estimate Σ_{|k|≤M} λ(k/M) γ̂_k of Σ_k γ_k, the variance of
+        √n times the mean (it can come out at or below zero on a short, strongly
+        anti-persistent series).
+    bandwidth:
+        M, the lags that estimate used.
+    """
+
+    stationary: float
+    circular: float
+    variance: float
+    long_run_variance: float
+    bandwidth: int
+
+
+def politis_white(x: FloatArray) -> BlockLength:
+    """Block lengths by Politis & White (2004) with the correction of Patton, Politis & White
+    (2009), as ``arch.bootstrap.optimal_block_length`` computes them.
+
+    m̂ is the first lag from which k_n = max(5, ⌊log₁₀ n⌋) consecutive autocorrelations lie
+    within ±2√(log₁₀ n / n), M = 2 max(m̂, 1) (at most √n + k_n), and with the flat-top window
+    λ(t) = min(1, 2(1 − |t|)), Ĝ = Σ_{|k|≤M} λ(k/M)|k|γ̂_k and ĝ = Σ_{|k|≤M} λ(k/M)γ̂_k:
+    b = (2Ĝ² / (c ĝ²))^{1/3} n^{1/3}, c = 2 (stationary) or 4/3 (circular), at most
+    min(3√n, n/3). As in arch, the autocorrelation at lag i divides by the sums of squares of
+    the samples after the first i + 1 and before the last i + 1.
+    """
+    u = np.asarray(x, dtype=np.float64)
+    n = u.shape[0]
+    eps = u - float(np.mean(u))
+    kn = max(5, int(math.log10(n))) if n > 0 else 5
+    m_max = min(math.ceil(math.sqrt(n)) + kn, n - 2)
+    squares = np.cumsum(eps * eps)
+    if n < 3 or m_max < 1 or squares[-1] <= 0.0:
+        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
+    acv = autocovariances(eps[:, None], m_max)[:, 0] / n
+    lags = np.arange(m_max + 1)
+    after = squares[-1] - squares[lags]
+    before = squares[n - lags - 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.abs(acv * n) / np.sqrt(after * before)
+    inside = np.nan_to_num(corr, nan=np.inf) < 2.0 * math.sqrt(math.log10(n) / n)
+    runs = np.convolve(inside.astype(np.int64), np.ones(kn, dtype=np.int64), mode="valid")
+    first = np.flatnonzero(runs[: m_max - kn + 1] == kn)
+    m = min(2 * max(int(first[0]), 1), m_max) if first.shape[0] else m_max
+    k = np.arange(1, m + 1, dtype=np.float64)
+    window = np.minimum(1.0, 2.0 * (1.0 - k / m))
+    g = float(np.sum(2.0 * window * k * acv[1 : m + 1]))
+    long_run = float(acv[0] + np.sum(2.0 * window * acv[1 : m + 1]))
+    b_max = math.ceil(min(3.0 * math.sqrt(n), n / 3.0))
+    if long_run == 0.0:
+        return BlockLength(float(b_max), float(b_max), float(acv[0]), long_run, m)
+    ratio = 2.0 * g * g / (long_run * long_run) * n
+    return BlockLength(
+        stationary=min((ratio / 2.0) ** (1.0 / 3.0), b_max),
+        circular=min((ratio * 0.75) ** (1.0 / 3.0), b_max),
+        variance=float(acv[0]),
+        long_run_variance=long_run,
+        bandwidth=m,
+    )
 
 
 def ljung_box(x: npt.ArrayLike, lags: Sequence[int], *, alpha: float = 0.05) -> Whiteness:
