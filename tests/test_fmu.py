@@ -221,6 +221,23 @@ def test_bad_use_is_explained(
     assert str(info.value) == expected.format(fmu=fmus["gain"])
 
 
+def test_an_interface_the_fmu_lacks_is_named(fmus: dict[str, str]) -> None:
+    with pytest.raises(DataError) as info:
+        run_fmu(
+            fmus["gain"],
+            _reference(),
+            {},
+            {"y": "y"},
+            start_time=0.0,
+            stop_time=1.0,
+            interface="model-exchange",
+        )
+    assert str(info.value) == (
+        f"{fmus['gain']}: interface: this FMU has no model-exchange interface; it offers: "
+        "'co-simulation'; choose one of those or remove `interface:`"
+    )
+
+
 def test_missing_and_damaged_fmu_files(tmp_path: Path) -> None:
     missing = str(tmp_path / "nope.fmu")
     with pytest.raises(DataError) as info:
