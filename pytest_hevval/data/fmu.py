@@ -12,7 +12,7 @@ import math
 import os
 import re
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -155,6 +155,9 @@ def run_fmu(
                 output=list(dict.fromkeys(ref.variable for ref in recorded.values())),
                 model_description=description,
                 fmu_instance=instance,
+                step_finished=_discrete_inputs_held(
+                    instance, variables, signals, fmi_version, fmi_type
+                ),
             )
         except Exception as exc:
             fatal = getattr(exc, "status", None) == _STATUS_FATAL
@@ -168,6 +171,50 @@ def run_fmu(
                 _free(instance)
 
     return _result_record(fmu_path, result, recorded, variables, description, fmi_type)
+
+
+def _discrete_inputs_held(
+    instance: Any,
+    variables: Mapping[str, Any],
+    signals: npt.NDArray[Any] | None,
+    fmi_version: str,
+    fmi_type: str,
+) -> Callable[[float, Any], bool] | None:
+    """After each co-simulation step, set the integer and Boolean inputs for the next one.
+
+    fmpy before 0.3.23 (the last that runs on numpy 1.x) sets a co-simulation's discrete
+    inputs once, at the start, and holds them there for the whole run. Later versions set
+    them before each step by the same rule (the last sample at or before the step's start),
+    after this, so their values are the ones the step reads.
+    """
+    if fmi_type != "CoSimulation" or signals is None:
+        return None
+    names = [n for n in signals.dtype.names or () if signals.dtype[n].kind in "biu"]
+    if not names:
+        return None
+    times = signals["time"]
+    fmi3 = not fmi_version.startswith(("1.", "2."))
+    setters = [
+        (getattr(instance, _setter(variables[name], fmi3)), variables[name].valueReference, name)
+        for name in names
+    ]
+
+    def apply(time: float, recorder: Any) -> bool:
+        # fmpy's time is a sum of steps: a sample at the step's start counts within rounding.
+        index = int(np.searchsorted(times, time + 1e-9 * max(1.0, abs(time)), side="right")) - 1
+        for setter, reference, name in setters:
+            setter([reference], [signals[name][max(index, 0)].item()])
+        return True  # go on
+
+    return apply
+
+
+def _setter(variable: Any, fmi3: bool) -> str:
+    """The name of fmpy's setter for a discrete variable's type."""
+    kind = str(variable.type)
+    if kind == "Enumeration":
+        return "setInt64" if fmi3 else "setInteger"
+    return f"set{kind}"
 
 
 def _import_fmpy() -> Any:
