@@ -105,7 +105,8 @@ def test_array_outputs_become_one_column_per_element(probe: str) -> None:
         (
             "z[1]",
             "no variable 'z[1]' in this FMU; the FMU's outputs: 'i64_out', 'u64_out', 'y', "
-            "'m', 'label_out', 'label_length', 'tol_seen', 'start_seen', 'blob', 'u_out'",
+            "'m', 'label_out', 'label_length', 'tol_seen', 'start_seen', 'blob', 'u_out', "
+            "'offset_sum'",
         ),
     ],
 )
@@ -187,10 +188,11 @@ def test_int64_max_in_a_csv_file_is_refused_not_wrapped(probe: str, tmp_path: Pa
 def test_parameters_keep_their_declared_type(probe: str) -> None:
     record = _run(
         probe,
-        outputs={"length": "label_length", "y": "y[1]"},
-        parameters={"label": "twelve chars", "k": 2},
+        outputs={"length": "label_length", "y": "y[1]", "offsets": "offset_sum"},
+        parameters={"label": "twelve chars", "k": 2, "offsets": [1.5, 2]},
     )
     np.testing.assert_array_equal(record.channels["length"].values, 12.0)
+    np.testing.assert_array_equal(record.channels["offsets"].values, 1.5 + 10 * 2)
     np.testing.assert_allclose(record.channels["y"].values, np.exp(-2 * TIME), rtol=1e-12)
 
 
@@ -209,6 +211,16 @@ def test_parameters_keep_their_declared_type(probe: str) -> None:
         (
             {"k": True},
             "parameter 'k' is a Float64 variable; True is not a number; give 'k' a number",
+        ),
+        (
+            {"offsets": [1.0]},
+            "parameter 'offsets' is an array of 2 Float64 values; [1.0] is not a list of 2 "
+            "values; give 'offsets' a list of 2 values",
+        ),
+        (
+            {"offsets": [1.0, "x"]},
+            "parameter 'offsets' is an array of 2 Float64 values; 'x' is not a number; give "
+            "'offsets' a number",
         ),
         (
             {"blob": "x"},
@@ -233,7 +245,7 @@ def test_text_and_binary_outputs_cannot_be_scored(
         f"probe3.fmu: outputs: output {output!r} is a {kind} variable: it holds {holds}, not "
         "numbers, and cannot be scored; remove 'name' from the outputs; the FMU's numeric "
         "outputs: 'i64_out', 'u64_out', 'y', 'm', 'label_length', 'tol_seen', 'start_seen', "
-        "'u_out'"
+        "'u_out', 'offset_sum'"
     )
 
 

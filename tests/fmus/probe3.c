@@ -1,11 +1,12 @@
-/* An FMI 3.0 test model (co-simulation and model exchange) for tests/test_fmu.py.
+/* An FMI 3.0 test model (co-simulation and model exchange) for tests/test_fmu_compiled.py.
  *
  * x is one continuous state with der(x) = -k*x and x(start) = 1; u_out = u passes the real
  * input straight through. The other outputs expose what the FMU received: an array
  * y = [x, 2x, 3x], a 2x2 matrix m[i,j] = (10i + j) x, the 64-bit integer inputs echoed, the
- * String parameter (echoed and as its length), and the start time and tolerance the importer
- * passed to fmi3EnterInitializationMode. Functions the tests never
- * reach are generated as stubs that return fmi3Error (compiled_fmus.py).
+ * String parameter (echoed and as its length), the array parameter offsets (as
+ * offsets[1] + 10 offsets[2]), and the start time and tolerance the importer passed to
+ * fmi3EnterInitializationMode. Functions the tests never reach are generated as stubs that
+ * return fmi3Error (compiled_fmus.py).
  */
 #include <math.h>
 #include <stdlib.h>
@@ -15,10 +16,10 @@
 
 enum { VR_TIME, VR_I64, VR_U64, VR_I64_OUT, VR_U64_OUT, VR_Y, VR_M, VR_K, VR_LABEL,
        VR_LABEL_OUT, VR_LABEL_LENGTH, VR_TOL_SEEN, VR_START_SEEN, VR_X, VR_DER_X, VR_BLOB, VR_U,
-       VR_U_OUT };
+       VR_U_OUT, VR_OFFSETS, VR_OFFSET_SUM };
 
 typedef struct {
-    double time, x, k, tolerance, start, u;
+    double time, x, k, tolerance, start, u, offsets[2];
     fmi3Int64 i64;
     fmi3UInt64 u64;
     char label[256];
@@ -37,6 +38,8 @@ static int value_of(const Probe *p, fmi3ValueReference vr, size_t *count, double
     case VR_START_SEEN: out[(*count)++] = p->start; break;
     case VR_X: out[(*count)++] = p->x; break;
     case VR_U: case VR_U_OUT: out[(*count)++] = p->u; break;
+    case VR_OFFSETS: out[(*count)++] = p->offsets[0]; out[(*count)++] = p->offsets[1]; break;
+    case VR_OFFSET_SUM: out[(*count)++] = p->offsets[0] + 10 * p->offsets[1]; break;
     case VR_DER_X: out[(*count)++] = -p->k * p->x; break;
     default: return -1;
     }
@@ -119,13 +122,17 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                           const fmi3Float64 values[], size_t nValues) {
     Probe *p = instance;
+    size_t count = 0;
     for (size_t i = 0; i < nvr; i++) {
-        if (vr[i] == VR_K) p->k = values[i];
-        else if (vr[i] == VR_X) p->x = values[i];
-        else if (vr[i] == VR_U) p->u = values[i];
-        else return fmi3Error;
+        if (vr[i] == VR_K) p->k = values[count++];
+        else if (vr[i] == VR_X) p->x = values[count++];
+        else if (vr[i] == VR_U) p->u = values[count++];
+        else if (vr[i] == VR_OFFSETS) {
+            p->offsets[0] = values[count++];
+            p->offsets[1] = values[count++];
+        } else return fmi3Error;
     }
-    return fmi3OK;
+    return count == nValues ? fmi3OK : fmi3Error;
 }
 
 fmi3Status fmi3GetInt64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
