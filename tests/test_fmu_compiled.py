@@ -4,6 +4,8 @@ and tolerance, and inputs with events; through ``run_fmu`` and through ``pytest 
 
 from __future__ import annotations
 
+import json
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -60,23 +62,17 @@ def _error(probe: str, reference: Record = STILL, **kwargs: Any) -> str:
     return str(info.value).replace(probe, "probe3.fmu")
 
 
+#: The columns of the array y (3) and the matrix m (2×2), in FMI's order.
+ELEMENTS = ["y[1]", "y[2]", "y[3]", "m[1,1]", "m[1,2]", "m[2,1]", "m[2,2]"]
+
+
 def test_array_outputs_become_one_column_per_element(probe: str) -> None:
     record = _run(
         probe,
         outputs={"y": "y", "m": "m", "second": "y[2]", "corner": "m[2,1]"},
         parameters={"k": 0.5},
     )
-    assert list(record.channels) == [
-        "y[1]",
-        "y[2]",
-        "y[3]",
-        "m[1,1]",
-        "m[1,2]",
-        "m[2,1]",
-        "m[2,2]",
-        "second",
-        "corner",
-    ]
+    assert list(record.channels) == [*ELEMENTS, "second", "corner"]
     # Co-simulation: the model steps x exactly, x = exp(-k t).
     x = np.exp(-0.5 * TIME)
     for i in (1, 2, 3):
@@ -461,3 +457,65 @@ sets:
     result = pytester.runpytest("--hevval", "-v", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines(["events: Φ = 1.0000*"])
+
+
+def test_without_outputs_every_numeric_output_is_recorded(probe: str) -> None:
+    record = _run(probe, outputs={})
+    assert list(record.channels) == [
+        "i64_out",
+        "u64_out",
+        *ELEMENTS,
+        "label_length",
+        "tol_seen",
+        "start_seen",
+        "u_out",
+        "offset_sum",
+    ]
+    assert record.meta["unscored"] == {
+        "label_out": "output 'label_out' is a String variable: it holds text, not numbers, "
+        "and cannot be scored",
+        "blob": "output 'blob' is a Binary variable: it holds bytes, not numbers, and cannot "
+        "be scored",
+    }
+    with pytest.raises(DataError) as info:
+        record.channel("label_out")
+    assert str(info.value) == (
+        f"{probe}: column 'label_out': output 'label_out' is a String variable: it holds "
+        "text, not numbers, and cannot be scored; score a numeric column"
+    )
+
+
+def test_a_spec_without_outputs_notes_the_text_outputs_it_left_out(
+    pytester: pytest.Pytester, probe: str
+) -> None:
+    _project(pytester, probe)
+    spec = """\
+name: free
+reference: measured.csv
+model: {{fmu: probe3.fmu, params: {{k: 0.5}}, start_time: 1.0, step_size: 0.01}}
+sets:
+  - {{signal: decay, ref: x, sim: "{sim}"}}
+"""
+    pytester.makefile(".hevval.yaml", free=spec.format(sim="y[1]"))
+    result = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "run", "free.hevval.yaml", "--json", "out.json"
+    )
+    assert result.ret == 0, result.stderr.str()
+    payload = json.loads((pytester.path / "out.json").read_text())
+    assert payload["data"]["model"]["unscored_outputs"] == {
+        "label_out": "output 'label_out' is a String variable: it holds text, not numbers, "
+        "and cannot be scored",
+        "blob": "output 'blob' is a Binary variable: it holds bytes, not numbers, and cannot "
+        "be scored",
+    }
+
+    pytester.makefile(".hevval.yaml", free=spec.format(sim="label_out"))
+    result = pytester.runpytest("--hevval", "-p", "no:cacheprovider")
+    assert result.ret != 0
+    result.stdout.fnmatch_lines(
+        [
+            "*probe3.fmu: column 'label_out': output 'label_out' is a String variable: it "
+            "holds text, not numbers, and cannot be scored; score a numeric column*"
+        ]
+    )
+    assert "Traceback" not in result.stdout.str()

@@ -68,7 +68,9 @@ def run_fmu(
     outputs
         Signal name to produce → FMU variable to record. An array variable gives one column
         per element, ``name[1]``, ``name[2]``, … (1-based, ``name[i,j]`` for a matrix); one
-        element is named the same way (``y[2]``).
+        element is named the same way (``y[2]``). Empty: every numeric output under its own
+        name; String, Binary and Clock outputs are left out, each with the reason in
+        ``Record.meta["unscored"]``, and reading one is an error that gives it.
     start_time, stop_time
         Simulation window in seconds; every input channel must cover it.
     step_size
@@ -114,7 +116,7 @@ def run_fmu(
 
     variables = {v.name: v for v in description.modelVariables}
     fmi_type = _fmi_type(fmu_path, description, interface)
-    recorded = _check_variables(fmu_path, variables, inputs, outputs, parameters or {})
+    recorded, unscored = _check_variables(fmu_path, variables, inputs, outputs, parameters or {})
     fmi_version = str(description.fmiVersion)
     start_values = _start_values(fmu_path, variables, parameters or {}, fmi_version)
     signals = _input_signals(reference, inputs, variables, fmi_version, start_time, stop_time)
@@ -170,7 +172,9 @@ def run_fmu(
             if not fatal:
                 _free(instance)
 
-    return _result_record(fmu_path, result, recorded, variables, description, fmi_type)
+    record = _result_record(fmu_path, result, recorded, variables, description, fmi_type)
+    record.meta["unscored"] = unscored
+    return record
 
 
 def _discrete_inputs_held(
@@ -368,8 +372,9 @@ def _check_variables(
     inputs: Mapping[str, str],
     outputs: Mapping[str, str],
     parameters: Mapping[str, object],
-) -> dict[str, _Output]:
-    """Check every name against the FMU; the variable (or element) each output records."""
+) -> tuple[dict[str, _Output], dict[str, str]]:
+    """Check every name against the FMU; the variable (or element) each output records, and
+    the outputs left out because they hold no numbers (with the reason)."""
     model_inputs = [n for n, v in variables.items() if v.causality == "input"]
     for name in inputs:
         if name not in variables:
@@ -390,7 +395,28 @@ def _check_variables(
                 key="inputs",
                 hint=f"remove {name!r} from the inputs; the FMU then uses its start value",
             )
+    found = _recorded_outputs(path, variables, outputs)
+    settable = [n for n, v in variables.items() if v.causality in ("parameter", "input", "local")]
+    for name in parameters:
+        if name not in variables:
+            raise _no_variable(path, "parameters", name, settable, "parameters")
+    return found
+
+
+def _recorded_outputs(
+    path: str, variables: Mapping[str, Any], outputs: Mapping[str, str]
+) -> tuple[dict[str, _Output], dict[str, str]]:
+    """What each output column records; without ``outputs``, every numeric output under its
+    own name, and the others left out with the reason."""
     model_outputs = [n for n, v in variables.items() if v.causality == "output"]
+    numeric = [n for n in model_outputs if str(variables[n].type) not in _NOT_NUMBERS]
+    if not outputs:
+        unscored = {
+            name: _not_numbers(name, variables[name])
+            for name in model_outputs
+            if name not in numeric
+        }
+        return {name: _Output(name) for name in numeric}, unscored
     recorded: dict[str, _Output] = {}
     for signal, name in outputs.items():
         ref = _output_ref(variables, name)
@@ -398,10 +424,8 @@ def _check_variables(
             raise _no_variable(path, "outputs", name, list(variables), "outputs", model_outputs)
         variable = variables[ref.variable]
         if str(variable.type) in _NOT_NUMBERS:
-            numeric = [n for n in model_outputs if str(variables[n].type) not in _NOT_NUMBERS]
             raise DataError(
-                f"output {name!r} is a {variable.type} variable: it holds "
-                f"{_NOT_NUMBERS[str(variable.type)]}, not numbers, and cannot be scored",
+                _not_numbers(name, variable),
                 file=path,
                 key="outputs",
                 hint=f"remove {signal!r} from the outputs; "
@@ -411,11 +435,15 @@ def _check_variables(
         if shape or ref.index is not None:
             _check_element(path, ref, shape)
         recorded[signal] = ref
-    settable = [n for n, v in variables.items() if v.causality in ("parameter", "input", "local")]
-    for name in parameters:
-        if name not in variables:
-            raise _no_variable(path, "parameters", name, settable, "parameters")
-    return recorded
+    return recorded, {}
+
+
+def _not_numbers(name: str, variable: Any) -> str:
+    kind = str(variable.type)
+    return (
+        f"output {name!r} is a {kind} variable: it holds {_NOT_NUMBERS[kind]}, not numbers, "
+        "and cannot be scored"
+    )
 
 
 def _kind(variable: Any) -> str:

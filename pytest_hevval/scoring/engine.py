@@ -306,7 +306,11 @@ def _load_model(
         interface=run.interface,
         tolerance=run.tolerance,
     )
-    return record, {"path": model.path, "kind": "fmu"}
+    info: dict[str, Any] = {"path": model.path, "kind": "fmu"}
+    if record.meta["unscored"]:
+        # Outputs without numbers (text, bytes), left out when the spec names no outputs.
+        info["unscored_outputs"] = dict(record.meta["unscored"])
+    return record, info
 
 
 def _check_model_columns(node: SignalSpec, model: Record) -> tuple[str, ...]:
