@@ -185,7 +185,8 @@ def test_parameters_keep_their_declared_type(probe: str) -> None:
     record = _run(
         probe,
         outputs={"length": "label_length", "y": "y[1]", "offsets": "offset_sum"},
-        parameters={"label": "twelve chars", "k": 2, "offsets": [1.5, 2]},
+        # YAML 1.1 reads 2e0 as text: the declared type (Float64) makes it a number.
+        parameters={"label": "twelve chars", "k": "2e0", "offsets": [1.5, 2]},
     )
     np.testing.assert_array_equal(record.channels["length"].values, 12.0)
     np.testing.assert_array_equal(record.channels["offsets"].values, 1.5 + 10 * 2)

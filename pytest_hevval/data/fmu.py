@@ -495,6 +495,9 @@ def _start_values(
 
 def _start_value(path: str, name: str, variable: Any, value: object, fmi_version: str) -> Any:
     kind = str(variable.type)
+    if kind not in ("String", "Boolean") and isinstance(value, str):
+        # YAML 1.1 reads 1e-6 (no dot) as text; as the spec's own numbers, it is a number.
+        value = _number(value)
     if kind in _REAL_TYPES:
         if isinstance(value, int | float) and not isinstance(value, bool):
             return float(value)
@@ -526,6 +529,16 @@ def _start_value(path: str, name: str, variable: Any, value: object, fmi_version
             path, name, variable, value, f"a whole number from {limits.min} to {limits.max}"
         )
     return value
+
+
+def _number(text: str) -> object:
+    """``text`` as an int or a float if it spells one, else ``text`` itself."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 def _bad_parameter(
