@@ -234,6 +234,15 @@ def test_model_failure_is_a_data_error(fmus: dict[str, str]) -> None:
             "stop_time=0.0); set stop_time after start_time",
         ),
         (
+            {"tolerance": 2.0},
+            "{fmu}: tolerance: tolerance=2.0 must be a relative tolerance, greater than 0 and "
+            "less than 1 (such as 1e-6)",
+        ),
+        (
+            {"interface": "cs"},
+            "{fmu}: interface: no interface 'cs'; choose co-simulation or model-exchange",
+        ),
+        (
             {"step_size": -0.1},
             "{fmu}: step_size: step_size=-0.1 does not fit the window 0.0..2.0 s; use a "
             "positive step smaller than the window",

@@ -340,10 +340,14 @@ def _spec(root: Path, model: str, reference: str = "measured.csv") -> Path:
         ),
         (
             "{fmu: p.fmu, tolerance: 1}",
-            ":3: model.tolerance: is a relative tolerance and must be less than 1 (such as "
-            "1e-6) (got 1.0)",
+            ":3: model.tolerance: must be a relative tolerance, greater than 0 and less than 1 "
+            "(such as 1e-6) (got 1.0)",
         ),
-        ("{fmu: p.fmu, tolerance: 0}", ":3: model.tolerance: must be greater than 0 (got 0)"),
+        (
+            "{fmu: p.fmu, tolerance: 0}",
+            ":3: model.tolerance: must be a relative tolerance, greater than 0 and less than 1 "
+            "(such as 1e-6) (got 0.0)",
+        ),
         (
             "{fmu: p.fmu, start_time: 5, stop_time: 2}",
             ":3: model.stop_time: must be later than start_time (5) (got 2.0)",

@@ -23,7 +23,7 @@ from ..errors import DataError, MissingExtraError, did_you_mean
 from ..files import check_input
 from .record import Channel, Record
 
-__all__ = ["FMU_INTERFACES", "run_fmu"]
+__all__ = ["FMU_INTERFACES", "run_fmu", "tolerance_problem"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -266,14 +266,17 @@ def _check_window(path: str, start: float, stop: float, step: float | None) -> N
         )
 
 
+def tolerance_problem(tolerance: float) -> str | None:
+    """What is wrong with ``tolerance`` as a relative tolerance; None when nothing is."""
+    if math.isfinite(tolerance) and 0 < tolerance < 1:
+        return None
+    return "must be a relative tolerance, greater than 0 and less than 1 (such as 1e-6)"
+
+
 def _check_tolerance(path: str, tolerance: float | None) -> None:
-    if tolerance is not None and not (math.isfinite(tolerance) and 0 < tolerance < 1):
-        raise DataError(
-            f"tolerance={tolerance} is not a relative tolerance",
-            file=path,
-            key="tolerance",
-            hint="use a number between 0 and 1, such as 1e-6",
-        )
+    problem = None if tolerance is None else tolerance_problem(tolerance)
+    if problem is not None:
+        raise DataError(f"tolerance={tolerance} {problem}", file=path, key="tolerance")
 
 
 def _fmi_type(path: str, description: Any, interface: str | None) -> str:
@@ -431,9 +434,7 @@ def _recorded_outputs(
                 hint=f"remove {signal!r} from the outputs; "
                 + _listing("the FMU's numeric outputs", numeric),
             )
-        shape = _shape(variable)
-        if shape or ref.index is not None:
-            _check_element(path, ref, shape)
+        _check_element(path, ref, _shape(variable))
         recorded[signal] = ref
     return recorded, {}
 
@@ -660,7 +661,7 @@ def _field_type(variable: Any, fmi_version: str) -> Any:
 
 
 def _previous(time: FloatArray, at: FloatArray) -> npt.NDArray[np.intp]:
-    """Index of the last sample at or before each of ``at`` (the first sample before it)."""
+    """Index of the last sample at or before each of ``at`` (the first, for times before it)."""
     return np.maximum(np.searchsorted(time, at, side="right") - 1, 0)
 
 

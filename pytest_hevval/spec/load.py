@@ -25,7 +25,7 @@ from ..core.registry import (
     registered_characteristics,
     select_characteristics,
 )
-from ..data.fmu import FMU_INTERFACES
+from ..data.fmu import FMU_INTERFACES, tolerance_problem
 from ..data.quality import QUALITY_ACTIONS, QualityLimits
 from ..data.record import SourceOptions
 from ..data.remote import is_url
@@ -676,19 +676,17 @@ def _fmu_run(context: _Context, mapping: LineDict, key: str, kind: str) -> FmuRu
             f"must be later than start_time ({start:g})",
             got=stop,
         )
-    tolerance = context.get(mapping, "tolerance", key, context.positive, None)
-    if tolerance is not None and tolerance >= 1:
+    tolerance = context.get(mapping, "tolerance", key, context.number, None)
+    problem = None if tolerance is None else tolerance_problem(tolerance)
+    if problem is not None:
         raise context.error(
-            mapping.line_of("tolerance"),
-            _join(key, "tolerance"),
-            "is a relative tolerance and must be less than 1 (such as 1e-6)",
-            got=tolerance,
+            mapping.line_of("tolerance"), _join(key, "tolerance"), problem, got=tolerance
         )
     return FmuRun(interface=interface, start_time=start, stop_time=stop, tolerance=tolerance)
 
 
 def _with_events(source: SourceSpec) -> SourceSpec:
-    """``source`` read with events: two rows at one time stamp (docs/data.md#events)."""
+    """``source`` read with events: two rows at one time stamp (docs/data.md#fmu-models)."""
     options = dataclasses.replace(source.options, extra={**source.options.extra, "events": True})
     return dataclasses.replace(source, options=options)
 

@@ -252,7 +252,8 @@ def _check_time(
             hint="remove that row or fill in its time",
         )
     step = np.diff(time)
-    repeated = step == 0
+    # Only with events may two rows share a time stamp.
+    repeated = step == 0 if events else np.zeros(step.shape, dtype=bool)
     if events:
         third = np.flatnonzero(repeated[:-1] & repeated[1:])
         if third.size:
@@ -265,8 +266,6 @@ def _check_time(
                 column=column,
                 hint="keep two rows per time stamp at most",
             )
-    else:
-        repeated[:] = False
     bad = np.flatnonzero((step <= 0) & ~repeated)
     if bad.size:
         i = int(bad[0])
