@@ -66,6 +66,37 @@ class Failing(Fmi2Slave):
         return True
 '''
 
+COUNTER = '''
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer
+
+
+class Counter(Fmi2Slave):
+    """Echoes an Integer and a Boolean input (FMI 2 discrete inputs)."""
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.n = 0
+        self.on = False
+        self.n_out = 0
+        self.on_out = False
+        for name, kind in (("n", Integer), ("on", Boolean)):
+            self.register_variable(
+                kind(name, causality=Fmi2Causality.input, variability=Fmi2Variability.discrete)
+            )
+            self.register_variable(
+                kind(
+                    name + "_out",
+                    causality=Fmi2Causality.output,
+                    variability=Fmi2Variability.discrete,
+                )
+            )
+
+    def do_step(self, current_time, step_size):
+        self.n_out = self.n
+        self.on_out = self.on
+        return True
+'''
+
 
 def _build(tmp: Path, name: str, source: str) -> str:
     builder = pytest.importorskip("pythonfmu.builder")
@@ -77,7 +108,11 @@ def _build(tmp: Path, name: str, source: str) -> str:
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     tmp = tmp_path_factory.mktemp("fmus")
-    return {"gain": _build(tmp, "Gain", GAIN), "failing": _build(tmp, "Failing", FAILING)}
+    return {
+        "gain": _build(tmp, "Gain", GAIN),
+        "failing": _build(tmp, "Failing", FAILING),
+        "counter": _build(tmp, "Counter", COUNTER),
+    }
 
 
 def _reference() -> Record:
@@ -199,6 +234,15 @@ def test_model_failure_is_a_data_error(fmus: dict[str, str]) -> None:
             "stop_time=0.0); set stop_time after start_time",
         ),
         (
+            {"tolerance": 2.0},
+            "{fmu}: tolerance: tolerance=2.0 must be a relative tolerance, greater than 0 and "
+            "less than 1 (such as 1e-6)",
+        ),
+        (
+            {"interface": "cs"},
+            "{fmu}: interface: no interface 'cs'; choose co-simulation or model-exchange",
+        ),
+        (
             {"step_size": -0.1},
             "{fmu}: step_size: step_size=-0.1 does not fit the window 0.0..2.0 s; use a "
             "positive step smaller than the window",
@@ -219,6 +263,70 @@ def test_bad_use_is_explained(
     with pytest.raises(DataError) as info:
         run_fmu(fmus["gain"], _reference(), **args)  # type: ignore[arg-type]
     assert str(info.value) == expected.format(fmu=fmus["gain"])
+
+
+def test_integer_and_boolean_inputs_hold_each_sample(fmus: dict[str, str]) -> None:
+    # Sampled at 10 Hz, run at 100 Hz: between samples the FMU gets the last one, never a
+    # value in between, on every fmpy (0.3.22 held them at the first for the whole run).
+    slow = np.round(np.arange(0, 2.0001, 0.1), 10)
+    counts = np.arange(slow.size) * 1000.0 - 7.0
+    switch = (np.arange(slow.size) % 3 == 0).astype(float)
+    reference = Record(
+        source="measured.csv",
+        channels={"count": Channel(slow, counts), "switch": Channel(slow, switch)},
+    )
+    record = run_fmu(
+        fmus["counter"],
+        reference,
+        inputs={"n": "count", "on": "switch"},
+        outputs={"n": "n_out", "on": "on_out"},
+        start_time=0.0,
+        stop_time=2.0,
+        step_size=0.01,
+    )
+    time = record.channels["n"].time
+    # The output at t + h echoes the input read at the step's start t.
+    held = np.searchsorted(slow, time[:-1] + 1e-9, side="right") - 1
+    np.testing.assert_array_equal(record.channels["n"].values[1:], counts[held])
+    np.testing.assert_array_equal(record.channels["on"].values[1:], switch[held])
+
+
+def test_an_integer_beyond_its_type_is_refused(fmus: dict[str, str]) -> None:
+    t = np.arange(0, 2.0001, 0.1)
+    reference = Record(
+        source="measured.csv", channels={"count": Channel(t, np.full(t.size, 2.0**31))}
+    )
+    with pytest.raises(DataError) as info:
+        run_fmu(
+            fmus["counter"],
+            reference,
+            {"n": "count"},
+            {"n": "n_out"},
+            start_time=0.0,
+            stop_time=1.0,
+        )
+    assert str(info.value) == (
+        "measured.csv: column 'count': holds 2147483648 at t=0 s for the FMU's Integer input "
+        "'n', outside its range -2147483648..2147483647; feed the input a channel within that "
+        "range"
+    )
+
+
+def test_an_interface_the_fmu_lacks_is_named(fmus: dict[str, str]) -> None:
+    with pytest.raises(DataError) as info:
+        run_fmu(
+            fmus["gain"],
+            _reference(),
+            {},
+            {"y": "y"},
+            start_time=0.0,
+            stop_time=1.0,
+            interface="model-exchange",
+        )
+    assert str(info.value) == (
+        f"{fmus['gain']}: interface: this FMU has no model-exchange interface; it offers: "
+        "'co-simulation'; choose one of those or remove `interface:`"
+    )
 
 
 def test_missing_and_damaged_fmu_files(tmp_path: Path) -> None:

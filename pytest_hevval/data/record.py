@@ -81,6 +81,15 @@ class Record:
         except KeyError:
             if self.meta.get("model_output"):
                 raise model_column_error(self, name) from None
+            # A column the source holds but left out, such as an FMU's text output.
+            unscored: Mapping[str, str] = self.meta.get("unscored", {})
+            if name in unscored:
+                raise DataError(
+                    unscored[name],
+                    file=self.source,
+                    column=name,
+                    hint="score a numeric column",
+                ) from None
             raise missing_column(self.source, name, self.available or self.channels) from None
 
 

@@ -291,8 +291,9 @@ def _load_model(
     times = [c.time for c in reference.channels.values() if c.time.shape[0]]
     if not times:
         raise DataError("the reference has no samples to drive the FMU", file=str(spec.path))
-    start = max(float(t[0]) for t in times)
-    stop = min(float(t[-1]) for t in times)
+    run = model.fmu_run
+    start = max(float(t[0]) for t in times) if run.start_time is None else run.start_time
+    stop = min(float(t[-1]) for t in times) if run.stop_time is None else run.stop_time
     record = run_fmu(
         str(model.path),
         reference,
@@ -301,9 +302,15 @@ def _load_model(
         start_time=start,
         stop_time=stop,
         step_size=model.step_size,
-        parameters={k: float(v) for k, v in model.params.items()},
+        parameters=dict(model.params),
+        interface=run.interface,
+        tolerance=run.tolerance,
     )
-    return record, {"path": model.path, "kind": "fmu"}
+    info: dict[str, Any] = {"path": model.path, "kind": "fmu"}
+    if record.meta["unscored"]:
+        # Outputs without numbers (text, bytes), left out when the spec names no outputs.
+        info["unscored_outputs"] = dict(record.meta["unscored"])
+    return record, info
 
 
 def _check_model_columns(node: SignalSpec, model: Record) -> tuple[str, ...]:

@@ -25,6 +25,7 @@ from ..core.registry import (
     registered_characteristics,
     select_characteristics,
 )
+from ..data.fmu import FMU_INTERFACES, tolerance_problem
 from ..data.quality import QUALITY_ACTIONS, QualityLimits
 from ..data.record import SourceOptions
 from ..data.remote import is_url
@@ -45,6 +46,7 @@ from .model import (
     CampaignSpec,
     ConditionSpec,
     DiagnosisSpec,
+    FmuRun,
     Interpolation,
     LocalGate,
     LocalSpec,
@@ -109,7 +111,18 @@ _SOURCE_KEYS = (
     "check_time_unit",
     "dbc",
 )
-_MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
+#: Keys that only an FMU model takes (docs/data.md#fmu-models).
+_FMU_KEYS = ("interface", "start_time", "stop_time", "tolerance")
+_MODEL_KEYS = (
+    *_SOURCE_KEYS,
+    "callable",
+    "fmu",
+    "params",
+    "inputs",
+    "outputs",
+    "step_size",
+    *_FMU_KEYS,
+)
 _ALIGN_KEYS = (
     "rate_hz",
     "window",
@@ -422,6 +435,9 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         base,
         path_optional=_rows_name_models(top),
     )
+    if model.kind == "fmu":
+        # An FMU reads inputs in the FMI event convention: two rows at one time stamp.
+        reference = _with_events(reference)
     campaign = _campaign(context, top, reference, model, base)
     alignment = _alignment(context, top)
     metrics = _metrics(context, top)
@@ -636,7 +652,43 @@ def _source(
         fmu_inputs=fmu_inputs,
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
+        fmu_run=_fmu_run(context, mapping, key, kind),
     )
+
+
+def _fmu_run(context: _Context, mapping: LineDict, key: str, kind: str) -> FmuRun:
+    """How an FMU model runs: ``interface``, ``start_time``, ``stop_time``, ``tolerance``."""
+    for name in _FMU_KEYS:
+        if name in mapping and kind != "fmu":
+            raise context.error(
+                mapping.line_of(name),
+                _join(key, name),
+                f"applies to an FMU model, not a {'file' if kind == 'path' else kind}",
+                hint=f"remove `{name}:`",
+            )
+    interface = context.get(mapping, "interface", key, context.choice(tuple(FMU_INTERFACES)), None)
+    start = context.get(mapping, "start_time", key, context.number, None)
+    stop = context.get(mapping, "stop_time", key, context.number, None)
+    if start is not None and stop is not None and stop <= start:
+        raise context.error(
+            mapping.line_of("stop_time"),
+            _join(key, "stop_time"),
+            f"must be later than start_time ({start:g})",
+            got=stop,
+        )
+    tolerance = context.get(mapping, "tolerance", key, context.number, None)
+    problem = None if tolerance is None else tolerance_problem(tolerance)
+    if problem is not None:
+        raise context.error(
+            mapping.line_of("tolerance"), _join(key, "tolerance"), problem, got=tolerance
+        )
+    return FmuRun(interface=interface, start_time=start, stop_time=stop, tolerance=tolerance)
+
+
+def _with_events(source: SourceSpec) -> SourceSpec:
+    """``source`` read with events: two rows at one time stamp (docs/data.md#fmu-models)."""
+    options = dataclasses.replace(source.options, extra={**source.options.extra, "events": True})
+    return dataclasses.replace(source, options=options)
 
 
 def _can_format(context: _Context, mapping: LineDict, key: str, fmt: str | None) -> str:

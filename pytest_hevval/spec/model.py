@@ -21,6 +21,7 @@ __all__ = [
     "CampaignSpec",
     "ConditionSpec",
     "DiagnosisSpec",
+    "FmuRun",
     "Interpolation",
     "LocalGate",
     "LocalSpec",
@@ -45,6 +46,19 @@ ROLES: tuple[Role, ...] = ("validation", "calibration")
 
 
 @dataclass(frozen=True)
+class FmuRun:
+    """How an FMU model runs (the spec's ``model:`` keys); None: the default."""
+
+    #: "co-simulation" or "model-exchange"; None: co-simulation when the FMU has it.
+    interface: str | None = None
+    #: The simulation window [s]; None: where the reference starts or ends.
+    start_time: float | None = None
+    stop_time: float | None = None
+    #: Relative tolerance of the solver (model exchange) or the FMU (co-simulation).
+    tolerance: float | None = None
+
+
+@dataclass(frozen=True)
 class SourceSpec:
     """Where one side's data comes from: a file, a Python callable or an FMU."""
 
@@ -61,6 +75,7 @@ class SourceSpec:
     #: FMU: signal column → FMU output variable.
     fmu_outputs: Mapping[str, str] = field(default_factory=dict)
     step_size: float | None = None
+    fmu_run: FmuRun = field(default_factory=FmuRun)
 
     @property
     def describe(self) -> str:

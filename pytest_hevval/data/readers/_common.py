@@ -134,11 +134,35 @@ def _time_base(
     """:func:`_check_time` for relative or absolute (clock) time; the meta of a clock start."""
     scale, stated = time_scale(source, column, options) if _numeric(raw) else (1.0, False)
     clock = _clock_seconds(raw, scale if stated else None)
+    events = bool(options.extra.get("events"))
     if clock is None:
-        return _check_time(source, column, raw, options, first_line=first_line), {}
-    relative, start = clock
-    checked = _check_time(source, column, relative, _clock_options(options), first_line=first_line)
-    return checked, _start_meta(start)
+        checked = _check_time(source, column, raw, options, first_line=first_line, events=events)
+        meta: dict[str, Any] = {}
+    else:
+        relative, start = clock
+        checked = _check_time(
+            source, column, relative, _clock_options(options), first_line=first_line, events=events
+        )
+        meta = _start_meta(start)
+    if events:
+        checked, meta["events"] = _separate_events(checked)
+    return checked, meta
+
+
+def _separate_events(time: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Time with each event's first row (the value before it) one float64 step earlier, so
+    that time increases strictly; and the events' times.
+
+    Scoring then sees a step at the event (the value before it up to the event's instant, the
+    value after it from there), and an FMU's input gets the two rows back at one time stamp
+    (:func:`pytest_hevval.data.fmu.run_fmu`).
+    """
+    before = np.flatnonzero(np.diff(time) == 0)
+    if not before.size:
+        return time, before.astype(np.float64)
+    separated = time.copy()
+    separated[before] = np.nextafter(time[before], -np.inf)
+    return separated, time[before + 1]
 
 
 def _numeric(raw: npt.NDArray[Any]) -> bool:
@@ -197,10 +221,13 @@ def _check_time(
     options: SourceOptions,
     *,
     first_line: int | None = None,
+    events: bool = False,
 ) -> FloatArray:
     """Return ``raw`` as float64 seconds, or raise if it is not a usable time base.
 
     ``first_line`` is the file line of index 0 (text formats), so errors can point at a line.
+    With ``events``, two rows at one time stamp (an event in the FMI convention: the values
+    before and after it) are allowed; three are not.
     """
 
     def line(index: int) -> int | None:
@@ -225,7 +252,21 @@ def _check_time(
             hint="remove that row or fill in its time",
         )
     step = np.diff(time)
-    bad = np.flatnonzero(step <= 0)
+    # Only with events may two rows share a time stamp.
+    repeated = step == 0 if events else np.zeros(step.shape, dtype=bool)
+    if events:
+        third = np.flatnonzero(repeated[:-1] & repeated[1:])
+        if third.size:
+            i = int(third[0])
+            raise DataError(
+                f"three rows at t={time[i]:g} (index {i} to {i + 2}); an event has two, "
+                "the values before and after it",
+                file=source,
+                line=line(i + 2),
+                column=column,
+                hint="keep two rows per time stamp at most",
+            )
+    bad = np.flatnonzero((step <= 0) & ~repeated)
     if bad.size:
         i = int(bad[0])
         if step[i] == 0:
