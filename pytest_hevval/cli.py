@@ -251,6 +251,7 @@ def _diagnose(args: argparse.Namespace) -> int:
 
 
 def _write(text: str, output: str | None) -> None:
+    from .errors import OutputError
     from .files import write_atomic
     from .history import HistoryError
 
@@ -259,6 +260,8 @@ def _write(text: str, output: str | None) -> None:
         return
     try:
         write_atomic(output, text)
+    except OutputError:
+        raise
     except OSError as exc:
         raise HistoryError(
             f"cannot write: {exc.strerror or exc}", file=output, hint="choose another --output"

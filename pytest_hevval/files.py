@@ -188,6 +188,9 @@ def write_atomic(path: Path | str, content: str | bytes, *, replace: bool = True
     try:
         if target.is_dir():
             raise IsADirectoryError(errno.EISDIR, "it is a folder")
+        if str(path).endswith(("/", os.sep)):
+            # Path() drops the slash that says the user meant a folder.
+            raise IsADirectoryError(errno.EISDIR, "the path ends in a slash, so it names a folder")
         target.parent.mkdir(parents=True, exist_ok=True)
         temp = write_temporary(target.parent, payload, stem=target.name)
         try:
@@ -207,7 +210,9 @@ def write_atomic(path: Path | str, content: str | bytes, *, replace: bool = True
 def output_error(path: Path | str, exc: OSError) -> OutputError:
     """The clear error for an output that could not be written, from the OSError that said so."""
     reason = exc.strerror or str(exc)
-    if exc.errno == errno.ENOSPC:
+    if exc.errno == errno.EISDIR:
+        hint = "name a file, not a folder"
+    elif exc.errno == errno.ENOSPC:
         hint = "free some disk space, or write somewhere else"
     elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
         hint = "make the folder writable, or write somewhere else"

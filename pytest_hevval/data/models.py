@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import DataError, HevvalError
-from .record import Channel, Record
+from .record import Channel, Record, SourceOptions
 
 __all__ = ["import_callable", "record_from_frame", "reference_frame", "run_callable"]
 
@@ -83,9 +83,18 @@ def _finest(channels: list[Channel]) -> np.ndarray:
     return max(channels, key=lambda c: c.time.shape[0]).time
 
 
-def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
-    """Convert a model's returned DataFrame into a :class:`Record`, checking its shape."""
+def record_from_frame(
+    frame: Any, time_name: str, source: str, options: SourceOptions | None = None
+) -> Record:
+    """Convert a model's returned DataFrame into a :class:`Record`, checking its shape.
+
+    Its time column is read by the rule every data file's is (``options``: the spec's
+    ``model:`` keys, ``time_scale`` among them): seconds, another unit, datetimes, ISO-8601
+    text or epoch numbers. A column of text is kept as a name only, so asking for it says it
+    holds no numbers."""
     import pandas as pd
+
+    from .readers._common import _kind_name, _time_base
 
     if not isinstance(frame, pd.DataFrame):
         raise DataError(
@@ -105,21 +114,25 @@ def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
             column=time_name,
             hint=(error.hint or "") + "; set model.time to its name",
         )
-    time = np.asarray(pd.to_numeric(frame[time_name], errors="coerce"), dtype=np.float64)
-    if time.shape[0] < 2 or not np.all(np.isfinite(time)) or not np.all(np.diff(time) > 0):
+    if len(frame) < 2:
         raise DataError(
-            "the model output's time column must be finite and strictly increasing",
+            f"the model output holds {len(frame)} rows; a time series needs at least 2",
             file=source,
             column=time_name,
         )
+    time, start = _time_base(
+        source, time_name, frame[time_name].to_numpy(), options or SourceOptions()
+    )
     channels: dict[str, Channel] = {}
     numeric: list[str] = []
+    not_numeric: dict[str, str] = {}
     for column in frame.columns:
         name = str(column)
         if name == time_name:
             continue
         series = frame[column]
         if not (pd.api.types.is_numeric_dtype(series) or pd.api.types.is_bool_dtype(series)):
+            not_numeric[name] = _kind_name(np.asarray(series).dtype)
             continue
         values = np.asarray(series, dtype=np.float64)
         channels[name] = Channel(time=time, values=values)
@@ -129,7 +142,7 @@ def record_from_frame(frame: Any, time_name: str, source: str) -> Record:
         channels=channels,
         available=tuple(str(c) for c in frame.columns),
         numeric=tuple(numeric),
-        meta={"model_output": True},
+        meta={"model_output": True, "not_numeric": not_numeric, **start},
     )
 
 
@@ -143,8 +156,10 @@ def run_callable(
     model_time: str,
     folders: Iterable[Path],
     spec_file: str,
+    options: SourceOptions | None = None,
 ) -> Record:
-    """Run ``module:function(reference_frame, **params)`` and return its output as a Record."""
+    """Run ``module:function(reference_frame, **params)`` and return its output as a Record
+    (``options``: how to read its time column, from the spec's ``model:``)."""
     function = import_callable(reference_to, folders, source=spec_file)
     frame = reference_frame(reference, inputs, reference_time)
     label = f"model {reference_to}"
@@ -187,7 +202,7 @@ def run_callable(
             hint=f"run {reference_to} on the columns it was given ({_listing(given)}; "
             "`inputs:` under `model:` chooses them) to debug it",
         ) from None
-    return record_from_frame(output, model_time, label)
+    return record_from_frame(output, model_time, label, options)
 
 
 def _model_line(exc: BaseException, folders: Iterable[Path]) -> str:

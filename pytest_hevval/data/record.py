@@ -119,7 +119,15 @@ class Reader(Protocol):
 
 
 def model_column_error(record: Record, name: str) -> DataError:
-    """The error for a column a model callable's output does not hold."""
+    """The error for a column a model callable's output does not hold, or holds as text."""
+    holds = record.meta.get("not_numeric", {}).get(name)
+    if holds is not None:
+        return DataError(
+            f"holds {holds} in the model's output, not numbers",
+            file=record.source,
+            column=name,
+            hint="return the column as numbers (float or int)",
+        )
     return missing_column(
         record.source, name, record.available or record.channels, where="in the model's output"
     )

@@ -139,7 +139,15 @@ def parse_utc(text: Any, *, where: str = "started_utc", file: str | None = None)
         ) from None
     if moment.tzinfo is None:
         moment = moment.replace(tzinfo=timezone.utc)
-    return moment.astimezone(timezone.utc)
+    try:
+        return moment.astimezone(timezone.utc)
+    except OverflowError:  # 9999-12-31T23:59:59-12:00 is in year 10000 in UTC
+        raise HistoryError(
+            f"the time {text!r} lies outside the years 1 to 9999 in UTC",
+            file=file,
+            key=where,
+            hint=_HINT_CORRUPT,
+        ) from None
 
 
 def record_time(record: Mapping[str, Any]) -> datetime:

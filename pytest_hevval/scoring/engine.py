@@ -6,6 +6,7 @@ never prints, and it writes nothing.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
@@ -277,6 +278,7 @@ def _load_model(
                 model_time=model.options.time or "time",
                 folders=folders,
                 spec_file=str(spec.path),
+                options=model.options,
             )
         except DataError as exc:
             # The spec's `model:` line: where the inputs it names are given.
@@ -370,8 +372,32 @@ def _signal_side(
     if converted is not None:
         values = _convert_units(values, *converted, node, side)
     if scale != 1.0 or offset != 0.0:
-        values = values * scale + offset
+        values = _scaled(values, scale, offset, node, side)
     return values
+
+
+def _scaled(
+    values: FloatArray, scale: float, offset: float, node: SignalSpec, side: str
+) -> FloatArray:
+    """``values * scale + offset``, or the error naming the key that takes them beyond what
+    float64 holds (the range the signal is normalised by included)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        result = values * scale + offset
+        finite = result[np.isfinite(result)]
+        spread = float(finite.max() - finite.min()) if finite.size else 0.0
+    overflowed = np.isinf(result) & np.isfinite(values)
+    if not (bool(overflowed.any()) or math.isinf(spread)):
+        return result
+    prefix = "ref" if side == "reference" else "sim"
+    key = f"{prefix}_scale" if scale != 1.0 else f"{prefix}_offset"
+    largest = float(np.nanmax(np.abs(values))) if values.size else 0.0
+    raise ExpressionError(
+        f"{key} {scale if scale != 1.0 else offset:g} takes the {side} side beyond what float64 "
+        f"holds (its largest magnitude is {largest:g})",
+        key=f"{node.key}.{key}",
+        line=node.line,
+        hint=f"check {key}: it converts the data to the signal's unit",
+    )
 
 
 def _convert_units(

@@ -136,6 +136,8 @@ def _time_base(
     clock = _clock_seconds(raw, scale if stated else None)
     events = bool(options.extra.get("events"))
     if clock is None:
+        if np.asarray(raw).dtype.kind in "OUS":
+            raw = text_time_numbers(source, column, raw, first_line=first_line)
         checked = _check_time(source, column, raw, options, first_line=first_line, events=events)
         meta: dict[str, Any] = {}
     else:
@@ -163,6 +165,62 @@ def _separate_events(time: FloatArray) -> tuple[FloatArray, FloatArray]:
     separated = time.copy()
     separated[before] = np.nextafter(time[before], -np.inf)
     return separated, time[before + 1]
+
+
+def text_time_numbers(
+    source: str, column: str, raw: npt.NDArray[Any], *, first_line: int | None = None
+) -> FloatArray:
+    """A time column of text that is not all ISO-8601 stamps, as numbers; else the error that
+    names its first cell that is neither a stamp (where the column holds stamps) nor a
+    number."""
+    import pandas as pd
+
+    check_stamps(source, column, raw, first_line=first_line)
+    cells = pd.Series(np.asarray(raw, dtype=object))
+    numbers = pd.to_numeric(cells, errors="coerce")
+    bad = np.flatnonzero((numbers.isna() & cells.notna()).to_numpy())
+    if bad.size:
+        index = int(bad[0])
+        raise DataError(
+            f"non-numeric value {cells.iloc[index]!r} at index {index}",
+            file=source,
+            line=None if first_line is None else first_line + index,
+            column=column,
+            hint="give time as seconds or as ISO-8601 stamps",
+        )
+    return np.asarray(numbers, dtype=np.float64)
+
+
+def check_stamps(
+    source: str, column: str, raw: npt.NDArray[Any], *, first_line: int | None = None
+) -> None:
+    """Where a text time column holds ISO-8601 stamps, the error naming its first cell that
+    is not one (a leap second, ``…T23:59:60Z``, says so)."""
+    import pandas as pd
+
+    values = np.asarray(raw)
+    if values.dtype.kind not in "OUS" or values.size == 0:
+        return
+    if not re.match(r"\s*[+-]?\d{4}-\d\d-\d\d", str(values[0])):
+        return
+    cells = pd.Series(values.astype(object))
+    stamps = pd.to_datetime(cells, utc=True, format="ISO8601", errors="coerce")
+    if stamps.notna().any():
+        bad = np.flatnonzero((stamps.isna() & cells.notna()).to_numpy())
+        if bad.size:
+            index = int(bad[0])
+            value = cells.iloc[index]
+            leap = isinstance(value, str) and re.search(r":60(\.\d*)?\s*(Z|[+-]\d|$)", value)
+            raise DataError(
+                f"{value!r} at index {index} is not a time stamp"
+                + (" (a leap second, which no time stamp type here can hold)" if leap else ""),
+                file=source,
+                line=None if first_line is None else first_line + index,
+                column=column,
+                hint="write that stamp as the second before it (…:59.999) or give time as seconds"
+                if leap
+                else "fix or remove that cell",
+            )
 
 
 def _numeric(raw: npt.NDArray[Any]) -> bool:
@@ -287,7 +345,19 @@ def _check_time(
     if not stated and options.extra.get("check_time_unit", True):
         _check_time_unit(source, column, time)
     if scale != 1.0:
-        time = time * scale
+        with np.errstate(over="ignore", under="ignore"):
+            scaled = time * scale
+        if not (np.all(np.isfinite(scaled)) and np.all(np.diff(scaled) > 0)):
+            raise DataError(
+                f"`time_scale: {scale:g}` takes the time outside what float64 holds "
+                f"(from t = {time[0]:g} to {time[-1]:g} become {scaled[0]:g} to {scaled[-1]:g} s)",
+                file=source,
+                column=column,
+                key="time_scale",
+                hint="set `time_scale:` to the seconds in one unit of this column "
+                "(0.001 for milliseconds)",
+            )
+        time = scaled
     return time
 
 

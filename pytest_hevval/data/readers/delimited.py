@@ -27,6 +27,7 @@ from ._common import (
     _table_record,
     _time_base,
     _unit_from_name,
+    check_stamps,
 )
 
 _SEPARATORS = (";", ",", "\t", "|")
@@ -217,6 +218,8 @@ def _read_delimited(
 
     time_raw = frame[time_name].to_numpy()
     if time_raw.dtype.kind not in "OUSM" or _clock_seconds(time_raw) is None:
+        # A column of stamps with one that cannot be read is named by that stamp.
+        check_stamps(path, time_name, time_raw, first_line=2)
         time_raw = _numeric_column(path, frame, time_name, decimal)
     time, start_meta = _time_base(path, time_name, time_raw, options, first_line=2)
     values = {

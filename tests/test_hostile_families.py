@@ -1,0 +1,200 @@
+"""The hostile inputs of the third round (issue 50), each with the family it stands for: run
+as ``hevval`` in a child process bounded in time and memory (``tests/test_hostile.py``), or
+through pytester where the pytest front end is the one at stake."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tests import test_hostile
+from tests.test_hostile import SPEC, _clear_error, hevval
+
+#: The folder of test_hostile: a spec, ref.csv and sim.csv (the model is off by 0.01).
+project = test_hostile.project
+
+
+def _spec(project: Path, text: str, name: str = "hostile.hevval.yaml") -> str:
+    (project / name).write_text(text, encoding="utf-8")
+    return name
+
+
+def _record(project: Path, **fields: object) -> Path:
+    """A history record written by ``hevval run --history``, with ``fields`` replaced."""
+    done = hevval(project, "run", "hostile.hevval.yaml", "--history")
+    assert done.returncode == 0, done.stderr
+    (path,) = (project / ".hevval" / "history").glob("*.json")
+    record = json.loads(path.read_text("utf-8"))
+    record.update(fields)
+    path.write_text(json.dumps(record), encoding="utf-8")
+    return path
+
+
+# -- numbers beyond what float64 holds ----------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("started", "problem"),
+    [
+        ("9999-12-31T23:59:59-12:00", "outside the years 1 to 9999"),
+        ("0001-01-01T00:00:00+14:00", "outside the years 1 to 9999"),
+    ],
+)
+def test_a_history_record_starting_beyond_year_9999_is_skipped_and_named(
+    project: Path, started: str, problem: str
+) -> None:
+    path = _record(project, started_utc=started)
+    done = hevval(project, "history")
+    assert "Traceback" not in done.stdout + done.stderr, done.stderr
+    assert path.name in done.stderr, done.stderr
+    assert problem in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("key", ["ref_scale", "sim_scale"])
+def test_a_scale_that_overflows_the_signal_names_its_key(project: Path, key: str) -> None:
+    _spec(project, SPEC.replace("{signal: v}", f"{{signal: v, {key}: 1.0e+308}}"))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, "hostile.hevval.yaml", f"sets[0].{key}", "beyond what float64 holds")
+
+
+def test_a_time_scale_that_overflows_the_time_names_its_key(project: Path) -> None:
+    """Scaled to inf: an error naming the key, and no RuntimeWarning (the child turns warnings
+    into errors)."""
+    _spec(project, SPEC.replace("{path: sim.csv}", "{path: sim.csv, time_scale: 1.0e+307}"))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, "sim.csv", "time_scale", "outside what float64 holds")
+
+
+# -- every path the tool writes -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("run", "hostile.hevval.yaml", "--no-history", "--json"),
+        ("diagnose", "hostile.hevval.yaml", "--signal", "v", "--json"),
+    ],
+    ids=["run", "diagnose"],
+)
+@pytest.mark.parametrize("target", ["out", "new/"], ids=["existing folder", "trailing slash"])
+def test_json_output_naming_a_folder_says_so(
+    project: Path, argv: tuple[str, ...], target: str
+) -> None:
+    (project / "out").mkdir()
+    done = hevval(project, *argv, target)
+    _clear_error(done, "names a folder" if target.endswith("/") else "it is a folder")
+    assert "cannot write it: " in done.stderr
+    assert done.stderr.count("cannot write") == 1
+    assert not (project / "new").exists()
+
+
+def test_history_and_compare_output_naming_a_folder_say_so_once(project: Path) -> None:
+    _record(project)
+    (project / "out").mkdir()
+    for argv in (
+        ("history", "--json", "out"),
+        ("compare", "history:latest", "history:latest", "--output", "out"),
+    ):
+        done = hevval(project, *argv)
+        _clear_error(done, "out: cannot write it: it is a folder")
+        assert done.stderr.count("cannot write") == 1, done.stderr
+
+
+# -- a model callable's output in every type --------------------------------------------------
+
+MODELS = """\
+import numpy as np
+import pandas as pd
+
+
+def text(frame):
+    return pd.DataFrame({"time": frame["time"], "v": [str(x) for x in np.sin(frame["time"])]})
+
+
+def milliseconds(frame):
+    return pd.DataFrame({"t_ms": frame["time"] * 1000, "v": np.sin(frame["time"]) + 0.1})
+
+
+def datetimes(frame):
+    start = pd.Timestamp("2024-01-01T00:00:00Z")
+    stamps = start + pd.to_timedelta(frame["time"], unit="s")
+    return pd.DataFrame({"time": stamps, "v": np.sin(frame["time"]) + 0.1})
+
+
+def iso_text(frame):
+    start = pd.Timestamp("2024-01-01T00:00:00Z")
+    stamps = (start + pd.to_timedelta(frame["time"], unit="s")).dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return pd.DataFrame({"time": stamps, "v": np.sin(frame["time"]) + 0.1})
+
+
+def float32(frame):
+    t = frame["time"].to_numpy(dtype=np.float32)
+    return pd.DataFrame({"time": t, "v": (np.sin(frame["time"]) + 0.1).astype(np.float32)})
+
+
+def text_time(frame):
+    return pd.DataFrame({"time": ["zero", *frame["time"][1:]], "v": np.sin(frame["time"])})
+"""
+
+
+def _callable_spec(project: Path, function: str, model_keys: str = "") -> str:
+    (project / "models.py").write_text(MODELS, encoding="utf-8")
+    return _spec(
+        project,
+        "name: hostile\nreference: {path: ref.csv}\n"
+        f'model: {{callable: "models:{function}"{model_keys}}}\n'
+        "sets:\n  - {signal: v}\n",
+    )
+
+
+def test_a_model_column_of_text_is_named_as_not_numeric(project: Path) -> None:
+    spec = _callable_spec(project, "text")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "column 'v'", "holds objects (text or mixed)", "not numbers")
+    assert "no such column" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("function", "model_keys"),
+    [
+        ("milliseconds", ", time: t_ms, time_scale: 0.001"),
+        ("datetimes", ""),
+        ("iso_text", ""),
+        ("float32", ""),
+    ],
+)
+def test_a_model_time_column_is_read_by_the_rule_every_file_is(
+    project: Path, function: str, model_keys: str
+) -> None:
+    """The model is the reference plus 0.1: its MAE is 0.1 whatever type its time has."""
+    spec = _callable_spec(project, function, model_keys)
+    done = hevval(project, "run", spec, "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == pytest.approx(0.1, abs=1e-5)
+
+
+def test_a_model_time_column_with_a_word_names_the_cell(project: Path) -> None:
+    spec = _callable_spec(project, "text_time")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "column 'time'", "non-numeric value 'zero' at index 0")
+
+
+# -- time stamps no type holds -------------------------------------------------------------------
+
+
+def test_a_leap_second_is_named_where_it_is(project: Path) -> None:
+    start = pd.Timestamp("2016-12-31T23:59:50Z")
+    stamps = [
+        (start + pd.Timedelta(seconds=0.1 * i)).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-5] + "Z"
+        for i in range(200)
+    ]
+    stamps[100] = "2016-12-31T23:59:60.0Z"
+    v = np.sin(np.arange(200) * 0.1)
+    pd.DataFrame({"time": stamps, "v": v}).to_csv(project / "ref.csv", index=False)
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, "ref.csv:102: column 'time'", "at index 100", "leap second")
