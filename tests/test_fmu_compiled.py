@@ -187,6 +187,17 @@ def test_int64_max_in_a_csv_file_is_refused_not_wrapped(probe: str, tmp_path: Pa
     assert message.startswith(f"{path}: column 'big': holds 9.2233720368547758e+18 at t=0 s")
 
 
+@pytest.mark.parametrize(
+    ("variable", "kind"),
+    [("gains", "an array of 2 Float64 values"), ("mode", "a String variable")],
+)
+def test_inputs_one_channel_cannot_drive_are_refused(probe: str, variable: str, kind: str) -> None:
+    assert _error(probe, inputs={variable: "zero"}) == (
+        f"probe3.fmu: inputs: input {variable!r} is {kind}, which one measured channel cannot "
+        f"drive; remove {variable!r} from the inputs; the FMU then uses its start value"
+    )
+
+
 def test_parameters_keep_their_declared_type(probe: str) -> None:
     record = _run(
         probe,
