@@ -21,8 +21,10 @@ from tests.conftest import IN_CI
 
 SOURCES = Path(__file__).parent / "fmus"
 
-_DECLARED = re.compile(r"#define\s+(fmi3\w+)\s+fmi3FullName\(")
-_DEFINED = re.compile(r"^[A-Za-z][\w\s\*]*?\b(fmi3[A-Z]\w*)\(", re.MULTILINE)
+#: FMI version → the header that declares every function, and the binaries' platform folder.
+_HEADERS = {"2.0": "fmi2Functions.h", "3.0": "fmi3Functions.h"}
+_DECLARED = re.compile(r"#define\s+(fmi[23]\w+)\s+fmi[23]FullName\(")
+_DEFINED = re.compile(r"^[A-Za-z][\w\s\*]*?\b(fmi[23][A-Z]\w*)\(", re.MULTILINE)
 
 
 def _unavailable(reason: str) -> None:
@@ -31,34 +33,40 @@ def _unavailable(reason: str) -> None:
     pytest.skip(reason)
 
 
-def _headers() -> Path:
+def _headers(fmi_version: str) -> Path:
     fmpy = pytest.importorskip("fmpy")
     folder = Path(fmpy.__file__).parent / "c-code"
-    if not (folder / "fmi3Functions.h").is_file():
-        _unavailable(f"the installed fmpy ({fmpy.__version__}) ships no FMI 3 headers in {folder}")
+    if not (folder / _HEADERS[fmi_version]).is_file():
+        _unavailable(
+            f"the installed fmpy ({fmpy.__version__}) ships no FMI {fmi_version} headers "
+            f"in {folder}"
+        )
     return folder
 
 
-def build_fmi3(name: str, out: Path) -> str:
+def build_fmu(name: str, fmi_version: str, out: Path) -> str:
     """Compile ``tests/fmus/<name>.c`` with its ``<name>.xml`` into ``out/<name>.fmu``.
 
-    FMI functions the source does not define are added as stubs that return fmi3Error: fmpy
-    looks every FMI function up when it loads the binary, and the tests call only some.
+    FMI functions the source does not define are added as stubs that return the FMI error
+    status (3): fmpy looks every FMI function up when it loads the binary, and the tests call
+    only some.
     """
     import fmpy
 
     compiler = shutil.which("gcc") or shutil.which("cc")
     if compiler is None:
         _unavailable("no C compiler (gcc or cc) on PATH")
-    headers = _headers()
+    headers = _headers(fmi_version)
     source = SOURCES / f"{name}.c"
-    declared = _DECLARED.findall((headers / "fmi3Functions.h").read_text())
+    declared = _DECLARED.findall((headers / _HEADERS[fmi_version]).read_text())
     defined = set(_DEFINED.findall(source.read_text()))
     stubs = out / f"{name}_stubs.c"
     stubs.write_text(
         "".join(f"int {f}(void) {{ return 3; }}\n" for f in declared if f not in defined)
     )
-    binary = f"binaries/{fmpy.platform_tuple}/{name}{fmpy.sharedLibraryExtension}"
+    # FMI 3 names the folder by a platform tuple (x86_64-linux), FMI 2 by a name (linux64).
+    platform = fmpy.platform_tuple if fmi_version == "3.0" else fmpy.platform
+    binary = f"binaries/{platform}/{name}{fmpy.sharedLibraryExtension}"
     library = out / binary
     library.parent.mkdir(parents=True, exist_ok=True)
     command = [compiler, "-shared", "-fPIC", "-O1", "-I", str(headers), str(source), str(stubs)]

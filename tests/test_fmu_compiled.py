@@ -1,6 +1,7 @@
-"""The FMU runner on an FMI 3.0 FMU compiled from C here (tests/fmus/probe3.c): array outputs,
-64-bit integer inputs, String parameters and outputs, the choice of interface, the start time
-and tolerance, and inputs with events; through ``run_fmu`` and through ``pytest --hevval``."""
+"""The FMU runner on FMUs compiled from C here: an FMI 3.0 one (tests/fmus/probe3.c) for array
+outputs, 64-bit integer inputs, String parameters and outputs, the choice of interface, the
+start time and tolerance, and inputs with events, through ``run_fmu`` and through
+``pytest --hevval``; an FMI 2.0 one (probe2.c) for the same run settings on FMI 2."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ from pytest_hevval.data.readers import read_record
 from pytest_hevval.data.record import Channel, Record, SourceOptions
 from pytest_hevval.errors import DataError, SpecError
 from pytest_hevval.spec.load import load_spec
-from tests.compiled_fmus import build_fmi3
+from tests.compiled_fmus import build_fmu
 
 fmpy = pytest.importorskip("fmpy")
 
@@ -30,7 +31,12 @@ UINT64_MAX = 2**64 - 1
 
 @pytest.fixture(scope="session")
 def probe(tmp_path_factory: pytest.TempPathFactory) -> str:
-    return build_fmi3("probe3", tmp_path_factory.mktemp("compiled-fmus"))
+    return build_fmu("probe3", "3.0", tmp_path_factory.mktemp("compiled-fmus"))
+
+
+@pytest.fixture(scope="session")
+def probe2(tmp_path_factory: pytest.TempPathFactory) -> str:
+    return build_fmu("probe2", "2.0", tmp_path_factory.mktemp("compiled-fmus"))
 
 
 def _reference(**columns: tuple[np.ndarray, np.ndarray]) -> Record:
@@ -179,6 +185,17 @@ def test_int64_max_in_a_csv_file_is_refused_not_wrapped(probe: str, tmp_path: Pa
     reference = read_record(str(path), ["big"], SourceOptions())
     message = _error(probe, reference, inputs={"i64": "big"})
     assert message.startswith(f"{path}: column 'big': holds 9.2233720368547758e+18 at t=0 s")
+
+
+@pytest.mark.parametrize(
+    ("variable", "kind"),
+    [("gains", "an array of 2 Float64 values"), ("mode", "a String variable")],
+)
+def test_inputs_one_channel_cannot_drive_are_refused(probe: str, variable: str, kind: str) -> None:
+    assert _error(probe, inputs={variable: "zero"}) == (
+        f"probe3.fmu: inputs: input {variable!r} is {kind}, which one measured channel cannot "
+        f"drive; remove {variable!r} from the inputs; the FMU then uses its start value"
+    )
 
 
 def test_parameters_keep_their_declared_type(probe: str) -> None:
@@ -524,3 +541,35 @@ sets:
         ]
     )
     assert "Traceback" not in result.stdout.str()
+
+
+@pytest.mark.parametrize("interface", ["co-simulation", "model-exchange"])
+def test_an_fmi2_fmu_runs_either_interface_with_its_settings(probe2: str, interface: str) -> None:
+    slow = np.round(np.arange(0, 1.0001, 0.1), 10)
+    counts = np.arange(slow.size) * 7.0 - 20.0
+    reference = _reference(count=(slow, counts))
+    record = _run(
+        probe2,
+        reference,
+        interface=interface,
+        inputs={"n": "count"},
+        outputs={"y": "y", "n": "n_out", "tol": "tol_seen", "start": "start_seen"},
+        parameters={"k": 0.5},
+        start_time=0.2,
+        tolerance=1e-9,
+    )
+    assert record.meta["fmi_version"] == "2.0"
+    y = record.channels["y"]
+    np.testing.assert_allclose(y.values, np.exp(-0.5 * (y.time - 0.2)), rtol=1e-6)
+    np.testing.assert_array_equal(record.channels["start"].values, 0.2)
+    n = record.channels["n"]
+    held = np.searchsorted(slow, n.time + 1e-9, side="right") - 1
+    if interface == "co-simulation":
+        # fmi2SetupExperiment gets the tolerance; a step reads the input at its start.
+        assert record.meta["fmi_type"] == "CoSimulation"
+        np.testing.assert_array_equal(record.channels["tol"].values, 1e-9)
+        np.testing.assert_array_equal(n.values[1:], counts[held[:-1]])
+    else:
+        # CVode solves to the tolerance; the model reads the input at each output time.
+        assert record.meta["fmi_type"] == "ModelExchange"
+        np.testing.assert_array_equal(n.values, counts[held])

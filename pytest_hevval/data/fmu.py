@@ -593,7 +593,6 @@ def _input_signals(
     if not inputs:
         return None
     channels: dict[str, Channel] = {}
-    inside: dict[str, tuple[float, float]] = {}
     for variable, column in inputs.items():
         channel = reference.channel(column)
         first, last = float(channel.time[0]), float(channel.time[-1])
@@ -606,7 +605,6 @@ def _input_signals(
                 column=column,
                 hint="set the simulation window inside the measurement",
             )
-        inside[variable] = (start - slack, stop + slack)
         window = (channel.time >= start - slack) & (channel.time <= stop + slack)
         bad = np.flatnonzero(~np.isfinite(channel.values) & window)
         if bad.size:
@@ -622,6 +620,9 @@ def _input_signals(
     for channel in channels.values():
         if channel.time is not times:
             times = np.union1d(times, channel.time)
+    # The window's own ends first and last: fmpy holds the first row from the start (at a
+    # sample on the start it would read an integer input's sample before, at initialisation).
+    times = np.concatenate(([start], times[(times > start) & (times < stop)], [stop]))
     dtype = [("time", np.float64)] + [
         (name, _field_type(variables[name], fmi_version)) for name in channels
     ]
@@ -631,25 +632,41 @@ def _input_signals(
         if field_type.kind in "biu":
             # Discrete inputs hold each sample until the next, as fmpy holds them.
             held = channel.values[_previous(channel.time, times)].astype(np.float64)
-            low, high = inside[name]
-            used = (times >= low) & (times <= high)
             if field_type.kind == "b":
                 signals[name] = held != 0
             else:
                 signals[name] = _exact_integers(
-                    reference.source,
-                    inputs[name],
-                    name,
-                    variables[name],
-                    field_type,
-                    held,
-                    times,
-                    used,
+                    reference.source, inputs[name], name, variables[name], field_type, held, times
                 )
         else:
             signals[name] = np.interp(times, channel.time, channel.values.astype(np.float64))
     signals["time"] = _with_events(reference, times)
-    return signals
+    return _discrete_changes_as_events(signals)
+
+
+def _discrete_changes_as_events(signals: npt.NDArray[Any]) -> npt.NDArray[Any]:
+    """``signals`` with each change of an integer or Boolean input as an event: a row before
+    it (the old value) and one after it (the new) at the change's time stamp.
+
+    Between two rows fmpy 0.3.22 gives a discrete input the later row's value at an event of
+    model exchange; with the old value held at the change's own time stamp it gives the value
+    that holds there, as later versions do.
+    """
+    names = [n for n in signals.dtype.names or () if signals.dtype[n].kind in "biu"]
+    if not names:
+        return signals
+    changes = np.zeros(signals.size, dtype=bool)
+    for name in names:
+        changes[1:] |= signals[name][1:] != signals[name][:-1]
+    # A change that is an event of the reference has its row before already.
+    changes[1:] &= np.diff(signals["time"]) > 0
+    at = np.flatnonzero(changes)
+    if not at.size:
+        return signals
+    before = signals[at]
+    for name in names:
+        before[name] = signals[name][at - 1]
+    return np.insert(signals, at, before)
 
 
 def _field_type(variable: Any, fmi_version: str) -> Any:
@@ -673,7 +690,6 @@ def _exact_integers(
     integer: np.dtype[Any],
     values: FloatArray,
     times: FloatArray,
-    used: npt.NDArray[np.bool_],
 ) -> npt.NDArray[np.integer]:
     """``values`` as the input's integer type, or an error at the first one it cannot hold."""
     limits = np.iinfo(integer)
@@ -696,7 +712,7 @@ def _exact_integers(
             "feed the input a channel within that range",
         ),
     ):
-        bad = np.flatnonzero(wrong & used)
+        bad = np.flatnonzero(wrong)
         if bad.size:
             i = int(bad[0])
             raise DataError(
@@ -706,8 +722,7 @@ def _exact_integers(
                 column=column,
                 hint=hint,
             )
-    # Outside the window nothing is read; any value the type holds will do there.
-    return np.where(used, values, 0).astype(integer)
+    return values.astype(integer)
 
 
 def _with_events(reference: Record, times: FloatArray) -> FloatArray:
