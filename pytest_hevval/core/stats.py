@@ -36,6 +36,11 @@ RCOND = 1e-10
 #: 10⁴ of each other): the solution's relative error is then at most about ε·10⁸ ≈ 2·10⁻⁸. A
 #: worse-conditioned design is solved through the SVD of X.
 GRAM_CONDITION = 1e-8
+#: The lowest Fourier frequencies whose periodogram checks an AR model's long-run variance in
+#: :func:`effective_samples` (a drift or a slow wave puts its power there).
+LOW_FREQUENCIES = 8
+#: ... and the level at which that check rejects the AR model.
+LOW_FREQUENCY_LEVEL = 1e-3
 #: How many spectral peaks :func:`dominant_frequencies` reports.
 N_PEAKS = 3
 
@@ -419,26 +424,46 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
 
 
 def effective_samples(u: FloatArray, order: int) -> float:
-    """Samples of white noise that would estimate the mean of u as precisely.
+    """Samples of white noise that would estimate the mean of u as precisely: n γ₀ / LRV,
+    at least 1 and at most n.
 
-    The AR(p) long-run variance gives n γ₀ (1 − Σφ)² / σ²; for a nearly deterministic u (a
-    drift, a slow wave) both (1 − Σφ) and σ² vanish and the ratio means nothing, so the
-    AR(1) value n (1 − ρ₁)/(1 + ρ₁) (Bartlett 1935) bounds it from above.
+    LRV, the long-run variance Σ_k γ_k, is that of u's AR(order) model, σ²_ε / (1 − Σφ)²,
+    right for persistent and oscillating noise alike. A drift or a slow wave is no such
+    process, and an AR fit of a few lags makes little sense of it; it shows as more power at
+    the lowest frequencies than the AR model allows. So the periodogram I_j = |Σ_t u_t
+    e^{−iω_j t}|² / n at the :data:`LOW_FREQUENCIES` lowest Fourier frequencies is compared
+    with the AR spectrum g(ω) = σ²_ε / |1 − Σ_k φ_k e^{−iωk}|² there (g(0) = LRV): when
+    Σ_j 2 I_j / g(ω_j), χ² with 2J degrees of freedom under the model, exceeds its
+    1 − :data:`LOW_FREQUENCY_LEVEL` quantile, LRV is the larger of the AR value and the mean
+    of those I_j.
     """
     n = u.shape[0]
     centred = u - float(np.mean(u))
-    gamma0 = dot(centred, centred)
+    gamma0 = dot(centred, centred) / n
     if gamma0 <= 0.0:
         return float(n)
-    rho1 = min(max(dot(centred[1:], centred[:-1]) / gamma0, -0.999999), 0.999999)
-    eff = n * (1.0 - rho1) / (1.0 + rho1)
     phi = ar_fit(centred, order)
     if phi.shape[0]:
-        residual = whiten(centred, phi)
-        sigma2 = dot(residual, residual) / residual.shape[0]
-        if sigma2 > 0.0:
-            eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
-    return float(min(max(eff, 1.0), n))
+        innovations = whiten(centred, phi)
+        sigma2 = dot(innovations, innovations) / innovations.shape[0]
+    else:
+        sigma2 = gamma0
+    lowest = min(LOW_FREQUENCIES, (n - 1) // 2)
+    omega = 2.0 * np.pi * np.arange(1, lowest + 1) / n
+    lags = np.arange(1, phi.shape[0] + 1)
+    transfer = 1.0 - np.exp(-1j * np.outer(omega, lags)) @ phi
+    model = sigma2 / np.maximum(np.abs(transfer) ** 2, 1e-300)
+    long_run = sigma2 / max((1.0 - float(np.sum(phi))) ** 2, 1e-300)
+    if lowest > 0 and sigma2 > 0.0:
+        periodogram = np.abs(np.fft.rfft(centred)[1 : lowest + 1]) ** 2 / n
+        from scipy import stats  # over a second to import; scoring never needs it
+
+        limit = float(stats.chi2.ppf(1.0 - LOW_FREQUENCY_LEVEL, 2 * lowest))
+        if float(np.sum(2.0 * periodogram / model)) > limit:
+            long_run = max(long_run, float(np.mean(periodogram)))
+    if long_run <= 0.0:
+        return float(n)
+    return float(min(max(n * gamma0 / long_run, 1.0), n))
 
 
 @dataclass(frozen=True)
