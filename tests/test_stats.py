@@ -10,7 +10,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval.core.diagnosis import Candidate, diagnose_residual
-from pytest_hevval.core.stats import hac_fit, least_squares, residualise
+from pytest_hevval.core.stats import (
+    effective_samples,
+    hac_fit,
+    least_squares,
+    politis_white,
+    residualise,
+)
 
 
 def _random_walk_on_a_regressor(seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,3 +114,12 @@ def test_least_squares_agrees_with_lapack_on_ill_conditioned_and_singular_design
     both = residualise(np.column_stack([y, 2.0 * y]), repeated)
     np.testing.assert_allclose(both[:, 1], 2.0 * both[:, 0], atol=1e-10)
     np.testing.assert_allclose(both[:, 0], y - repeated @ fit.coef, atol=1e-10)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 10])
+def test_short_and_constant_series_have_blocks_of_one_and_all_their_samples(n: int) -> None:
+    constant = np.full(n, 4.2)
+    assert politis_white(constant).circular == 1.0
+    assert politis_white(constant).stationary == 1.0
+    if n:
+        assert effective_samples(constant, 0) == float(n)

@@ -96,6 +96,12 @@ def lag_matrix(u: FloatArray, order: int) -> FloatArray:
     return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
 
 
+def varies(x: FloatArray) -> bool:
+    """Whether x takes two different values. A constant series is caught before centring it:
+    its mean's rounding would leave a constant non-zero remainder that looks like a signal."""
+    return bool(x.shape[0]) and float(np.max(x)) > float(np.min(x))
+
+
 def column_lengths(x: FloatArray) -> FloatArray:
     """The Euclidean length of every column of x; 1 for a zero column (it stays zero)."""
     norms = np.sqrt(np.einsum("ti,ti->i", x, x))
@@ -438,10 +444,10 @@ def effective_samples(u: FloatArray, order: int) -> float:
     of those I_j.
     """
     n = u.shape[0]
+    if not varies(u):
+        return float(n)
     centred = u - float(np.mean(u))
     gamma0 = dot(centred, centred) / n
-    if gamma0 <= 0.0:
-        return float(n)
     phi = ar_fit(centred, order)
     if phi.shape[0]:
         innovations = whiten(centred, phi)
@@ -502,16 +508,18 @@ def politis_white(x: FloatArray) -> BlockLength:
     λ(t) = min(1, 2(1 − |t|)), Ĝ = Σ_{|k|≤M} λ(k/M)|k|γ̂_k and ĝ = Σ_{|k|≤M} λ(k/M)γ̂_k:
     b = (2Ĝ² / (c ĝ²))^{1/3} n^{1/3}, c = 2 (stationary) or 4/3 (circular), at most
     min(3√n, n/3). As in arch, the autocorrelation at lag i divides by the sums of squares of
-    the samples after the first i + 1 and before the last i + 1.
+    the samples after the first i + 1 and before the last i + 1. A series without dependence
+    can get a length under one sample (blocks of one); one of fewer than three samples, or a
+    constant one, gets 1.
     """
     u = np.asarray(x, dtype=np.float64)
     n = u.shape[0]
+    if n < 3 or not varies(u):
+        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
     eps = u - float(np.mean(u))
-    kn = max(5, int(math.log10(n))) if n > 0 else 5
+    kn = max(5, int(math.log10(n)))
     m_max = min(math.ceil(math.sqrt(n)) + kn, n - 2)
     squares = np.cumsum(eps * eps)
-    if n < 3 or m_max < 1 or squares[-1] <= 0.0:
-        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
     acv = autocovariances(eps[:, None], m_max)[:, 0] / n
     lags = np.arange(m_max + 1)
     after = squares[-1] - squares[lags]
@@ -526,9 +534,9 @@ def politis_white(x: FloatArray) -> BlockLength:
     window = np.minimum(1.0, 2.0 * (1.0 - k / m))
     g = float(np.sum(2.0 * window * k * acv[1 : m + 1]))
     long_run = float(acv[0] + np.sum(2.0 * window * acv[1 : m + 1]))
-    b_max = math.ceil(min(3.0 * math.sqrt(n), n / 3.0))
+    b_max = float(math.ceil(min(3.0 * math.sqrt(n), n / 3.0)))
     if long_run == 0.0:
-        return BlockLength(float(b_max), float(b_max), float(acv[0]), long_run, m)
+        return BlockLength(b_max, b_max, float(acv[0]), long_run, m)
     ratio = 2.0 * g * g / (long_run * long_run) * n
     return BlockLength(
         stationary=min((ratio / 2.0) ** (1.0 / 3.0), b_max),
