@@ -22,6 +22,7 @@ from pytest_hevval.core.stats import (
     andrews_bandwidth,
     ar_fit,
     ar_order,
+    effective_samples,
     hac_fit,
     ljung_box,
     politis_white,
@@ -33,6 +34,7 @@ from .strategies import SERIES_KINDS, time_series, time_series_of
 statsmodels_api = pytest.importorskip("statsmodels.api")
 ar_model = pytest.importorskip("statsmodels.tsa.ar_model")
 diagnostic = pytest.importorskip("statsmodels.stats.diagnostic")
+arima_process = pytest.importorskip("statsmodels.tsa.arima_process")
 arch_bootstrap = pytest.importorskip("arch.bootstrap")
 
 #: Long series are checked on a few cases only, each vectorised, so the file stays fast.
@@ -197,3 +199,49 @@ def test_non_overlapping_block_bootstrap_agrees_with_arch_moving_blocks(kind: st
         ratios.append(ours / theirs)
     assert np.all(np.abs(np.log(ratios)) < math.log(1.25))
     assert abs(float(np.mean(ratios)) - 1.0) < 0.03
+
+
+@pytest.mark.parametrize(
+    ("ar", "shocks"),
+    [
+        ([0.99], "normal"),  # near a unit root
+        ([0.9], "t3"),  # heavy-tailed
+        ([2 * 0.9 * math.cos(0.5), -0.81], "normal"),  # oscillating: 1/10 of the truth before
+        ([2 * 0.95 * math.cos(0.3), -0.9025], "normal"),  # oscillating: 1/20 of it before
+    ],
+)
+def test_effective_samples_are_those_of_the_process(ar: list[float], shocks: str) -> None:
+    """n γ₀ / Σ_k γ_k of the generating AR process (statsmodels' ``ArmaProcess``: its
+    autocovariance γ₀ and long-run variance σ²/(1 − Σφ)²), within 15 % in the median of eight
+    records of 20 000 samples. The former rule, bounded by the AR(1) value n(1 − ρ₁)/(1 + ρ₁),
+    gave an oscillating residual a tenth to a twentieth of this."""
+    process = arima_process.ArmaProcess(np.concatenate(([1.0], -np.asarray(ar))))
+    n = 20_000
+    truth = n * float(process.acovf(1)[0]) * (1.0 - sum(ar)) ** 2
+    rng = np.random.default_rng(7)
+    if shocks == "t3":
+        innovations = rng.standard_t(3, size=(8, n + 1000)) / math.sqrt(3.0)
+    else:
+        innovations = rng.standard_normal((8, n + 1000))
+    records = sps.lfilter([1.0], np.concatenate(([1.0], -np.asarray(ar))), innovations)
+    found = [effective_samples(u, ar_order(u - float(np.mean(u)))) for u in records[:, 1000:]]
+    assert float(np.median(found)) == pytest.approx(min(truth, n), rel=0.15)
+
+
+@pytest.mark.parametrize(
+    ("kind", "most"),
+    [("random_walk", 10.0), ("trending", 20.0), ("slow_wave", 20.0)],
+)
+def test_a_drift_or_a_slow_wave_is_worth_few_samples(kind: str, most: float) -> None:
+    """No AR process of ten lags describes these; their lowest frequencies say so, and the
+    mean of such a record is known to within a few of its samples' worth whatever n is."""
+    for n in (200, 20_000):
+        for seed in range(3):
+            if kind == "slow_wave":
+                rng = np.random.default_rng(seed)
+                u = np.sin(2 * np.pi * 3 * np.arange(n) / n) + 0.01 * rng.standard_normal(n)
+            else:
+                u = time_series_of(kind, n, seed, parameter=1.0)
+                if kind == "trending":
+                    u = u + 20.0 * np.linspace(0.0, 1.0, n)
+            assert effective_samples(u, ar_order(u - float(np.mean(u)))) <= most, (n, seed)

@@ -36,6 +36,11 @@ RCOND = 1e-10
 #: 10⁴ of each other): the solution's relative error is then at most about ε·10⁸ ≈ 2·10⁻⁸. A
 #: worse-conditioned design is solved through the SVD of X.
 GRAM_CONDITION = 1e-8
+#: The lowest Fourier frequencies whose periodogram checks an AR model's long-run variance in
+#: :func:`effective_samples` (a drift or a slow wave puts its power there).
+LOW_FREQUENCIES = 8
+#: ... and the level at which that check rejects the AR model.
+LOW_FREQUENCY_LEVEL = 1e-3
 #: How many spectral peaks :func:`dominant_frequencies` reports.
 N_PEAKS = 3
 
@@ -89,6 +94,12 @@ def lag_matrix(u: FloatArray, order: int) -> FloatArray:
     """Columns u[t−1], …, u[t−order] for t = order … n−1."""
     n = u.shape[0]
     return np.column_stack([u[order - i : n - i] for i in range(1, order + 1)])
+
+
+def varies(x: FloatArray) -> bool:
+    """Whether x takes two different values. A constant series is caught before centring it:
+    its mean's rounding would leave a constant non-zero remainder that looks like a signal."""
+    return bool(x.shape[0]) and float(np.max(x)) > float(np.min(x))
 
 
 def column_lengths(x: FloatArray) -> FloatArray:
@@ -419,26 +430,46 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
 
 
 def effective_samples(u: FloatArray, order: int) -> float:
-    """Samples of white noise that would estimate the mean of u as precisely.
+    """Samples of white noise that would estimate the mean of u as precisely: n γ₀ / LRV,
+    at least 1 and at most n.
 
-    The AR(p) long-run variance gives n γ₀ (1 − Σφ)² / σ²; for a nearly deterministic u (a
-    drift, a slow wave) both (1 − Σφ) and σ² vanish and the ratio means nothing, so the
-    AR(1) value n (1 − ρ₁)/(1 + ρ₁) (Bartlett 1935) bounds it from above.
+    LRV, the long-run variance Σ_k γ_k, is that of u's AR(order) model, σ²_ε / (1 − Σφ)²,
+    right for persistent and oscillating noise alike. A drift or a slow wave is no such
+    process, and an AR fit of a few lags makes little sense of it; it shows as more power at
+    the lowest frequencies than the AR model allows. So the periodogram I_j = |Σ_t u_t
+    e^{−iω_j t}|² / n at the :data:`LOW_FREQUENCIES` lowest Fourier frequencies is compared
+    with the AR spectrum g(ω) = σ²_ε / |1 − Σ_k φ_k e^{−iωk}|² there (g(0) = LRV): when
+    Σ_j 2 I_j / g(ω_j), χ² with 2J degrees of freedom under the model, exceeds its
+    1 − :data:`LOW_FREQUENCY_LEVEL` quantile, LRV is the larger of the AR value and the mean
+    of those I_j.
     """
     n = u.shape[0]
-    centred = u - float(np.mean(u))
-    gamma0 = dot(centred, centred)
-    if gamma0 <= 0.0:
+    if not varies(u):
         return float(n)
-    rho1 = min(max(dot(centred[1:], centred[:-1]) / gamma0, -0.999999), 0.999999)
-    eff = n * (1.0 - rho1) / (1.0 + rho1)
+    centred = u - float(np.mean(u))
+    gamma0 = dot(centred, centred) / n
     phi = ar_fit(centred, order)
     if phi.shape[0]:
-        residual = whiten(centred, phi)
-        sigma2 = dot(residual, residual) / residual.shape[0]
-        if sigma2 > 0.0:
-            eff = min(eff, gamma0 * (1.0 - float(np.sum(phi))) ** 2 / sigma2)
-    return float(min(max(eff, 1.0), n))
+        innovations = whiten(centred, phi)
+        sigma2 = dot(innovations, innovations) / innovations.shape[0]
+    else:
+        sigma2 = gamma0
+    lowest = min(LOW_FREQUENCIES, (n - 1) // 2)
+    omega = 2.0 * np.pi * np.arange(1, lowest + 1) / n
+    lags = np.arange(1, phi.shape[0] + 1)
+    transfer = 1.0 - np.exp(-1j * np.outer(omega, lags)) @ phi
+    model = sigma2 / np.maximum(np.abs(transfer) ** 2, 1e-300)
+    long_run = sigma2 / max((1.0 - float(np.sum(phi))) ** 2, 1e-300)
+    if lowest > 0 and sigma2 > 0.0:
+        periodogram = np.abs(np.fft.rfft(centred)[1 : lowest + 1]) ** 2 / n
+        from scipy import stats  # over a second to import; scoring never needs it
+
+        limit = float(stats.chi2.ppf(1.0 - LOW_FREQUENCY_LEVEL, 2 * lowest))
+        if float(np.sum(2.0 * periodogram / model)) > limit:
+            long_run = max(long_run, float(np.mean(periodogram)))
+    if long_run <= 0.0:
+        return float(n)
+    return float(min(max(n * gamma0 / long_run, 1.0), n))
 
 
 @dataclass(frozen=True)
@@ -477,16 +508,18 @@ def politis_white(x: FloatArray) -> BlockLength:
     λ(t) = min(1, 2(1 − |t|)), Ĝ = Σ_{|k|≤M} λ(k/M)|k|γ̂_k and ĝ = Σ_{|k|≤M} λ(k/M)γ̂_k:
     b = (2Ĝ² / (c ĝ²))^{1/3} n^{1/3}, c = 2 (stationary) or 4/3 (circular), at most
     min(3√n, n/3). As in arch, the autocorrelation at lag i divides by the sums of squares of
-    the samples after the first i + 1 and before the last i + 1.
+    the samples after the first i + 1 and before the last i + 1. A series without dependence
+    can get a length under one sample (blocks of one); one of fewer than three samples, or a
+    constant one, gets 1.
     """
     u = np.asarray(x, dtype=np.float64)
     n = u.shape[0]
+    if n < 3 or not varies(u):
+        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
     eps = u - float(np.mean(u))
-    kn = max(5, int(math.log10(n))) if n > 0 else 5
+    kn = max(5, int(math.log10(n)))
     m_max = min(math.ceil(math.sqrt(n)) + kn, n - 2)
     squares = np.cumsum(eps * eps)
-    if n < 3 or m_max < 1 or squares[-1] <= 0.0:
-        return BlockLength(1.0, 1.0, 0.0, 0.0, 0)
     acv = autocovariances(eps[:, None], m_max)[:, 0] / n
     lags = np.arange(m_max + 1)
     after = squares[-1] - squares[lags]
@@ -501,9 +534,9 @@ def politis_white(x: FloatArray) -> BlockLength:
     window = np.minimum(1.0, 2.0 * (1.0 - k / m))
     g = float(np.sum(2.0 * window * k * acv[1 : m + 1]))
     long_run = float(acv[0] + np.sum(2.0 * window * acv[1 : m + 1]))
-    b_max = math.ceil(min(3.0 * math.sqrt(n), n / 3.0))
+    b_max = float(math.ceil(min(3.0 * math.sqrt(n), n / 3.0)))
     if long_run == 0.0:
-        return BlockLength(float(b_max), float(b_max), float(acv[0]), long_run, m)
+        return BlockLength(b_max, b_max, float(acv[0]), long_run, m)
     ratio = 2.0 * g * g / (long_run * long_run) * n
     return BlockLength(
         stationary=min((ratio / 2.0) ** (1.0 / 3.0), b_max),
