@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
 from .results.spec_result import SpecResult
+from .results.verdict import RegressedItem, RunVerdict
 from .spec.model import Spec
 
 if TYPE_CHECKING:
@@ -102,7 +103,10 @@ class Publication:
     notes: list[str] = field(default_factory=list)
     #: GitHub workflow commands, printed each on its own line before the summary.
     annotations: list[str] = field(default_factory=list)
+    #: A step of publishing failed (a report or the record could not be written).
     failed: bool = False
+    #: The run's verdict, which every report says and the front ends end the run with.
+    verdict: RunVerdict = field(default_factory=lambda: RunVerdict(passed=True))
 
 
 class Publisher:
@@ -130,6 +134,15 @@ class Publisher:
         """This run's name in comparisons and trends: its model version, or, when none could
         be found (no git, no --hevval-model-version), ``this run``."""
         return "this run" if self.model_version == UNKNOWN_MODEL_VERSION else self.model_version
+
+    @property
+    def baseline_label(self) -> str | None:
+        """The baseline in words (model version, commit, time), or None without one."""
+        if self.baseline is None:
+            return None
+        from .history import describe_record
+
+        return describe_record(self.baseline)
 
     @property
     def wants_comparison(self) -> bool:
@@ -210,17 +223,19 @@ class Publisher:
         specs: Mapping[str, Spec],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         dicts: Sequence[dict[str, Any]] | Callable[[], Sequence[dict[str, Any]]] | None = None,
+        errors: Sequence[str] = (),
     ) -> Publication:
-        """Reports, comparison, ratchet and history record of a run's results, in that order.
+        """The run's verdict, then its reports, comparison, ratchet and history record.
 
         ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
         (spec, signal), as :func:`diagnosis_panels` gives them; ``dicts`` the results' JSON
         data (``SpecResult.to_dict`` of each, in order) where the caller holds it already, or
         a function that makes it. The data is made only if a step uses it: a run that writes
         nothing does not pay for it (the tables of a spec with windows and regions cost
-        seconds to turn into JSON).
+        seconds to turn into JSON). ``errors``: the specs that could not be scored, each
+        named with its error.
         """
-        out = Publication()
+        out = Publication(verdict=RunVerdict.decide(results, errors=errors))
         if not results:
             return out
 
@@ -235,6 +250,13 @@ class Publisher:
             for index, result in enumerate(results)
             for regression in self.regressions(result, functools.partial(_item, data, index))
         ]
+        out.verdict = RunVerdict.decide(
+            results,
+            regressions=[RegressedItem(r.spec, r.signal, str(r)) for r in found],
+            regressions_accepted=self.options.accept,
+            baseline=self.baseline_label,
+            errors=errors,
+        )
         self._write_reports(data, diagnoses, out)
         self._compare(data, out)
         self._ratchet(data, specs, out)
@@ -261,6 +283,7 @@ class Publisher:
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
+                    verdict=out.verdict,
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")

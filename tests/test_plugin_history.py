@@ -225,6 +225,15 @@ def acceptance_of(root: Path) -> list[tuple[str, bool, str]]:
 GATE = "--hevval-compare-fail=lambda:0.002"
 
 
+def regressing_run(project: pytest.Pytester, *options: str) -> pytest.RunResult:
+    """Record model "good", worsen it, and run "worse" against the accepted baseline."""
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    worsen(project.path)
+    return project.runpytest(
+        "--hevval", "--hevval-model-version=worse", "--hevval-compare=accepted", GATE, *options
+    )
+
+
 def test_a_regressed_run_is_recorded_but_never_becomes_the_accepted_baseline(
     project: pytest.Pytester,
 ) -> None:
@@ -260,15 +269,7 @@ def test_a_regressed_run_is_recorded_but_never_becomes_the_accepted_baseline(
 def test_accept_records_a_regression_as_the_baseline_and_reports_it(
     project: pytest.Pytester,
 ) -> None:
-    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
-    worsen(project.path)
-    result = project.runpytest(
-        "--hevval",
-        "--hevval-model-version=worse",
-        "--hevval-compare=accepted",
-        GATE,
-        "--hevval-accept",
-    )
+    result = regressing_run(project, "--hevval-accept")
     # Accepting the regressions is the point: they are reported, and fail nothing.
     result.assert_outcomes(passed=6)
     result.stdout.fnmatch_lines(
@@ -317,3 +318,66 @@ def test_accept_is_given_on_the_command_line_only(project: pytest.Pytester) -> N
     result = project.runpytest("--hevval", "--hevval-model-version=v1", "--hevval-compare")
     result.assert_outcomes(passed=6)
     assert acceptance_of(project.path) == [("v1", False, "no-baseline")]
+
+
+@pytest.mark.parametrize("processes", [[], ["-p", "xdist", "-n", "2"]], ids=["serial", "xdist"])
+def test_a_regression_fails_the_run_alike_in_every_output(
+    project: pytest.Pytester, processes: list[str]
+) -> None:
+    """The terminal, report.md, report.json, report.html, JUnit XML and the exit code say one
+    verdict when only a regression fails the run."""
+    import xml.etree.ElementTree as ET
+
+    result = regressing_run(
+        project, "--hevval-report=html,json,md", "--junitxml=junit.xml", *processes
+    )
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    suite = ET.parse(project.path / "junit.xml").getroot().find("testsuite")
+    assert suite is not None
+    failures = int(suite.get("failures", "-1"))
+    assert failures > 0
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    summary = report["summary"]
+    assert summary["passed"] is False
+    assert summary["specs_failed"] == 1
+    # Every failing item is a signal or the Φ of the spec: as many as JUnit counts.
+    assert summary["outcome"].endswith(
+        f"6 items, {failures} fail ({failures} by regression): "
+        f"{summary['signals_failed']} of 5 signals, {failures - summary['signals_failed']} of 1 Φ"
+    )
+    regressions = report["verdict"]["regressions"]
+    assert len(regressions) == summary["regressions"] > 0
+    assert "pack.hevval.yaml::E/P/I" in {
+        item["spec"] + "::" + item["signal"] for item in regressions
+    }
+    good = records(project.path)[0]
+    against = f"against good ({good['started_utc'][:10]} {good['started_utc'][11:16]} UTC)"
+    count = len(regressions)
+    assert summary["outcome"].startswith(f"{count} regression{'s' * (count != 1)} {against}; ")
+    markdown = (folder / "report.md").read_text().splitlines()
+    assert markdown[0] == f"### ❌ hevval: {summary['outcome']}"
+    assert "| ❌ | pack |" in "\n".join(markdown)
+    assert f"regression{'s' * (count != 1)} {against}**" in "\n".join(markdown)
+    html = (folder / "report.html").read_text()
+    assert summary["outcome"] in html
+    assert 'class="fail"' in html
+    # The terminal's last line of the summary tree says the same.
+    result.stdout.fnmatch_lines([summary["outcome"]])
+
+
+def test_a_spec_that_cannot_be_scored_fails_the_verdict_of_the_reports(
+    project: pytest.Pytester,
+) -> None:
+    project.makefile(".hevval.yaml", lost=TREE_SPEC.replace("data/sim.csv", "data/gone.csv"))
+    result = project.runpytest("--hevval", "--hevval-report=json,md")
+    result.assert_outcomes(passed=6, errors=6)
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    assert report["summary"]["passed"] is False
+    (error,) = report["verdict"]["errors"]
+    assert error.startswith("lost.hevval.yaml: ")
+    assert "gone.csv" in error
+    assert report["summary"]["outcome"].startswith("1 spec could not be scored; ")
+    markdown = (folder / "report.md").read_text()
+    assert markdown.startswith("### ❌ hevval: 1 spec could not be scored; ")

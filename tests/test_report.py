@@ -373,6 +373,8 @@ def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> No
         "specs": 2,
         "specs_failed": 1,
         "outcome": "2 spec files, 1 pass; 6 items, 3 fail: 2 of 4 signals, 1 of 2 Φ",
+        "passed": False,
+        "regressions": 0,
     }
     assert payload["specs"][0]["signals"][0]["mae"] is None
     assert payload["specs"][0]["signals"][1]["figures"] == results[0]["signals"][1]["figures"]

@@ -14,6 +14,7 @@ from typing import Any
 from .. import __version__
 from ..defaults import split_key
 from ..results.codec import plain_json
+from ..results.verdict import RunVerdict
 from . import model
 
 __all__ = [
@@ -50,15 +51,20 @@ def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any
     return out
 
 
-def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
-    """report.json: every spec result as given, plus the summary and worst-signal table.
+def render_json(
+    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None = None
+) -> str:
+    """report.json: every spec result as given, plus the summary (with the run's verdict,
+    ``summary.passed``), the worst-signal table and, when the run decided one, ``verdict``:
+    its regressions against the baseline and the specs that could not be scored.
 
     Keys are sorted and separators fixed, so equal results give byte-identical files.
     """
     payload = {
         "report_schema_version": REPORT_SCHEMA_VERSION,
         "generated_by": f"pytest-hevval {__version__}",
-        "summary": model.summary(spec_results),
+        "summary": model.summary(spec_results, verdict),
+        **({"verdict": verdict.to_dict()} if verdict is not None else {}),
         "worst": _worst_json(spec_results),
         "specs": list(spec_results),
         **({"campaigns": campaigns} if (campaigns := campaigns_of(spec_results)) else {}),
@@ -255,24 +261,30 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
     return lines
 
 
-def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
-    """A short summary for a GitHub step summary or PR comment."""
-    counts = model.summary(spec_results)
-    ok = counts["specs_failed"] == 0
-    mark = "✅" if ok else "❌"
+def render_markdown(
+    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None = None
+) -> str:
+    """A short summary for a GitHub step summary or PR comment; its headline is the run's
+    verdict (``verdict``, else the verdict of the results alone)."""
+    counts = model.summary(spec_results, verdict)
+    mark = "✅" if counts["passed"] else "❌"
+    regressed = verdict.regressed if verdict is not None else {}
     lines = [
-        f"### {mark} hevval: {counts['outcome']}",
+        f"### {mark} hevval: {_md(counts['outcome'])}",
         "",
         "| | spec | Φ | min Φ | failing signals |",
         "|:-:|---|--:|--:|--:|",
     ]
     for spec in spec_results:
         failing = model.failing_signals(spec)
+        failed = spec.get("passed") is False or str(spec.get("spec")) in regressed
         lines.append(
-            f"| {'❌' if spec.get('passed') is False else '✅'} | {_md(spec.get('name', ''))} "
+            f"| {'❌' if failed else '✅'} | {_md(spec.get('name', ''))} "
             f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
             f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
         )
+    if verdict is not None:
+        lines += _verdict_markdown(verdict)
     for spec in spec_results:
         failing = model.failing_signals(spec)
         if spec.get("passed") is not False and not failing:
@@ -315,6 +327,32 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
                 f"{found['start_s']:.6g}–{found['stop_s']:.6g} s ({_md(str(found['detail']))})"
             )
     return "\n".join(lines) + "\n"
+
+
+def _verdict_markdown(verdict: RunVerdict) -> list[str]:
+    """The regressions against the baseline and the specs that could not be scored."""
+    lines: list[str] = []
+    if verdict.regressions:
+        count = len(verdict.regressions)
+        against = f" against {_md(verdict.baseline)}" if verdict.baseline else ""
+        accepted = (
+            " (accepted with --hevval-accept: reported, not failed)"
+            if verdict.regressions_accepted
+            else ""
+        )
+        lines += [
+            "",
+            f"**{'⚠️' if verdict.regressions_accepted else '❌'} {count} "
+            f"regression{'s' * (count != 1)}{against}**{accepted}",
+            "",
+        ]
+        lines += [f"- {_md(item.text)}" for item in verdict.regressions[:_MARKDOWN_SIGNALS]]
+        if count > _MARKDOWN_SIGNALS:
+            lines.append(f"- … and {count - _MARKDOWN_SIGNALS} more (see report.json)")
+    if verdict.errors:
+        lines += ["", "**❌ Could not be scored**", ""]
+        lines += [f"- {_md(error)}" for error in verdict.errors]
+    return lines
 
 
 def _escape_data(text: str) -> str:

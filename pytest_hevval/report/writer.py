@@ -9,6 +9,7 @@ from typing import Any
 
 from ..errors import HevvalError, did_you_mean
 from ..files import output_error, write_atomic
+from ..results.verdict import RunVerdict
 
 __all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
 
@@ -57,8 +58,10 @@ def write_reports(
     *,
     title: str = "hevval validation report",
     generated_utc: str | None = None,
+    verdict: RunVerdict | None = None,
 ) -> list[Path]:
-    """Write report.html / report.json / report.md for ``formats`` into ``directory``.
+    """Write report.html / report.json / report.md for ``formats`` into ``directory``; each
+    says ``verdict``, the run's (else the verdict of the results alone).
 
     The directory is created if needed; each file is replaced atomically. Returns the written
     paths in the order html, json, md.
@@ -82,15 +85,17 @@ def write_reports(
         if name == "html":
             from .html import render_html
 
-            text = render_html(spec_results, title=title, generated_utc=stamp, formats=formats)
+            text = render_html(
+                spec_results, title=title, generated_utc=stamp, formats=formats, verdict=verdict
+            )
         elif name == "json":
             from .text import render_json
 
-            text = render_json(spec_results)
+            text = render_json(spec_results, verdict)
         else:
             from .text import render_markdown
 
-            text = render_markdown(spec_results)
+            text = render_markdown(spec_results, verdict)
         path = directory / FILE_NAMES[name]
         write_atomic(path, text)
         written.append(path)
