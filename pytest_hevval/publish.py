@@ -24,7 +24,7 @@ from .results.verdict import RegressedItem, RunVerdict
 from .spec.model import Spec
 
 if TYPE_CHECKING:
-    from .history import Regression
+    from .history import Comparison, Regression
 
 __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
@@ -252,13 +252,18 @@ class Publisher:
         ]
         out.verdict = RunVerdict.decide(
             results,
-            regressions=[RegressedItem(r.spec, r.signal, str(r)) for r in found],
+            regressions=[RegressedItem(r.spec, r.signal, r.field, str(r)) for r in found],
             regressions_accepted=self.options.accept,
             baseline=self.baseline_label,
             errors=errors,
         )
-        self._write_reports(data, diagnoses, out)
-        self._compare(data, out)
+        comparison = None
+        if self.baseline is not None:
+            from .history import compare
+
+            comparison = compare(data(), self.baseline, after_label=self.run_label)
+        self._write_reports(data, diagnoses, out, comparison)
+        self._compare(comparison, out)
         self._ratchet(data, specs, out)
         self._record(data, self.acceptance(found), out)
         return out
@@ -273,6 +278,7 @@ class Publisher:
         data: _Data,
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         out: Publication,
+        comparison: Comparison | None,
     ) -> None:
         if self.formats:
             from .report import write_reports
@@ -284,6 +290,7 @@ class Publisher:
                     self.options.report_dir,
                     title=REPORT_TITLE,
                     verdict=out.verdict,
+                    comparison=None if comparison is None else comparison.to_dict(),
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")
@@ -335,14 +342,14 @@ class Publisher:
             decorated.append({**result, "signals": signals})
         return decorated
 
-    def _compare(self, data: _Data, out: Publication) -> None:
-        if self.baseline is None or not self.options.compare:
+    def _compare(self, comparison: Comparison | None, out: Publication) -> None:
+        """The comparison in the terminal, when it was asked for by name."""
+        if comparison is None or not self.options.compare:
             return
-        from .history import compare, comparison_table, regressions
+        from .history import comparison_table
         from .history.compare import campaign_change_lines
 
-        comparison = compare(data(), self.baseline, after_label=self.run_label)
-        found = regressions(comparison, self.rules) if self.rules else None
+        found = [r for result in self._regressions.values() for r in result] if self.rules else None
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))
 

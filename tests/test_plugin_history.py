@@ -358,7 +358,9 @@ def test_a_regression_fails_the_run_alike_in_every_output(
     markdown = (folder / "report.md").read_text().splitlines()
     assert markdown[0] == f"### ❌ hevval: {summary['outcome']}"
     assert "| ❌ | pack |" in "\n".join(markdown)
-    assert f"regression{'s' * (count != 1)} {against}**" in "\n".join(markdown)
+    # The comparison follows the spec table, its regressions first.
+    at = markdown.index(f"#### Compared with {against[len('against ') :]}")
+    assert markdown[at + 2].startswith(f"❌ {count} regression")
     html = (folder / "report.html").read_text()
     assert summary["outcome"] in html
     assert 'class="fail"' in html
@@ -381,3 +383,47 @@ def test_a_spec_that_cannot_be_scored_fails_the_verdict_of_the_reports(
     assert report["summary"]["outcome"].startswith("1 spec could not be scored; ")
     markdown = (folder / "report.md").read_text()
     assert markdown.startswith("### ❌ hevval: 1 spec could not be scored; ")
+
+
+def test_the_comparison_is_in_report_md_and_alone_in_comparison_md(
+    project: pytest.Pytester,
+) -> None:
+    # A model version that would break a Markdown table, and raw HTML.
+    project.runpytest("--hevval", "--hevval-model-version=v1|<i>").assert_outcomes(passed=6)
+    worsen(project.path)
+    result = project.runpytest(
+        "--hevval",
+        "--hevval-model-version=v2",
+        "--hevval-compare=accepted",
+        GATE,
+        "--hevval-report=md,json",
+    )
+    result.assert_outcomes(passed=3, failed=3)
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    assert (report["comparison"]["before"], report["comparison"]["after"]) == ("v1|<i>", "v2")
+    alone = (folder / "comparison.md").read_text()
+    markdown = (folder / "report.md").read_text()
+    assert alone.splitlines()[0] == markdown.splitlines()[0]
+    assert alone.startswith("### ❌ hevval: 7 regressions against v1\\|&lt;i&gt; (")
+    assert "<i>" not in alone
+    section = alone[alone.index("#### Compared with v1\\|&lt;i&gt; (") :]
+    assert section.split("<sub>")[0] in markdown
+    lines = section.splitlines()
+    # Changes the tables' four decimals cannot show are none (λ1, and λ6 of E/P).
+    assert lines[2] == "❌ 7 regressions; 9 values of Φ and λ worse, 4 better."
+    assert lines[4].startswith("- pack.hevval.yaml::E: λ3 mae dropped 1 → 0.9935")
+    table = lines[lines.index("**Worst changes**") + 2 :]
+    assert table[0].startswith("| | where | quantity | before | after | Δ | 95 % intervals")
+    rows = [row for row in table[2:] if row.startswith("| ") and not row.startswith("| |")]
+    # The regressions first, each with both runs' intervals; then Φ's drop, which no rule
+    # of lambda:0.002 covers.
+    assert [row.split(" | ")[0] for row in rows[:9]] == ["| ❌"] * 7 + ["| 🔻"] * 2
+    assert all(" → [" in row for row in rows)
+    assert rows[0].endswith("| -0.0076 | [0.9996, 0.9996] → [0.9920, 0.9920] (disjoint) |")
+    assert rows[7].startswith("| 🔻 | `pack.hevval.yaml` | Φ | 0.9964 | 0.9951 | -0.0014 | ")
+    assert [row.split(" | ")[0] for row in rows[9:]] == ["| 🔺"] * 4  # the best changes
+    assert "<details>" not in alone  # both tables show every change already
+    # A run that compares with nothing leaves no comparison behind.
+    project.runpytest("--hevval", "--hevval-report=md").assert_outcomes(passed=6)
+    assert not (folder / "comparison.md").exists()

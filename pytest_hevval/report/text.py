@@ -20,6 +20,9 @@ from . import model
 __all__ = [
     "REPORT_SCHEMA_VERSION",
     "github_annotations",
+    "headline",
+    "regression_lines",
+    "render_comparison",
     "render_json",
     "render_markdown",
 ]
@@ -52,11 +55,14 @@ def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any
 
 
 def render_json(
-    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None = None
+    spec_results: Sequence[Mapping[str, Any]],
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
 ) -> str:
     """report.json: every spec result as given, plus the summary (with the run's verdict,
     ``summary.passed``), the worst-signal table and, when the run decided one, ``verdict``:
-    its regressions against the baseline and the specs that could not be scored.
+    its regressions against the baseline and the specs that could not be scored; and the
+    ``comparison`` with the baseline when one ran (``Comparison.to_dict()``).
 
     Keys are sorted and separators fixed, so equal results give byte-identical files.
     """
@@ -65,6 +71,7 @@ def render_json(
         "generated_by": f"pytest-hevval {__version__}",
         "summary": model.summary(spec_results, verdict),
         **({"verdict": verdict.to_dict()} if verdict is not None else {}),
+        **({"comparison": comparison} if comparison is not None else {}),
         "worst": _worst_json(spec_results),
         "specs": list(spec_results),
         **({"campaigns": campaigns} if (campaigns := campaigns_of(spec_results)) else {}),
@@ -261,16 +268,24 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
     return lines
 
 
+def headline(spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None) -> str:
+    """The Markdown headline of a run: its verdict in one line."""
+    counts = model.summary(spec_results, verdict)
+    return f"### {'✅' if counts['passed'] else '❌'} hevval: {_md(counts['outcome'])}"
+
+
 def render_markdown(
-    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None = None
+    spec_results: Sequence[Mapping[str, Any]],
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
 ) -> str:
     """A short summary for a GitHub step summary or PR comment; its headline is the run's
-    verdict (``verdict``, else the verdict of the results alone)."""
-    counts = model.summary(spec_results, verdict)
-    mark = "✅" if counts["passed"] else "❌"
+    verdict (``verdict``, else the verdict of the results alone). With ``comparison`` (the
+    comparison with the baseline as ``Comparison.to_dict()`` gives it, and ``verdict``), the
+    comparison follows the spec table (:mod:`.comparison`)."""
     regressed = verdict.regressed if verdict is not None else {}
     lines = [
-        f"### {mark} hevval: {_md(counts['outcome'])}",
+        headline(spec_results, verdict),
         "",
         "| | spec | Φ | min Φ | failing signals |",
         "|:-:|---|--:|--:|--:|",
@@ -283,8 +298,12 @@ def render_markdown(
             f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
             f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
         )
+    if verdict is not None and comparison is not None:
+        from .comparison import comparison_markdown
+
+        lines += ["", *comparison_markdown(comparison, verdict)]
     if verdict is not None:
-        lines += _verdict_markdown(verdict)
+        lines += _verdict_markdown(verdict, regressions=comparison is None)
     for spec in spec_results:
         failing = model.failing_signals(spec)
         if spec.get("passed") is not False and not failing:
@@ -329,10 +348,20 @@ def render_markdown(
     return "\n".join(lines) + "\n"
 
 
-def _verdict_markdown(verdict: RunVerdict) -> list[str]:
-    """The regressions against the baseline and the specs that could not be scored."""
+def regression_lines(verdict: RunVerdict) -> list[str]:
+    """The run's regressions as a Markdown list (the first fifteen; all in report.json)."""
+    count = len(verdict.regressions)
+    lines = [f"- {_md(item.text)}" for item in verdict.regressions[:_MARKDOWN_SIGNALS]]
+    if count > _MARKDOWN_SIGNALS:
+        lines.append(f"- … and {count - _MARKDOWN_SIGNALS} more (see report.json)")
+    return lines
+
+
+def _verdict_markdown(verdict: RunVerdict, *, regressions: bool) -> list[str]:
+    """The regressions against the baseline (when ``regressions``: no comparison lists them)
+    and the specs that could not be scored."""
     lines: list[str] = []
-    if verdict.regressions:
+    if verdict.regressions and regressions:
         count = len(verdict.regressions)
         against = f" against {_md(verdict.baseline)}" if verdict.baseline else ""
         accepted = (
@@ -345,14 +374,23 @@ def _verdict_markdown(verdict: RunVerdict) -> list[str]:
             f"**{'⚠️' if verdict.regressions_accepted else '❌'} {count} "
             f"regression{'s' * (count != 1)}{against}**{accepted}",
             "",
+            *regression_lines(verdict),
         ]
-        lines += [f"- {_md(item.text)}" for item in verdict.regressions[:_MARKDOWN_SIGNALS]]
-        if count > _MARKDOWN_SIGNALS:
-            lines.append(f"- … and {count - _MARKDOWN_SIGNALS} more (see report.json)")
     if verdict.errors:
         lines += ["", "**❌ Could not be scored**", ""]
         lines += [f"- {_md(error)}" for error in verdict.errors]
     return lines
+
+
+def render_comparison(
+    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict, comparison: Mapping[str, Any]
+) -> str:
+    """comparison.md: the run's headline and its comparison with the baseline, alone, for a
+    workflow that posts just that as a pull-request comment."""
+    from .comparison import comparison_markdown
+
+    lines = [headline(spec_results, verdict), "", *comparison_markdown(comparison, verdict)]
+    return "\n".join([*lines, "", f"<sub>pytest-hevval {__version__}</sub>"]) + "\n"
 
 
 def _escape_data(text: str) -> str:

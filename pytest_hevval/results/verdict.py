@@ -27,10 +27,12 @@ class RegressedItem:
 
     spec: str
     signal: str | None
+    #: ``phi``, ``lag`` or a characteristic's name.
+    field: str
     text: str
 
     def to_dict(self) -> dict[str, Any]:
-        return {"spec": self.spec, "signal": self.signal, "text": self.text}
+        return {"spec": self.spec, "signal": self.signal, "field": self.field, "text": self.text}
 
 
 @dataclass(frozen=True)
