@@ -23,8 +23,9 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     Each run adds a record, so the folder grows by one per run, as in use; the empty one is
     emptied again. Measured with the index present (every run but the first) and, for the
     sizes in ``--cold``, once without it (the run that builds it by reading every record, as
-    after a fresh clone). ``--full-read`` also times ``HistoryStore.entries()``, the full read
-    every run paid before the index.
+    after a fresh clone). ``--fresh-clone`` adds ``--repeat`` runs that each find the records
+    without an index, as every CI job on a fresh clone does. ``--full-read`` also times
+    ``HistoryStore.entries()``, the full read every run paid before the index.
 ``--part pytest``
     ``pytest --hevval --hevval-report=html`` on the example project with an empty history and
     with ``--pytest-records`` records, alternating run by run (the order swaps each round), in
@@ -32,6 +33,8 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     (``--hevval-history-dir``, ``--hevval-report-dir``); the example project is not written
     to. The large history is run once first to build its index (timed and printed apart);
     each run adds its own record, so the large history grows by one per round, as in use.
+    With ``--fresh-clone`` the index is removed before each run on the large history, as on
+    a fresh clone.
     Wall time and CPU time (user + system of the child) are both printed: on a shared machine
     the CPU time is the steadier of the two. The whole example scores for half a minute, and
     a shared machine varies it by seconds; ``--select hwfet`` runs one spec of it (a few
@@ -193,7 +196,7 @@ def _history_part(
                         history_svg(signal["history"])
         else:
             out = Publication()
-            run._record(results, out)
+            run._record(lambda: results, run.acceptance([]), out)
             if out.failed:
                 sys.exit(f"recording failed: {out.notes}")
         spent[step] = (time.perf_counter() - wall, time.process_time() - cpu)
@@ -232,7 +235,15 @@ def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
 
             if count and count in args.cold:
                 spent, points = _history_part(publisher, results)
-                print(_row("missing: built", count, [spent], points), flush=True)
+                print(_row("missing", count, [spent], points), flush=True)
+            if count and args.fresh_clone:
+                fresh = []
+                for _ in range(args.repeat):
+                    # As in a fresh clone: the records, and no index (it is never committed).
+                    shutil.rmtree(folder / ".index", ignore_errors=True)
+                    spent, points = _history_part(publisher, results)
+                    fresh.append(spent)
+                print(_row("none: fresh clone", count, fresh, points), flush=True)
             runs = []
             for _ in range(args.repeat):
                 spent, points = _history_part(publisher, results)
@@ -269,11 +280,14 @@ def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
             f"first run on {count:,} records (no index yet): {wall:.1f} s, CPU {cpu:.1f} s",
             flush=True,
         )
+        index = large / ".index"
         times: dict[int, list[tuple[float, float]]] = {0: [], count: []}
         for round_index in range(args.rounds):
             order = (0, count) if round_index % 2 == 0 else (count, 0)
             for size in order:
                 folder = large if size else root / f"empty{round_index}"
+                if size and args.fresh_clone:
+                    shutil.rmtree(index, ignore_errors=True)  # as in a fresh clone
                 times[size].append(_run_example(folder, root / "report", args.select))
             (w0, c0), (w1, c1) = times[0][-1], times[count][-1]
             print(
@@ -300,6 +314,12 @@ def main() -> None:
     parser.add_argument("--cold", type=int, nargs="*", default=[1000])
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--full-read", action="store_true")
+    parser.add_argument(
+        "--fresh-clone",
+        action="store_true",
+        help="also (history part) or only (pytest part) run the records without an index, "
+        "as a fresh clone has them",
+    )
     parser.add_argument("--pytest-records", type=int, default=1000)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument(

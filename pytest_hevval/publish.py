@@ -317,7 +317,9 @@ class Publisher:
         if self.options.use_history:
             from .history import HistoryStore
 
-            trends = HistoryStore(self.options.history_dir).trends()
+            trends = HistoryStore(self.options.history_dir).trends(
+                (result["spec"], signal["path"]) for result in dicts for signal in result["signals"]
+            )
         decorated = []
         for result in dicts:
             signals = []

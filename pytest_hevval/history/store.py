@@ -11,7 +11,10 @@ a record is never overwritten; readers never see a half-written ``*.json``.
 
 The baseline and the report's trends come through an index (:mod:`.index`), a cache kept in
 the ``.index`` subfolder: a run reads it, the records it does not know yet and the one record
-it compares with, not every record. :meth:`HistoryStore.entries` still reads them all.
+it compares with, not every record. Where there is no index yet (a fresh clone: the index is
+never committed) and every file carries a record's name, the baseline and the trends of given
+signals are read from the newest records alone, newest first, and the index is built only
+when something asks for older data. :meth:`HistoryStore.entries` still reads them all.
 """
 
 from __future__ import annotations
@@ -21,9 +24,9 @@ import json
 import os
 import re
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -35,6 +38,7 @@ from .index import (
     HistoryIndex,
     IndexedRecord,
     IndexStale,
+    index_path,
     load_index,
     micros,
     save_index,
@@ -195,6 +199,9 @@ class HistoryStore:
                 hint="pass datetime.now(timezone.utc)",
             )
         wanted = _Wanted(version, None if before is None else micros(before), accepted_only)
+        walked = self._walk_newest(lambda index, found: len(found) == count, wanted)
+        if walked is not None:
+            return walked[1]
         found = self._pick(self._catalogue(), count, wanted, strict=True)
         if found is None:  # a file changed behind the index's back: read every record again
             found = self._pick(self._catalogue(rebuild=True), count, wanted, strict=False)
@@ -239,11 +246,31 @@ class HistoryStore:
             seen.setdefault(entry.model_version, None)
         return list(seen)
 
-    def trends(self) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    def trends(
+        self, keys: Iterable[tuple[str, str]] | None = None
+    ) -> dict[tuple[str, str], list[dict[str, Any]]]:
         """The recorded points of each (spec path, signal path), oldest first: the newest
         :attr:`trend_runs` runs that hold the signal, each as ``{"version", "phi",
-        "lambdas"}``. No record the index already knows is read."""
-        index = self._catalogue()
+        "lambdas"}``; of the given ``keys`` only, when given. No record the index already
+        knows is read; without an index, the trends of given keys are read from the newest
+        records, until each has its runs or every record is read."""
+        wanted = None if keys is None else set(keys)
+        index = None
+        if wanted is not None:
+            walked = self._walk_newest(
+                lambda index, found: (
+                    all(
+                        len(index.trends[key].points) >= self.trend_runs
+                        for key in wanted
+                        if key in index.trends
+                    )
+                    and wanted <= index.trends.keys()
+                ),
+                None,
+            )
+            index = walked[0] if walked is not None else None
+        if index is None:
+            index = self._catalogue()
         return {
             key: [
                 {
@@ -254,7 +281,49 @@ class HistoryStore:
                 for point in trend.points
             ]
             for key, trend in index.trends.items()
+            if wanted is None or key in wanted
         }
+
+    def _walk_newest(
+        self,
+        done: Callable[[HistoryIndex, list[StoredRecord]], bool],
+        wanted: _Wanted | None,
+    ) -> tuple[HistoryIndex, list[StoredRecord]] | None:
+        """Without an index, read the records newest first, by the times their names carry,
+        until ``done`` (given what is read so far, and the records ``wanted`` matches, newest
+        first) or every record is read: then the index holds everything and is saved.
+
+        ``None`` when this cannot be trusted to give what reading every record gives: there
+        is an index (use it), a file's name is not a record's name, its size cannot be read,
+        or a record read does not start at the time its name says; the caller then goes
+        through the index, built by reading every record."""
+        self.problems = []
+        if not self.directory.is_dir():
+            return HistoryIndex(self.trend_runs), []
+        if index_path(self.directory).exists():
+            return None
+        listing = _listing(self.directory)
+        named: list[tuple[int, str, int]] = []
+        for name, size in listing.items():
+            started = _name_time(name)
+            if started is None or size is None:
+                return None
+            named.append((started, name, size))
+        named.sort(reverse=True)
+        index = HistoryIndex(self.trend_runs)
+        found: list[StoredRecord] = []
+        for started, name, size in named:
+            if done(index, found):
+                return index, found
+            read = _read(self.directory / name)
+            if not isinstance(read, StoredRecord) or micros(read.started_utc) != started:
+                return None
+            index.add(name, size, read.record)
+            if wanted is not None and wanted.matches(index.records[name]):
+                found.append(read)
+        if named:  # every record read: the index is whole, and kept for the next run
+            save_index(self.directory, index)
+        return index, found
 
     # -- the index ---------------------------------------------------------------------------
 
@@ -314,6 +383,23 @@ class HistoryStore:
         if not isinstance(read, StoredRecord):
             raise IndexStale(name)
         return read.record
+
+
+#: A record's file name starts with its start time (see :meth:`HistoryStore.append`).
+_NAME_TIME = re.compile(r"^(\d{8}T\d{6}\.\d{6})Z_")
+
+
+def _name_time(name: str) -> int | None:
+    """The start time a record's file name carries, in whole microseconds; None for a name
+    that is not a record's."""
+    match = _NAME_TIME.match(name)
+    if match is None:
+        return None
+    try:
+        moment = datetime.strptime(match[1], "%Y%m%dT%H%M%S.%f").replace(tzinfo=timezone.utc)
+    except ValueError:
+        return None
+    return micros(moment)
 
 
 class _Wanted(NamedTuple):
