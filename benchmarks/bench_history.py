@@ -26,6 +26,10 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     after a fresh clone). ``--fresh-clone`` adds ``--repeat`` runs that each find the records
     without an index, as every CI job on a fresh clone does. ``--full-read`` also times
     ``HistoryStore.entries()``, the full read every run paid before the index.
+``--part trends``
+    ``HistoryStore.trends`` on ``--pytest-records`` records without an index, as on a fresh
+    clone: the run's own signals (the newest records parsed), then with one more spec that no
+    record holds (the older records searched for its paths, not parsed).
 ``--part pytest``
     ``pytest --hevval --hevval-report=html`` on the example project with an empty history and
     with ``--pytest-records`` records, alternating run by run (the order swaps each round), in
@@ -263,6 +267,32 @@ def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
             shutil.rmtree(folder)
 
 
+def trends_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
+    """``HistoryStore.trends`` of the run's own signals on ``--pytest-records`` records without
+    an index (a fresh clone), and the same with one spec no record holds (one a pull request
+    adds), ``--repeat`` times each."""
+    keys = [(spec["spec"], signal["path"]) for spec in seed["specs"] for signal in spec["signals"]]
+    count = args.pytest_records
+    print(f"\n## trends of a run on {count:,} records without an index ({_machine()})")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "history"
+        _fill(folder, seed, count)
+        for label, wanted in (
+            ("the run's own signals", keys),
+            ("and a spec no record holds", [*keys, ("new.hevval.yaml", "signal")]),
+        ):
+            for _ in range(args.repeat):
+                wall, cpu = time.perf_counter(), time.process_time()
+                HistoryStore(folder).trends(wanted)
+                print(
+                    f"{label}: {time.perf_counter() - wall:.2f} s, "
+                    f"CPU {time.process_time() - cpu:.2f} s",
+                    flush=True,
+                )
+        if (folder / ".index").exists():
+            sys.exit("the trends of the newest records built the whole index")
+
+
 def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
     count = args.pytest_records
     select = f" -k {args.select!r}" if args.select else ""
@@ -309,7 +339,7 @@ def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["history", "pytest", "all"], default="all")
+    parser.add_argument("--part", choices=["history", "pytest", "trends", "all"], default="all")
     parser.add_argument("--records", type=int, nargs="+", default=[0, 1000, 5000])
     parser.add_argument("--cold", type=int, nargs="*", default=[1000])
     parser.add_argument("--repeat", type=int, default=7)
@@ -334,6 +364,8 @@ def main() -> None:
     print(f"seed record: {len(seed['specs'])} specs, {signals} signals")
     if args.part in ("history", "all"):
         history_part(args, seed)
+    if args.part in ("trends", "all"):
+        trends_part(args, seed)
     if args.part in ("pytest", "all"):
         pytest_part(args, seed)
 

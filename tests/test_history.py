@@ -849,12 +849,22 @@ def test_a_folder_without_an_index_is_read_from_its_newest_records(
     assert trends == {key: full["trends"][key] for key in keys}
     assert reads == [path.name for path in files[::-1][:TREND]]
     assert not (tmp_path / ".index").exists()
-    # A signal of this run that no record holds: every record is read once, and the whole
-    # index is kept.
+    # A signal of this run that no record holds (a spec a pull request adds): the older
+    # records are searched for its paths, not parsed, and none is.
     reads.clear()
     assert store.trends([*keys, ("new.hevval.yaml", "x")]) == trends
-    assert len(reads) == len(files)
-    assert (tmp_path / ".index" / "index").is_file()
+    assert reads == [path.name for path in files[::-1][:TREND]]
+    assert not (tmp_path / ".index").exists()
+    # One that older records hold: those are parsed.
+    old = ("specs/trip_a01.hevval.yaml", "E_batt/I_batt")
+    with_extra = two_signal_record("v9", T0 - timedelta(days=1), 0.3, extra=True)
+    first = h.HistoryStore(tmp_path).append(with_extra)
+    reads.clear()
+    found = store.trends([*keys, old])
+    assert found[old] == [{"version": "v9", "phi": 0.3, "lambdas": dict.fromkeys(_names(), 0.15)}]
+    assert reads == [*(path.name for path in files[::-1][:TREND]), first.name]
+    # Something that asks for every record builds the index, which the next run reads.
+    assert store.versions()[0] == "v9"
     reads.clear()
     assert h.HistoryStore(tmp_path, trend_runs=TREND).trends(keys) == trends
     assert reads == []

@@ -20,6 +20,7 @@ when something asks for older data. :meth:`HistoryStore.entries` still reads the
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import re
@@ -31,13 +32,14 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ..defaults import HISTORY_DIR
-from ..files import fsync_directory, publish, read_json, write_temporary
+from ..files import fsync_directory, publish, read_input, read_json, write_temporary
 from ._base import HistoryError
 from .index import (
     TREND_RUNS,
     HistoryIndex,
     IndexedRecord,
     IndexStale,
+    TrendKey,
     index_path,
     load_index,
     micros,
@@ -267,6 +269,7 @@ class HistoryStore:
                     and wanted <= index.trends.keys()
                 ),
                 None,
+                functools.partial(_may_hold, self.trend_runs, wanted),
             )
             index = walked[0] if walked is not None else None
         if index is None:
@@ -288,10 +291,13 @@ class HistoryStore:
         self,
         done: Callable[[HistoryIndex, list[StoredRecord]], bool],
         wanted: _Wanted | None,
+        may_hold: Callable[[HistoryIndex, Path], bool] | None = None,
     ) -> tuple[HistoryIndex, list[StoredRecord]] | None:
         """Without an index, read the records newest first, by the times their names carry,
         until ``done`` (given what is read so far, and the records ``wanted`` matches, newest
-        first) or every record is read: then the index holds everything and is saved.
+        first) or every record is read: then the index holds everything and is saved. A file
+        that ``may_hold`` (given what is read so far) says cannot hold what is still wanted
+        is passed over, and the index is then not saved.
 
         ``None`` when this cannot be trusted to give what reading every record gives: there
         is an index (use it), a file's name is not a record's name, its size cannot be read,
@@ -312,16 +318,20 @@ class HistoryStore:
         named.sort(reverse=True)
         index = HistoryIndex(self.trend_runs)
         found: list[StoredRecord] = []
+        passed_over = False
         for started, name, size in named:
             if done(index, found):
                 return index, found
+            if may_hold is not None and not may_hold(index, self.directory / name):
+                passed_over = True
+                continue
             read = _read(self.directory / name)
             if not isinstance(read, StoredRecord) or micros(read.started_utc) != started:
                 return None
             index.add(name, size, read.record)
             if wanted is not None and wanted.matches(index.records[name]):
                 found.append(read)
-        if named:  # every record read: the index is whole, and kept for the next run
+        if named and not passed_over:  # every record read: the index is whole, and kept
             save_index(self.directory, index)
         return index, found
 
@@ -400,6 +410,33 @@ def _name_time(name: str) -> int | None:
     except ValueError:
         return None
     return micros(moment)
+
+
+#: How every record this version writes begins (``record_text``): the spec results' keys and
+#: values in it are written by ``json.dumps`` with its default separators and escapes.
+_RECORD_HEAD = b'{\n "schema_version": 4,'
+
+
+def _may_hold(trend_runs: int, wanted: set[TrendKey], index: HistoryIndex, path: Path) -> bool:
+    """Whether the record in ``path`` may hold a point of a trend in ``wanted`` that is not
+    yet full: without parsing it, by finding the spec's and the signal's paths as its writer
+    wrote them. A file this version did not write, or cannot read, is read to find out."""
+    short = [
+        key
+        for key in wanted
+        if key not in index.trends or len(index.trends[key].points) < trend_runs
+    ]
+    try:
+        data = read_input(path)
+    except (OSError, ValueError):
+        return True
+    if not data.startswith(_RECORD_HEAD):
+        return True
+    return any(
+        b'"spec": ' + json.dumps(spec).encode() in data
+        and b'"path": ' + json.dumps(signal).encode() in data
+        for spec, signal in short
+    )
 
 
 class _Wanted(NamedTuple):
