@@ -23,8 +23,13 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     Each run adds a record, so the folder grows by one per run, as in use; the empty one is
     emptied again. Measured with the index present (every run but the first) and, for the
     sizes in ``--cold``, once without it (the run that builds it by reading every record, as
-    after a fresh clone). ``--full-read`` also times ``HistoryStore.entries()``, the full read
-    every run paid before the index.
+    after a fresh clone). ``--fresh-clone`` adds ``--repeat`` runs that each find the records
+    without an index, as every CI job on a fresh clone does. ``--full-read`` also times
+    ``HistoryStore.entries()``, the full read every run paid before the index.
+``--part trends``
+    ``HistoryStore.trends`` on ``--pytest-records`` records without an index, as on a fresh
+    clone: the run's own signals (the newest records parsed), then with one more spec that no
+    record holds (the older records searched for its paths, not parsed).
 ``--part pytest``
     ``pytest --hevval --hevval-report=html`` on the example project with an empty history and
     with ``--pytest-records`` records, alternating run by run (the order swaps each round), in
@@ -32,6 +37,8 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
     (``--hevval-history-dir``, ``--hevval-report-dir``); the example project is not written
     to. The large history is run once first to build its index (timed and printed apart);
     each run adds its own record, so the large history grows by one per round, as in use.
+    With ``--fresh-clone`` the index is removed before each run on the large history, as on
+    a fresh clone.
     Wall time and CPU time (user + system of the child) are both printed: on a shared machine
     the CPU time is the steadier of the two. The whole example scores for half a minute, and
     a shared machine varies it by seconds; ``--select hwfet`` runs one spec of it (a few
@@ -193,7 +200,7 @@ def _history_part(
                         history_svg(signal["history"])
         else:
             out = Publication()
-            run._record(results, out)
+            run._record(lambda: results, run.acceptance([]), out)
             if out.failed:
                 sys.exit(f"recording failed: {out.notes}")
         spent[step] = (time.perf_counter() - wall, time.process_time() - cpu)
@@ -232,7 +239,15 @@ def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
 
             if count and count in args.cold:
                 spent, points = _history_part(publisher, results)
-                print(_row("missing: built", count, [spent], points), flush=True)
+                print(_row("missing", count, [spent], points), flush=True)
+            if count and args.fresh_clone:
+                fresh = []
+                for _ in range(args.repeat):
+                    # As in a fresh clone: the records, and no index (it is never committed).
+                    shutil.rmtree(folder / ".index", ignore_errors=True)
+                    spent, points = _history_part(publisher, results)
+                    fresh.append(spent)
+                print(_row("none: fresh clone", count, fresh, points), flush=True)
             runs = []
             for _ in range(args.repeat):
                 spent, points = _history_part(publisher, results)
@@ -252,6 +267,32 @@ def history_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
             shutil.rmtree(folder)
 
 
+def trends_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
+    """``HistoryStore.trends`` of the run's own signals on ``--pytest-records`` records without
+    an index (a fresh clone), and the same with one spec no record holds (one a pull request
+    adds), ``--repeat`` times each."""
+    keys = [(spec["spec"], signal["path"]) for spec in seed["specs"] for signal in spec["signals"]]
+    count = args.pytest_records
+    print(f"\n## trends of a run on {count:,} records without an index ({_machine()})")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "history"
+        _fill(folder, seed, count)
+        for label, wanted in (
+            ("the run's own signals", keys),
+            ("and a spec no record holds", [*keys, ("new.hevval.yaml", "signal")]),
+        ):
+            for _ in range(args.repeat):
+                wall, cpu = time.perf_counter(), time.process_time()
+                HistoryStore(folder).trends(wanted)
+                print(
+                    f"{label}: {time.perf_counter() - wall:.2f} s, "
+                    f"CPU {time.process_time() - cpu:.2f} s",
+                    flush=True,
+                )
+        if (folder / ".index").exists():
+            sys.exit("the trends of the newest records built the whole index")
+
+
 def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
     count = args.pytest_records
     select = f" -k {args.select!r}" if args.select else ""
@@ -269,11 +310,14 @@ def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
             f"first run on {count:,} records (no index yet): {wall:.1f} s, CPU {cpu:.1f} s",
             flush=True,
         )
+        index = large / ".index"
         times: dict[int, list[tuple[float, float]]] = {0: [], count: []}
         for round_index in range(args.rounds):
             order = (0, count) if round_index % 2 == 0 else (count, 0)
             for size in order:
                 folder = large if size else root / f"empty{round_index}"
+                if size and args.fresh_clone:
+                    shutil.rmtree(index, ignore_errors=True)  # as in a fresh clone
                 times[size].append(_run_example(folder, root / "report", args.select))
             (w0, c0), (w1, c1) = times[0][-1], times[count][-1]
             print(
@@ -295,11 +339,17 @@ def pytest_part(args: argparse.Namespace, seed: dict[str, Any]) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["history", "pytest", "all"], default="all")
+    parser.add_argument("--part", choices=["history", "pytest", "trends", "all"], default="all")
     parser.add_argument("--records", type=int, nargs="+", default=[0, 1000, 5000])
     parser.add_argument("--cold", type=int, nargs="*", default=[1000])
     parser.add_argument("--repeat", type=int, default=7)
     parser.add_argument("--full-read", action="store_true")
+    parser.add_argument(
+        "--fresh-clone",
+        action="store_true",
+        help="also (history part) or only (pytest part) run the records without an index, "
+        "as a fresh clone has them",
+    )
     parser.add_argument("--pytest-records", type=int, default=1000)
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument(
@@ -314,6 +364,8 @@ def main() -> None:
     print(f"seed record: {len(seed['specs'])} specs, {signals} signals")
     if args.part in ("history", "all"):
         history_part(args, seed)
+    if args.part in ("trends", "all"):
+        trends_part(args, seed)
     if args.part in ("pytest", "all"):
         pytest_part(args, seed)
 

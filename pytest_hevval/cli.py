@@ -108,21 +108,7 @@ def _run(args: argparse.Namespace) -> int:
     if errors and not evaluations:
         raise errors[0][1]
     results = [evaluation.result for evaluation in evaluations]
-    for line in run_summary(results, details=args.details):
-        print(line)
     verdicts = campaign_verdicts(results)
-    regressions = [
-        (result.spec, signal, found)
-        for result in results
-        for signal in [None, *(s.path for s in result.signals)]
-        for found in publisher.regressions_for(result, signal)
-    ]
-    passed = (
-        all(r.passed for r in results)
-        and all(v.passed for v in verdicts)
-        and not regressions
-        and not errors
-    )
 
     @functools.cache
     def dicts() -> list[dict[str, Any]]:
@@ -130,11 +116,27 @@ def _run(args: argparse.Namespace) -> int:
         if one of them asks."""
         return [r.to_dict() for r in results]
 
+    panels = diagnosis_panels(
+        target_payload(evaluation.result.spec, target, found)
+        for evaluation in evaluations
+        for target, found in evaluation.diagnoses.items()
+    )
+    published = publisher.publish(
+        results,
+        {relative_to(rootdir, spec.key): spec for spec in specs},
+        panels,
+        dicts,
+        [f"{key}: {str(error).splitlines()[0]}" for key, error in errors],
+    )
+    verdict = published.verdict
+    for line in run_summary(results, details=args.details, verdict=verdict):
+        print(line)
     if args.json:
         payload = {
             "schema_version": 1,
             "hevval_version": __version__,
-            "passed": passed,
+            "passed": verdict.passed,
+            "verdict": verdict.to_dict(),
             "specs": dicts(),
             **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
             **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
@@ -143,29 +145,21 @@ def _run(args: argparse.Namespace) -> int:
         if len(results) == 1:
             payload.update({k: v for k, v in dicts()[0].items() if k != "schema_version"})
         _write_json(args.json, payload)
-    panels = diagnosis_panels(
-        target_payload(evaluation.result.spec, target, found)
-        for evaluation in evaluations
-        for target, found in evaluation.diagnoses.items()
-    )
-    published = publisher.publish(
-        results, {relative_to(rootdir, spec.key): spec for spec in specs}, panels, dicts
-    )
     for line in published.annotations:
         print(line)
     finish_run()
     kernel_note = compile_note()
     for note in [*notes, *published.notes, *([kernel_note] if kernel_note else [])]:
         print(note)
-    for spec, signal, found in regressions:
-        what = "Φ" if signal is None else signal
-        print(f"regression: {spec}: {what}: {found}")
+    for item in verdict.regressions:
+        accepted = " (accepted)" if verdict.regressions_accepted else ""
+        print(f"regression{accepted}: {item.text}")
     # The others were scored and published; the specs that could not be are named once each.
     for _, error in errors:
         print(f"hevval run: error: {error}", file=sys.stderr)
     if errors:
         return EXIT_USAGE
-    return EXIT_OK if passed and not published.failed else EXIT_FAILED
+    return EXIT_OK if verdict.passed and not published.failed else EXIT_FAILED
 
 
 #: Files that make a folder pytest's rootdir, with the section that must be in them (if any).

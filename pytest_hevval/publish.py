@@ -20,10 +20,11 @@ from typing import TYPE_CHECKING, Any
 from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
 from .results.spec_result import SpecResult
+from .results.verdict import RegressedItem, RunVerdict
 from .spec.model import Spec
 
 if TYPE_CHECKING:
-    from .history import Regression
+    from .history import Comparison, Regression
 
 __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
@@ -102,7 +103,10 @@ class Publication:
     notes: list[str] = field(default_factory=list)
     #: GitHub workflow commands, printed each on its own line before the summary.
     annotations: list[str] = field(default_factory=list)
+    #: A step of publishing failed (a report or the record could not be written).
     failed: bool = False
+    #: The run's verdict, which every report says and the front ends end the run with.
+    verdict: RunVerdict = field(default_factory=lambda: RunVerdict(passed=True))
 
 
 class Publisher:
@@ -130,6 +134,15 @@ class Publisher:
         """This run's name in comparisons and trends: its model version, or, when none could
         be found (no git, no --hevval-model-version), ``this run``."""
         return "this run" if self.model_version == UNKNOWN_MODEL_VERSION else self.model_version
+
+    @property
+    def baseline_label(self) -> str | None:
+        """The baseline in words (model version, commit, time), or None without one."""
+        if self.baseline is None:
+            return None
+        from .history import describe_record
+
+        return describe_record(self.baseline)
 
     @property
     def wants_comparison(self) -> bool:
@@ -210,17 +223,19 @@ class Publisher:
         specs: Mapping[str, Spec],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         dicts: Sequence[dict[str, Any]] | Callable[[], Sequence[dict[str, Any]]] | None = None,
+        errors: Sequence[str] = (),
     ) -> Publication:
-        """Reports, comparison, ratchet and history record of a run's results, in that order.
+        """The run's verdict, then its reports, comparison, ratchet and history record.
 
         ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
         (spec, signal), as :func:`diagnosis_panels` gives them; ``dicts`` the results' JSON
         data (``SpecResult.to_dict`` of each, in order) where the caller holds it already, or
         a function that makes it. The data is made only if a step uses it: a run that writes
         nothing does not pay for it (the tables of a spec with windows and regions cost
-        seconds to turn into JSON).
+        seconds to turn into JSON). ``errors``: the specs that could not be scored, each
+        named with its error.
         """
-        out = Publication()
+        out = Publication(verdict=RunVerdict.decide(results, errors=errors))
         if not results:
             return out
 
@@ -235,8 +250,20 @@ class Publisher:
             for index, result in enumerate(results)
             for regression in self.regressions(result, functools.partial(_item, data, index))
         ]
-        self._write_reports(data, diagnoses, out)
-        self._compare(data, out)
+        out.verdict = RunVerdict.decide(
+            results,
+            regressions=[RegressedItem(r.spec, r.signal, r.field, str(r)) for r in found],
+            regressions_accepted=self.options.accept,
+            baseline=self.baseline_label,
+            errors=errors,
+        )
+        comparison = None
+        if self.baseline is not None:
+            from .history import compare
+
+            comparison = compare(data(), self.baseline, after_label=self.run_label)
+        self._write_reports(data, diagnoses, out, comparison)
+        self._compare(comparison, out)
         self._ratchet(data, specs, out)
         self._record(data, self.acceptance(found), out)
         return out
@@ -251,6 +278,7 @@ class Publisher:
         data: _Data,
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         out: Publication,
+        comparison: Comparison | None,
     ) -> None:
         if self.formats:
             from .report import write_reports
@@ -261,6 +289,8 @@ class Publisher:
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
+                    verdict=out.verdict,
+                    comparison=None if comparison is None else comparison.to_dict(),
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")
@@ -287,7 +317,9 @@ class Publisher:
         if self.options.use_history:
             from .history import HistoryStore
 
-            trends = HistoryStore(self.options.history_dir).trends()
+            trends = HistoryStore(self.options.history_dir).trends(
+                (result["spec"], signal["path"]) for result in dicts for signal in result["signals"]
+            )
         decorated = []
         for result in dicts:
             signals = []
@@ -312,14 +344,14 @@ class Publisher:
             decorated.append({**result, "signals": signals})
         return decorated
 
-    def _compare(self, data: _Data, out: Publication) -> None:
-        if self.baseline is None or not self.options.compare:
+    def _compare(self, comparison: Comparison | None, out: Publication) -> None:
+        """The comparison in the terminal, when it was asked for by name."""
+        if comparison is None or not self.options.compare:
             return
-        from .history import compare, comparison_table, regressions
+        from .history import comparison_table
         from .history.compare import campaign_change_lines
 
-        comparison = compare(data(), self.baseline, after_label=self.run_label)
-        found = regressions(comparison, self.rules) if self.rules else None
+        found = [r for result in self._regressions.values() for r in result] if self.rules else None
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))
 

@@ -829,6 +829,71 @@ def test_index_damaged_stale_or_deleted_is_rebuilt(
     assert reads == []
 
 
+def test_a_folder_without_an_index_is_read_from_its_newest_records(
+    tmp_path: Path, reads: list[str]
+) -> None:
+    """A fresh clone (no index: it is never committed): the baseline and the trends of the
+    run's signals come from the newest records alone, newest first, and answer as a full read
+    does; the index is built once something asks for older data."""
+    files = fill(tmp_path, 30)
+    full = full_answers(tmp_path, TREND, ["v0"])
+    keys = [("specs/trip_a01.hevval.yaml", "E_batt/P_batt"), ("b.hevval.yaml", "E_batt/P_batt")]
+    reads.clear()
+    store = h.HistoryStore(tmp_path, trend_runs=TREND)
+    assert store.latest() == full["latest"]
+    assert store.accepted() == full["accepted"]
+    # Hour 29 is accepted: the newest record is the baseline either way, read once more.
+    assert reads == [files[-1].name, files[-1].name]
+    reads.clear()
+    trends = store.trends(keys)
+    assert trends == {key: full["trends"][key] for key in keys}
+    assert reads == [path.name for path in files[::-1][:TREND]]
+    assert not (tmp_path / ".index").exists()
+    # A signal of this run that no record holds (a spec a pull request adds): the older
+    # records are searched for its paths, not parsed, and none is.
+    reads.clear()
+    assert store.trends([*keys, ("new.hevval.yaml", "x")]) == trends
+    assert reads == [path.name for path in files[::-1][:TREND]]
+    assert not (tmp_path / ".index").exists()
+    # One that older records hold: those are parsed.
+    old = ("specs/trip_a01.hevval.yaml", "E_batt/I_batt")
+    with_extra = two_signal_record("v9", T0 - timedelta(days=1), 0.3, extra=True)
+    first = h.HistoryStore(tmp_path).append(with_extra)
+    reads.clear()
+    found = store.trends([*keys, old])
+    assert found[old] == [{"version": "v9", "phi": 0.3, "lambdas": dict.fromkeys(_names(), 0.15)}]
+    assert reads == [*(path.name for path in files[::-1][:TREND]), first.name]
+    # Something that asks for every record builds the index, which the next run reads.
+    assert store.versions()[0] == "v9"
+    reads.clear()
+    assert h.HistoryStore(tmp_path, trend_runs=TREND).trends(keys) == trends
+    assert reads == []
+
+
+def test_a_folder_without_an_index_is_read_whole_where_names_cannot_be_trusted(
+    tmp_path: Path, reads: list[str]
+) -> None:
+    files = fill(tmp_path, 8)
+    keys = [("specs/trip_a01.hevval.yaml", "E_batt/P_batt")]
+    # A record whose start time is not the one its name carries, among the newest.
+    newest = json.loads(files[-1].read_text())
+    files[-1].write_text(json.dumps({**newest, "started_utc": "2030-01-01T00:00:00.000000Z"}))
+    full = full_answers(tmp_path, TREND, ["v0"])
+    reads.clear()
+    assert h.HistoryStore(tmp_path, trend_runs=TREND).latest() == full["latest"]
+    # The newest, then every record to build the index, then the baseline it names.
+    assert len(reads) == 2 + len(files)
+    shutil.rmtree(tmp_path / ".index")
+    # A file whose name is not a record's: its time is unknown, so every file is read.
+    (tmp_path / "copied.json").write_text(json.dumps(newest))
+    full = full_answers(tmp_path, TREND, ["v0"])
+    reads.clear()
+    store = h.HistoryStore(tmp_path, trend_runs=TREND)
+    assert store.trends(keys) == {key: full["trends"][key] for key in keys}
+    assert len(reads) == len(files) + 1
+    assert store.latest() == full["latest"]
+
+
 def test_index_that_cannot_be_written_costs_time_only(tmp_path: Path) -> None:
     fill(tmp_path, 4)
     (tmp_path / ".index").write_text("in the way")
@@ -1085,6 +1150,12 @@ def test_index_answers_equal_a_full_read_whatever_happens(
             elif kind == "rewrite" and files:  # by hand, to another size
                 target = files[hour % len(files)]
                 old_size = target.stat().st_size if target.is_file() else -1
+                named = re.match(r"(\d{8}T\d{6}\.\d{6})Z_", target.name)
+                if named:
+                    # A record keeps the start time its name carries, which a folder without
+                    # an index is read by (other values may be edited).
+                    started = datetime.strptime(named[1], "%Y%m%dT%H%M%S.%f")
+                    rec = {**rec, "started_utc": h.format_utc(started.replace(tzinfo=timezone.utc))}
                 text = json.dumps(rec)
                 text += " " * (len(text.encode()) == old_size)
                 if target.is_dir():

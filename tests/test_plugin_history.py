@@ -211,7 +211,9 @@ def test_report_trends_show_the_newest_recorded_runs_of_a_long_history(
     project.runpytest(
         "--hevval", "--hevval-model-version=now", "--hevval-report=json"
     ).assert_outcomes(passed=6)
-    assert (project.path / ".hevval" / "history" / ".index" / "index").is_file()
+    # Without an index (as on a fresh clone) the trends come from the newest records alone:
+    # every signal is in each of them, so no older record is read and no index is built.
+    assert not (project.path / ".hevval" / "history" / ".index").exists()
     expected = [f"old-{i}" for i in range(6, TREND_RUNS + 5)] + ["seed", "now"]
     assert len(expected) == TREND_RUNS + 1
     for trend in report_trends(project.path).values():
@@ -223,6 +225,15 @@ def acceptance_of(root: Path) -> list[tuple[str, bool, str]]:
 
 
 GATE = "--hevval-compare-fail=lambda:0.002"
+
+
+def regressing_run(project: pytest.Pytester, *options: str) -> pytest.RunResult:
+    """Record model "good", worsen it, and run "worse" against the accepted baseline."""
+    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
+    worsen(project.path)
+    return project.runpytest(
+        "--hevval", "--hevval-model-version=worse", "--hevval-compare=accepted", GATE, *options
+    )
 
 
 def test_a_regressed_run_is_recorded_but_never_becomes_the_accepted_baseline(
@@ -260,15 +271,7 @@ def test_a_regressed_run_is_recorded_but_never_becomes_the_accepted_baseline(
 def test_accept_records_a_regression_as_the_baseline_and_reports_it(
     project: pytest.Pytester,
 ) -> None:
-    project.runpytest("--hevval", "--hevval-model-version=good").assert_outcomes(passed=6)
-    worsen(project.path)
-    result = project.runpytest(
-        "--hevval",
-        "--hevval-model-version=worse",
-        "--hevval-compare=accepted",
-        GATE,
-        "--hevval-accept",
-    )
+    result = regressing_run(project, "--hevval-accept")
     # Accepting the regressions is the point: they are reported, and fail nothing.
     result.assert_outcomes(passed=6)
     result.stdout.fnmatch_lines(
@@ -317,3 +320,112 @@ def test_accept_is_given_on_the_command_line_only(project: pytest.Pytester) -> N
     result = project.runpytest("--hevval", "--hevval-model-version=v1", "--hevval-compare")
     result.assert_outcomes(passed=6)
     assert acceptance_of(project.path) == [("v1", False, "no-baseline")]
+
+
+@pytest.mark.parametrize("processes", [[], ["-p", "xdist", "-n", "2"]], ids=["serial", "xdist"])
+def test_a_regression_fails_the_run_alike_in_every_output(
+    project: pytest.Pytester, processes: list[str]
+) -> None:
+    """The terminal, report.md, report.json, report.html, JUnit XML and the exit code say one
+    verdict when only a regression fails the run."""
+    import xml.etree.ElementTree as ET
+
+    result = regressing_run(
+        project, "--hevval-report=html,json,md", "--junitxml=junit.xml", *processes
+    )
+    assert result.ret == pytest.ExitCode.TESTS_FAILED
+    suite = ET.parse(project.path / "junit.xml").getroot().find("testsuite")
+    assert suite is not None
+    failures = int(suite.get("failures", "-1"))
+    assert failures > 0
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    summary = report["summary"]
+    assert summary["passed"] is False
+    assert summary["specs_failed"] == 1
+    # Every failing item is a signal or the Φ of the spec: as many as JUnit counts.
+    assert summary["outcome"].endswith(
+        f"6 items, {failures} fail ({failures} by regression): "
+        f"{summary['signals_failed']} of 5 signals, {failures - summary['signals_failed']} of 1 Φ"
+    )
+    regressions = report["verdict"]["regressions"]
+    assert len(regressions) == summary["regressions"] > 0
+    assert "pack.hevval.yaml::E/P/I" in {
+        item["spec"] + "::" + item["signal"] for item in regressions
+    }
+    good = records(project.path)[0]
+    against = f"against good ({good['started_utc'][:10]} {good['started_utc'][11:16]} UTC)"
+    count = len(regressions)
+    assert summary["outcome"].startswith(f"{count} regression{'s' * (count != 1)} {against}; ")
+    markdown = (folder / "report.md").read_text().splitlines()
+    assert markdown[0] == f"### ❌ hevval: {summary['outcome']}"
+    assert "| ❌ | pack |" in "\n".join(markdown)
+    # The comparison follows the spec table, its regressions first.
+    at = markdown.index(f"#### Compared with {against[len('against ') :]}")
+    assert markdown[at + 2].startswith(f"❌ {count} regression")
+    html = (folder / "report.html").read_text()
+    assert summary["outcome"] in html
+    assert 'class="fail"' in html
+    # The terminal's last line of the summary tree says the same.
+    result.stdout.fnmatch_lines([summary["outcome"]])
+
+
+def test_a_spec_that_cannot_be_scored_fails_the_verdict_of_the_reports(
+    project: pytest.Pytester,
+) -> None:
+    project.makefile(".hevval.yaml", lost=TREE_SPEC.replace("data/sim.csv", "data/gone.csv"))
+    result = project.runpytest("--hevval", "--hevval-report=json,md")
+    result.assert_outcomes(passed=6, errors=6)
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    assert report["summary"]["passed"] is False
+    (error,) = report["verdict"]["errors"]
+    assert error.startswith("lost.hevval.yaml: ")
+    assert "gone.csv" in error
+    assert report["summary"]["outcome"].startswith("1 spec could not be scored; ")
+    markdown = (folder / "report.md").read_text()
+    assert markdown.startswith("### ❌ hevval: 1 spec could not be scored; ")
+
+
+def test_the_comparison_is_in_report_md_and_alone_in_comparison_md(
+    project: pytest.Pytester,
+) -> None:
+    # A model version that would break a Markdown table, and raw HTML.
+    project.runpytest("--hevval", "--hevval-model-version=v1|<i>").assert_outcomes(passed=6)
+    worsen(project.path)
+    result = project.runpytest(
+        "--hevval",
+        "--hevval-model-version=v2",
+        "--hevval-compare=accepted",
+        GATE,
+        "--hevval-report=md,json",
+    )
+    result.assert_outcomes(passed=3, failed=3)
+    folder = project.path / ".hevval" / "report"
+    report = json.loads((folder / "report.json").read_text())
+    assert (report["comparison"]["before"], report["comparison"]["after"]) == ("v1|<i>", "v2")
+    alone = (folder / "comparison.md").read_text()
+    markdown = (folder / "report.md").read_text()
+    assert alone.splitlines()[0] == markdown.splitlines()[0]
+    assert alone.startswith("### ❌ hevval: 7 regressions against v1\\|&lt;i&gt; (")
+    assert "<i>" not in alone
+    section = alone[alone.index("#### Compared with v1\\|&lt;i&gt; (") :]
+    assert section.split("<sub>")[0] in markdown
+    lines = section.splitlines()
+    # Changes the tables' four decimals cannot show are none (λ1, and λ6 of E/P).
+    assert lines[2] == "❌ 7 regressions; 9 values of Φ and λ worse, 4 better."
+    assert lines[4].startswith("- pack.hevval.yaml::E: λ3 mae dropped 1 → 0.9935")
+    table = lines[lines.index("**Worst changes**") + 2 :]
+    assert table[0].startswith("| | where | quantity | before | after | Δ | 95 % intervals")
+    rows = [row for row in table[2:] if row.startswith("| ") and not row.startswith("| |")]
+    # The regressions first, each with both runs' intervals; then Φ's drop, which no rule
+    # of lambda:0.002 covers.
+    assert [row.split(" | ")[0] for row in rows[:9]] == ["| ❌"] * 7 + ["| 🔻"] * 2
+    assert all(" → [" in row for row in rows)
+    assert rows[0].endswith("| -0.0076 | [0.9996, 0.9996] → [0.9920, 0.9920] (disjoint) |")
+    assert rows[7].startswith("| 🔻 | `pack.hevval.yaml` | Φ | 0.9964 | 0.9951 | -0.0014 | ")
+    assert [row.split(" | ")[0] for row in rows[9:]] == ["| 🔺"] * 4  # the best changes
+    assert "<details>" not in alone  # both tables show every change already
+    # A run that compares with nothing leaves no comparison behind.
+    project.runpytest("--hevval", "--hevval-report=md").assert_outcomes(passed=6)
+    assert not (folder / "comparison.md").exists()

@@ -373,6 +373,8 @@ def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> No
         "specs": 2,
         "specs_failed": 1,
         "outcome": "2 spec files, 1 pass; 6 items, 3 fail: 2 of 4 signals, 1 of 2 Φ",
+        "passed": False,
+        "regressions": 0,
     }
     assert payload["specs"][0]["signals"][0]["mae"] is None
     assert payload["specs"][0]["signals"][1]["figures"] == results[0]["signals"][1]["figures"]
@@ -888,3 +890,43 @@ def test_a_spec_that_fails_on_its_signals_says_so_under_its_phi(
     assert "✘ FAIL on its signals" in page
     assert "2 spec files" not in page
     assert "1 spec file, 0 pass;" in page
+
+
+def test_the_comparison_shows_the_worst_changes_and_every_change_behind_details() -> None:
+    from pytest_hevval.report.comparison import COMPARISON_ROWS, comparison_markdown
+    from pytest_hevval.results.verdict import RegressedItem, RunVerdict
+
+    lambdas = {
+        f"c{i}": {"before": 0.9, "after": 0.9 - (i - 12) / 1000, "delta": -(i - 12) / 1000}
+        for i in range(30)
+        if i != 12
+    }
+    comparison = {
+        "before": "v1",
+        "after": "v2",
+        "specs": [
+            {
+                "spec": "a|b.hevval.yaml",
+                "phi": {"before": 0.95, "after": 0.95, "delta": 0.0},
+                "signals": [{"path": "s<x>", "lambdas": lambdas}],
+                "data_changed": [],
+            }
+        ],
+    }
+    regression = RegressedItem("a|b.hevval.yaml", "s<x>", "c20", "a|b: c20 dropped")
+    verdict = RunVerdict(passed=False, regressions=(regression,), baseline="v1 (…)")
+    lines = comparison_markdown(comparison, verdict)
+    assert lines[0] == "#### Compared with v1 (…)"
+    assert lines[2] == "❌ 1 regression; 17 values of Φ and λ worse, 12 better."
+    assert lines[4] == "- a\\|b: c20 dropped"
+    rows = [line for line in lines if line.startswith("| ") and not line.startswith("| |")]
+    shown = COMPARISON_ROWS + 5
+    # The regression first, then the largest drops, then the largest rises.
+    assert rows[0].startswith("| ❌ | `a\\|b.hevval.yaml::s&lt;x&gt;` | c20 | 0.9000 | 0.8920 |")
+    assert [row.split(" | ")[2] for row in rows[1:4]] == ["c29", "c28", "c27"]
+    assert [row.split(" | ")[2] for row in rows[COMPARISON_ROWS : COMPARISON_ROWS + 2]] == [
+        "c0",
+        "c1",
+    ]
+    assert "<details><summary>Every change (29)</summary>" in lines
+    assert len(rows) == shown + 29

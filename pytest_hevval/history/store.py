@@ -11,30 +11,36 @@ a record is never overwritten; readers never see a half-written ``*.json``.
 
 The baseline and the report's trends come through an index (:mod:`.index`), a cache kept in
 the ``.index`` subfolder: a run reads it, the records it does not know yet and the one record
-it compares with, not every record. :meth:`HistoryStore.entries` still reads them all.
+it compares with, not every record. Where there is no index yet (a fresh clone: the index is
+never committed) and every file carries a record's name, the baseline and the trends of given
+signals are read from the newest records alone, newest first, and the index is built only
+when something asks for older data. :meth:`HistoryStore.entries` still reads them all.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import re
 import uuid
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, NamedTuple
 
 from ..defaults import HISTORY_DIR
-from ..files import fsync_directory, publish, read_json, write_temporary
+from ..files import fsync_directory, publish, read_input, read_json, write_temporary
 from ._base import HistoryError
 from .index import (
     TREND_RUNS,
     HistoryIndex,
     IndexedRecord,
     IndexStale,
+    TrendKey,
+    index_path,
     load_index,
     micros,
     save_index,
@@ -195,6 +201,9 @@ class HistoryStore:
                 hint="pass datetime.now(timezone.utc)",
             )
         wanted = _Wanted(version, None if before is None else micros(before), accepted_only)
+        walked = self._walk_newest(lambda index, found: len(found) == count, wanted)
+        if walked is not None:
+            return walked[1]
         found = self._pick(self._catalogue(), count, wanted, strict=True)
         if found is None:  # a file changed behind the index's back: read every record again
             found = self._pick(self._catalogue(rebuild=True), count, wanted, strict=False)
@@ -239,11 +248,32 @@ class HistoryStore:
             seen.setdefault(entry.model_version, None)
         return list(seen)
 
-    def trends(self) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    def trends(
+        self, keys: Iterable[tuple[str, str]] | None = None
+    ) -> dict[tuple[str, str], list[dict[str, Any]]]:
         """The recorded points of each (spec path, signal path), oldest first: the newest
         :attr:`trend_runs` runs that hold the signal, each as ``{"version", "phi",
-        "lambdas"}``. No record the index already knows is read."""
-        index = self._catalogue()
+        "lambdas"}``; of the given ``keys`` only, when given. No record the index already
+        knows is read; without an index, the trends of given keys are read from the newest
+        records, until each has its runs or every record is read."""
+        wanted = None if keys is None else set(keys)
+        index = None
+        if wanted is not None:
+            walked = self._walk_newest(
+                lambda index, found: (
+                    all(
+                        len(index.trends[key].points) >= self.trend_runs
+                        for key in wanted
+                        if key in index.trends
+                    )
+                    and wanted <= index.trends.keys()
+                ),
+                None,
+                functools.partial(_may_hold, self.trend_runs, wanted),
+            )
+            index = walked[0] if walked is not None else None
+        if index is None:
+            index = self._catalogue()
         return {
             key: [
                 {
@@ -254,7 +284,56 @@ class HistoryStore:
                 for point in trend.points
             ]
             for key, trend in index.trends.items()
+            if wanted is None or key in wanted
         }
+
+    def _walk_newest(
+        self,
+        done: Callable[[HistoryIndex, list[StoredRecord]], bool],
+        wanted: _Wanted | None,
+        may_hold: Callable[[HistoryIndex, Path], bool] | None = None,
+    ) -> tuple[HistoryIndex, list[StoredRecord]] | None:
+        """Without an index, read the records newest first, by the times their names carry,
+        until ``done`` (given what is read so far, and the records ``wanted`` matches, newest
+        first) or every record is read: then the index holds everything and is saved. A file
+        that ``may_hold`` (given what is read so far) says cannot hold what is still wanted
+        is passed over, and the index is then not saved.
+
+        ``None`` when this cannot be trusted to give what reading every record gives: there
+        is an index (use it), a file's name is not a record's name, its size cannot be read,
+        or a record read does not start at the time its name says; the caller then goes
+        through the index, built by reading every record."""
+        self.problems = []
+        if not self.directory.is_dir():
+            return HistoryIndex(self.trend_runs), []
+        if index_path(self.directory).exists():
+            return None
+        listing = _listing(self.directory)
+        named: list[tuple[int, str, int]] = []
+        for name, size in listing.items():
+            started = _name_time(name)
+            if started is None or size is None:
+                return None
+            named.append((started, name, size))
+        named.sort(reverse=True)
+        index = HistoryIndex(self.trend_runs)
+        found: list[StoredRecord] = []
+        passed_over = False
+        for started, name, size in named:
+            if done(index, found):
+                return index, found
+            if may_hold is not None and not may_hold(index, self.directory / name):
+                passed_over = True
+                continue
+            read = _read(self.directory / name)
+            if not isinstance(read, StoredRecord) or micros(read.started_utc) != started:
+                return None
+            index.add(name, size, read.record)
+            if wanted is not None and wanted.matches(index.records[name]):
+                found.append(read)
+        if named and not passed_over:  # every record read: the index is whole, and kept
+            save_index(self.directory, index)
+        return index, found
 
     # -- the index ---------------------------------------------------------------------------
 
@@ -314,6 +393,50 @@ class HistoryStore:
         if not isinstance(read, StoredRecord):
             raise IndexStale(name)
         return read.record
+
+
+#: A record's file name starts with its start time (see :meth:`HistoryStore.append`).
+_NAME_TIME = re.compile(r"^(\d{8}T\d{6}\.\d{6})Z_")
+
+
+def _name_time(name: str) -> int | None:
+    """The start time a record's file name carries, in whole microseconds; None for a name
+    that is not a record's."""
+    match = _NAME_TIME.match(name)
+    if match is None:
+        return None
+    try:
+        moment = datetime.strptime(match[1], "%Y%m%dT%H%M%S.%f").replace(tzinfo=timezone.utc)
+    except ValueError:
+        return None
+    return micros(moment)
+
+
+#: How every record this version writes begins (``record_text``): the spec results' keys and
+#: values in it are written by ``json.dumps`` with its default separators and escapes.
+_RECORD_HEAD = b'{\n "schema_version": 4,'
+
+
+def _may_hold(trend_runs: int, wanted: set[TrendKey], index: HistoryIndex, path: Path) -> bool:
+    """Whether the record in ``path`` may hold a point of a trend in ``wanted`` that is not
+    yet full: without parsing it, by finding the spec's and the signal's paths as its writer
+    wrote them. A file this version did not write, or cannot read, is read to find out."""
+    short = [
+        key
+        for key in wanted
+        if key not in index.trends or len(index.trends[key].points) < trend_runs
+    ]
+    try:
+        data = read_input(path)
+    except (OSError, ValueError):
+        return True
+    if not data.startswith(_RECORD_HEAD):
+        return True
+    return any(
+        b'"spec": ' + json.dumps(spec).encode() in data
+        and b'"path": ' + json.dumps(signal).encode() in data
+        for spec, signal in short
+    )
 
 
 class _Wanted(NamedTuple):

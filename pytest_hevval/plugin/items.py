@@ -25,7 +25,7 @@ from ..results.spec_result import SignalResult, SpecResult
 from ..scoring.engine import Evaluation
 from ..spec.load import load_spec
 from ..spec.model import Spec
-from .session import HevvalSession, judge_campaign
+from .session import SPEC_ITEM_PLACE, HevvalSession, judge_campaign
 from .stash import session_key
 
 __all__ = [
@@ -178,7 +178,7 @@ class _SpecItem(pytest.Item):
         self.hevval_payload = payload
 
     def reportinfo(self) -> tuple[Path, int, str]:
-        return self.path, max(self.line - 1, 0), f"hevval {self.spec.name}: {self.name}"
+        return self.path, max(self.line - 1, 0), f"{SPEC_ITEM_PLACE}{self.spec.name}: {self.name}"
 
     def repr_failure(
         self,
@@ -232,8 +232,8 @@ def _raise_regressions(found: list[str], what: str) -> None:
         raise ThresholdMissed(
             f"{what} got worse than the baseline by more than --hevval-compare-fail allows:\n"
             + "\n".join(f"  {line}" for line in found)
-            + "\n  next: fix the model, or, if the change is intended, record a new baseline "
-            "(run without --hevval-compare-fail and keep the history)"
+            + "\n  next: fix the model, or, if the change is intended, accept it as the new "
+            "baseline with a run given --hevval-accept"
         )
 
 

@@ -27,6 +27,7 @@ from ..options import get_option
 from ..publish import Publisher, PublishOptions, diagnosis_panels
 from ..report.terminal import run_summary
 from ..results.spec_result import SignalResult, SpecResult
+from ..results.verdict import RunVerdict
 from ..spec.model import Spec
 
 if TYPE_CHECKING:
@@ -37,6 +38,8 @@ if TYPE_CHECKING:
 
 __all__ = ["HevvalSession", "judge_campaign"]
 
+#: How a spec's item names its place in pytest's reports (``items._SpecItem.reportinfo``).
+SPEC_ITEM_PLACE = "hevval "
 #: The key of the campaign gates in an xdist worker's output to the controller.
 _GATES = "hevval_campaign_gates"
 
@@ -62,6 +65,11 @@ class HevvalSession:
     annotations: list[str] = field(default_factory=list)
     #: The item that reported each spec's error first, by spec key.
     error_shown: dict[str, str] = field(default_factory=dict)
+    #: On the controller: the specs that could not be scored (their items' setup failed), by
+    #: spec key, with the error of the first item that reported it.
+    unscored: dict[str, str] = field(default_factory=dict)
+    #: The run's verdict, once published (see ``publish.Publication.verdict``).
+    verdict: RunVerdict | None = None
     #: Campaign gate items the xdist workers left to this controller, by node id.
     gates: dict[str, dict[str, Any]] = field(default_factory=dict)
     #: Outcomes of items a worker judged with another one (``items.carry_spec_items``), by the
@@ -253,6 +261,11 @@ class HevvalSession:
         # A worker sees its own reports too; only the controller gathers what they carry.
         if not self.is_controller:
             return
+        if report.when == "setup" and report.failed and _is_spec_item(report):
+            # The item's own node id less its name: the spec, or a campaign's recording.
+            spec = report.nodeid.rsplit("::", 1)[0]
+            error = report.longreprtext.strip().splitlines() or ["its setup failed"]
+            self.unscored.setdefault(spec, error[0])
         payload = getattr(report, "hevval_spec", None)
         if payload is not None:
             self._receive(payload)
@@ -336,7 +349,9 @@ class HevvalSession:
 
         results = self.spec_results()
         dicts = [self.received.get(r.spec) or r.to_dict() for r in results]
-        published = self.publisher.publish(results, self.specs, self.diagnoses, dicts)
+        errors = [f"{spec}: {error}" for spec, error in self.unscored.items()]
+        published = self.publisher.publish(results, self.specs, self.diagnoses, dicts, errors)
+        self.verdict = published.verdict
         self.notes.extend(published.notes)
         kernel_note = compile_note()
         if kernel_note is not None:
@@ -352,11 +367,19 @@ class HevvalSession:
         for line in self.annotations:
             terminalreporter.write_line(line)
         terminalreporter.write_sep("=", "hevval validation summary")
-        for line in run_summary(results, details=bool(self.option("details"))):
+        for line in run_summary(
+            results, details=bool(self.option("details")), verdict=self.verdict
+        ):
             terminalreporter.write_line(line)
         for note in self.notes:
             for line in note.splitlines():
                 terminalreporter.write_line(line)
+
+
+def _is_spec_item(report: pytest.TestReport) -> bool:
+    """Whether a report is of a spec's item (a signal or Φ), whichever process ran it: those
+    name their place ``hevval <spec name>: <item>`` (``items._SpecItem.reportinfo``)."""
+    return str(report.location[2]).startswith(SPEC_ITEM_PLACE)
 
 
 def judge_campaign(

@@ -20,6 +20,7 @@ from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
 from ..results.local import LocalFailure
+from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg
 from .sentences import local_failure_text
 from .text import campaigns_of
@@ -211,8 +212,10 @@ def render_html(
     title: str,
     generated_utc: str,
     formats: Collection[str] = ("html", "json"),
+    verdict: RunVerdict | None = None,
 ) -> str:
-    """The HTML report of ``spec_results`` as one self-contained page.
+    """The HTML report of ``spec_results`` as one self-contained page; its header says
+    ``verdict`` (else the verdict of the results alone).
 
     Parameters
     ----------
@@ -246,7 +249,7 @@ def render_html(
         title=title,
         generated_utc=generated_utc,
         version=__version__,
-        summary=model.summary(spec_results),
+        summary=model.summary(spec_results, verdict),
         specs=specs,
         worst=worst,
         campaigns=campaigns_of(spec_results),

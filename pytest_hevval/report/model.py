@@ -17,7 +17,8 @@ from ..core.registry import describe, order_names, registered_characteristics
 from ..results.codec import is_finite_number, keyed_lambdas
 from ..results.measurement import ErrorCheck
 from ..results.spec_result import SpecResult
-from .sentences import failure_sentence, outcome_line
+from ..results.verdict import RunVerdict
+from .sentences import failure_sentence, verdict_line
 
 __all__ = [
     "CHARACTERISTICS",
@@ -404,15 +405,30 @@ def worst_rows(spec_results: Sequence[Mapping[str, Any]], limit: int = 10) -> li
     return rows[:limit]
 
 
-def summary(spec_results: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
-    """Counts for the headers; ``outcome`` is the run's one-line count (as the terminal's)."""
+def summary(
+    spec_results: Iterable[Mapping[str, Any]], verdict: RunVerdict | None = None
+) -> dict[str, Any]:
+    """Counts for the headers; ``outcome`` is the run's verdict in one line (as the terminal's
+    last line), ``passed`` the verdict itself: ``verdict`` as the run decided it, else decided
+    here from the results alone. A spec or signal a regression fails counts as failed."""
     specs = list(spec_results)
-    signals = [s for spec in specs for s in items(spec.get("signals"))]
+    regressed = verdict.regressed if verdict is not None else {}
+
+    def signal_failed(spec: Mapping[str, Any], signal: Mapping[str, Any]) -> bool:
+        return signal.get("passed") is False or signal.get("path") in regressed.get(
+            str(spec.get("spec")), ()
+        )
+
     counts: dict[str, Any] = {
         "specs": len(specs),
-        "specs_failed": sum(1 for spec in specs if spec.get("passed") is False),
-        "signals": len(signals),
-        "signals_failed": sum(1 for s in signals if s.get("passed") is False),
+        "specs_failed": sum(
+            1 for spec in specs if spec.get("passed") is False or str(spec.get("spec")) in regressed
+        ),
+        "signals": sum(len(items(spec.get("signals"))) for spec in specs),
+        "signals_failed": sum(
+            signal_failed(spec, signal) for spec in specs for signal in items(spec.get("signals"))
+        ),
+        "regressions": len(verdict.regressions) if verdict is not None else 0,
     }
     try:
         typed = [SpecResult.from_dict(spec) for spec in specs]
@@ -421,6 +437,9 @@ def summary(spec_results: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
             f"{counts['specs']} specs, {counts['specs_failed']} fail; "
             f"{counts['signals_failed']} of {counts['signals']} signals fail"
         )
-    else:
-        counts["outcome"] = outcome_line(typed) if typed else "no specs scored"
+        counts["passed"] = counts["specs_failed"] == 0 and (verdict is None or verdict.passed)
+        return counts
+    decided = verdict if verdict is not None else RunVerdict.decide(typed)
+    counts["passed"] = decided.passed
+    counts["outcome"] = verdict_line(typed, decided) if typed else "no specs scored"
     return counts

@@ -3,7 +3,7 @@ where the error lies. The terminal, the failure reports and the HTML report all 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from ..core.measurement import ERROR_CHARACTERISTICS
 from ..core.registry import describe
@@ -13,6 +13,7 @@ from ..results.campaign import CampaignVerdict, campaign_of, campaign_verdicts
 from ..results.local import NAMED_GROUPS, LocalFailure
 from ..results.measurement import ErrorCheck
 from ..results.spec_result import Failure, SignalResult, SpecResult
+from ..results.verdict import RunVerdict
 
 __all__ = [
     "failure_lines",
@@ -20,6 +21,7 @@ __all__ = [
     "failure_text",
     "local_failure_text",
     "outcome_line",
+    "verdict_line",
     "where_lines",
     "within_uncertainty_lines",
 ]
@@ -134,7 +136,9 @@ def where_lines(signal: SignalResult) -> list[str]:
 
 
 def outcome_line(
-    results: Sequence[SpecResult], verdicts: Sequence[CampaignVerdict] | None = None
+    results: Sequence[SpecResult],
+    verdicts: Sequence[CampaignVerdict] | None = None,
+    regressed: Mapping[str, frozenset[str | None]] | None = None,
 ) -> str:
     """The run's outcome in one line, counted as pytest counts items (a signal, a Φ, a campaign
     gate) and by spec file, so that the terminal, the reports and the docs say one count.
@@ -142,29 +146,61 @@ def outcome_line(
     ``14 spec files, 3 pass; 161 items, 40 fail: 38 of 137 signals, 1 of 23 Φ, 1 of 1
     campaign gate``. A recording of a campaign is a spec of its own (its signals and its Φ);
     its file passes when every recording and the campaign gate do. ``verdicts``: the
-    campaigns' verdicts of ``results`` where the caller has them already.
+    campaigns' verdicts of ``results`` where the caller has them already. ``regressed``: the
+    items a regression against the baseline fails, by spec (signal paths, None for Φ), as
+    :attr:`~pytest_hevval.results.verdict.RunVerdict.regressed` gives them.
     """
     by_spec = {v.spec: v for v in (campaign_verdicts(results) if verdicts is None else verdicts)}
+    regressed = regressed or {}
     files: dict[str, bool] = {}
+    failed_signals = failed_phi = by_regression = signal_count = 0
     for result in results:
+        worse = regressed.get(result.spec, frozenset())
         key = campaign_of(result.spec)
-        files[key] = files.get(key, True) and result.passed
+        files[key] = files.get(key, True) and result.passed and not worse
+        for signal in result.signals:
+            signal_count += 1
+            failed_signals += not signal.passed or signal.path in worse
+            by_regression += signal.passed and signal.path in worse
+        failed_phi += not result.phi_passed or None in worse
+        by_regression += result.phi_passed and None in worse
     for key, verdict in by_spec.items():
         files[key] = files.get(key, True) and verdict.passed
-    signals = [s for r in results for s in r.signals]
-    failed_signals = sum(not s.passed for s in signals)
-    failed_phi = sum(not r.phi_passed for r in results)
     failed_gates = sum(not v.passed for v in by_spec.values())
-    items = len(signals) + len(results) + len(by_spec)
+    items = signal_count + len(results) + len(by_spec)
     failed = failed_signals + failed_phi + failed_gates
     counts = [
-        f"{failed_signals} of {len(signals)} signal{'s' * (len(signals) != 1)}",
+        f"{failed_signals} of {signal_count} signal{'s' * (signal_count != 1)}",
         f"{failed_phi} of {len(results)} Φ",
     ]
     if by_spec:
         counts.append(f"{failed_gates} of {len(by_spec)} campaign gate{'s' * (len(by_spec) != 1)}")
     passing_files = sum(files.values())
+    cause = f" ({by_regression} by regression)" if by_regression else ""
     return (
         f"{len(files)} spec file{'s' * (len(files) != 1)}, {passing_files} pass; "
-        f"{items} items, {failed} fail: " + ", ".join(counts)
+        f"{items} items, {failed} fail{cause}: " + ", ".join(counts)
     )
+
+
+def verdict_line(
+    results: Sequence[SpecResult],
+    verdict: RunVerdict,
+    verdicts: Sequence[CampaignVerdict] | None = None,
+) -> str:
+    """The run's verdict in one line: what failed it beyond the counts (regressions against
+    the baseline, specs that could not be scored), then :func:`outcome_line`.
+
+    ``1 regression against v1 (commit 3f2a9c1, 2026-11-28 22:10 UTC); 1 spec file, 0 pass;
+    6 items, 1 fail (1 by regression): 1 of 5 signals, 0 of 1 Φ``.
+    """
+    parts = []
+    if verdict.regressions:
+        count = len(verdict.regressions)
+        against = f" against {verdict.baseline}" if verdict.baseline else ""
+        accepted = " (accepted: --hevval-accept)" if verdict.regressions_accepted else ""
+        parts.append(f"{count} regression{'s' * (count != 1)}{against}{accepted}")
+    if verdict.errors:
+        count = len(verdict.errors)
+        parts.append(f"{count} spec{'s' * (count != 1)} could not be scored")
+    return "; ".join([*parts, outcome_line(results, verdicts, verdict.regressed)])

@@ -11,10 +11,12 @@ from collections.abc import Iterable, Sequence
 from ..core.registry import describe
 from ..results.campaign import CampaignVerdict, campaign_verdicts
 from ..results.spec_result import SignalResult, SpecResult
+from ..results.verdict import RunVerdict
 from .sentences import (
     failure_lines,
     failure_text,
     outcome_line,
+    verdict_line,
     where_lines,
     within_uncertainty_lines,
 )
@@ -214,14 +216,21 @@ def quality_lines(result: SpecResult) -> list[str]:
     return lines
 
 
-def run_summary(results: Sequence[SpecResult], *, details: bool = False) -> list[str]:
-    """The run's summary: every spec's tree, then each campaign's verdict."""
+def run_summary(
+    results: Sequence[SpecResult], *, details: bool = False, verdict: RunVerdict | None = None
+) -> list[str]:
+    """The run's summary: every spec's tree, then each campaign's verdict, then the run's
+    verdict in one line (``verdict``, else the counts of the results alone)."""
     lines = tree_summary(results, details=details)
     verdicts = campaign_verdicts(results)
     for found in verdicts:
         lines.extend(verdict_lines(found))
     if results:
-        lines.append(outcome_line(results, verdicts))
+        lines.append(
+            outcome_line(results, verdicts)
+            if verdict is None
+            else verdict_line(results, verdict, verdicts)
+        )
     return lines
 
 

@@ -14,11 +14,15 @@ from typing import Any
 from .. import __version__
 from ..defaults import split_key
 from ..results.codec import plain_json
+from ..results.verdict import RunVerdict
 from . import model
 
 __all__ = [
     "REPORT_SCHEMA_VERSION",
     "github_annotations",
+    "headline",
+    "regression_lines",
+    "render_comparison",
     "render_json",
     "render_markdown",
 ]
@@ -50,15 +54,24 @@ def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any
     return out
 
 
-def render_json(spec_results: Sequence[Mapping[str, Any]]) -> str:
-    """report.json: every spec result as given, plus the summary and worst-signal table.
+def render_json(
+    spec_results: Sequence[Mapping[str, Any]],
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
+) -> str:
+    """report.json: every spec result as given, plus the summary (with the run's verdict,
+    ``summary.passed``), the worst-signal table and, when the run decided one, ``verdict``:
+    its regressions against the baseline and the specs that could not be scored; and the
+    ``comparison`` with the baseline when one ran (``Comparison.to_dict()``).
 
     Keys are sorted and separators fixed, so equal results give byte-identical files.
     """
     payload = {
         "report_schema_version": REPORT_SCHEMA_VERSION,
         "generated_by": f"pytest-hevval {__version__}",
-        "summary": model.summary(spec_results),
+        "summary": model.summary(spec_results, verdict),
+        **({"verdict": verdict.to_dict()} if verdict is not None else {}),
+        **({"comparison": comparison} if comparison is not None else {}),
         "worst": _worst_json(spec_results),
         "specs": list(spec_results),
         **({"campaigns": campaigns} if (campaigns := campaigns_of(spec_results)) else {}),
@@ -255,24 +268,42 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
     return lines
 
 
-def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
-    """A short summary for a GitHub step summary or PR comment."""
-    counts = model.summary(spec_results)
-    ok = counts["specs_failed"] == 0
-    mark = "✅" if ok else "❌"
+def headline(spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None) -> str:
+    """The Markdown headline of a run: its verdict in one line."""
+    counts = model.summary(spec_results, verdict)
+    return f"### {'✅' if counts['passed'] else '❌'} hevval: {_md(counts['outcome'])}"
+
+
+def render_markdown(
+    spec_results: Sequence[Mapping[str, Any]],
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
+) -> str:
+    """A short summary for a GitHub step summary or PR comment; its headline is the run's
+    verdict (``verdict``, else the verdict of the results alone). With ``comparison`` (the
+    comparison with the baseline as ``Comparison.to_dict()`` gives it, and ``verdict``), the
+    comparison follows the spec table (:mod:`.comparison`)."""
+    regressed = verdict.regressed if verdict is not None else {}
     lines = [
-        f"### {mark} hevval: {counts['outcome']}",
+        headline(spec_results, verdict),
         "",
         "| | spec | Φ | min Φ | failing signals |",
         "|:-:|---|--:|--:|--:|",
     ]
     for spec in spec_results:
         failing = model.failing_signals(spec)
+        failed = spec.get("passed") is False or str(spec.get("spec")) in regressed
         lines.append(
-            f"| {'❌' if spec.get('passed') is False else '✅'} | {_md(spec.get('name', ''))} "
+            f"| {'❌' if failed else '✅'} | {_md(spec.get('name', ''))} "
             f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
             f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
         )
+    if verdict is not None and comparison is not None:
+        from .comparison import comparison_markdown
+
+        lines += ["", *comparison_markdown(comparison, verdict)]
+    if verdict is not None:
+        lines += _verdict_markdown(verdict, regressions=comparison is None)
     for spec in spec_results:
         failing = model.failing_signals(spec)
         if spec.get("passed") is not False and not failing:
@@ -315,6 +346,51 @@ def render_markdown(spec_results: Sequence[Mapping[str, Any]]) -> str:
                 f"{found['start_s']:.6g}–{found['stop_s']:.6g} s ({_md(str(found['detail']))})"
             )
     return "\n".join(lines) + "\n"
+
+
+def regression_lines(verdict: RunVerdict) -> list[str]:
+    """The run's regressions as a Markdown list (the first fifteen; all in report.json)."""
+    count = len(verdict.regressions)
+    lines = [f"- {_md(item.text)}" for item in verdict.regressions[:_MARKDOWN_SIGNALS]]
+    if count > _MARKDOWN_SIGNALS:
+        lines.append(f"- … and {count - _MARKDOWN_SIGNALS} more (see report.json)")
+    return lines
+
+
+def _verdict_markdown(verdict: RunVerdict, *, regressions: bool) -> list[str]:
+    """The regressions against the baseline (when ``regressions``: no comparison lists them)
+    and the specs that could not be scored."""
+    lines: list[str] = []
+    if verdict.regressions and regressions:
+        count = len(verdict.regressions)
+        against = f" against {_md(verdict.baseline)}" if verdict.baseline else ""
+        accepted = (
+            " (accepted with --hevval-accept: reported, not failed)"
+            if verdict.regressions_accepted
+            else ""
+        )
+        lines += [
+            "",
+            f"**{'⚠️' if verdict.regressions_accepted else '❌'} {count} "
+            f"regression{'s' * (count != 1)}{against}**{accepted}",
+            "",
+            *regression_lines(verdict),
+        ]
+    if verdict.errors:
+        lines += ["", "**❌ Could not be scored**", ""]
+        lines += [f"- {_md(error)}" for error in verdict.errors]
+    return lines
+
+
+def render_comparison(
+    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict, comparison: Mapping[str, Any]
+) -> str:
+    """comparison.md: the run's headline and its comparison with the baseline, alone, for a
+    workflow that posts just that as a pull-request comment."""
+    from .comparison import comparison_markdown
+
+    lines = [headline(spec_results, verdict), "", *comparison_markdown(comparison, verdict)]
+    return "\n".join([*lines, "", f"<sub>pytest-hevval {__version__}</sub>"]) + "\n"
 
 
 def _escape_data(text: str) -> str:

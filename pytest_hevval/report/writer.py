@@ -9,12 +9,22 @@ from typing import Any
 
 from ..errors import HevvalError, did_you_mean
 from ..files import output_error, write_atomic
+from ..results.verdict import RunVerdict
 
-__all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
+__all__ = [
+    "COMPARISON_FILE",
+    "FILE_NAMES",
+    "FORMATS",
+    "ReportOptionError",
+    "parse_formats",
+    "write_reports",
+]
 
 #: Report formats in the order they are written, with their file names.
 FILE_NAMES: dict[str, str] = {"html": "report.html", "json": "report.json", "md": "report.md"}
 FORMATS: tuple[str, ...] = tuple(FILE_NAMES)
+#: The comparison with the baseline alone, written beside report.md when a comparison ran.
+COMPARISON_FILE = "comparison.md"
 _ALIASES = {"markdown": "md", "htm": "html"}
 
 
@@ -57,8 +67,13 @@ def write_reports(
     *,
     title: str = "hevval validation report",
     generated_utc: str | None = None,
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """Write report.html / report.json / report.md for ``formats`` into ``directory``.
+    """Write report.html / report.json / report.md for ``formats`` into ``directory``; each
+    says ``verdict``, the run's (else the verdict of the results alone). With ``comparison``
+    (the comparison with the baseline, ``Comparison.to_dict()``) and a verdict, report.json
+    and report.md carry it, and with ``md`` it is also written alone to comparison.md.
 
     The directory is created if needed; each file is replaced atomically. Returns the written
     paths in the order html, json, md.
@@ -82,26 +97,35 @@ def write_reports(
         if name == "html":
             from .html import render_html
 
-            text = render_html(spec_results, title=title, generated_utc=stamp, formats=formats)
+            text = render_html(
+                spec_results, title=title, generated_utc=stamp, formats=formats, verdict=verdict
+            )
         elif name == "json":
             from .text import render_json
 
-            text = render_json(spec_results)
+            text = render_json(spec_results, verdict, comparison)
         else:
             from .text import render_markdown
 
-            text = render_markdown(spec_results)
+            text = render_markdown(spec_results, verdict, comparison)
         path = directory / FILE_NAMES[name]
         write_atomic(path, text)
         written.append(path)
+    compared = "md" in formats and comparison is not None and verdict is not None
+    if "md" in formats and comparison is not None and verdict is not None:
+        from .text import render_comparison
+
+        path = directory / COMPARISON_FILE
+        write_atomic(path, render_comparison(spec_results, verdict, comparison))
+        written.append(path)
     # A report of an earlier run beside this run's would be read as this run's: only this
     # run's reports stay (the report files' own names only; nothing else is touched).
-    for name, file_name in FILE_NAMES.items():
-        if name not in formats:
-            stale = directory / file_name
-            try:
-                if stale.is_file() and not stale.is_symlink():
-                    stale.unlink()
-            except OSError as exc:
-                raise output_error(stale, exc) from None
+    left = [name for kind, name in FILE_NAMES.items() if kind not in formats]
+    for file_name in [*left, *([] if compared else [COMPARISON_FILE])]:
+        stale = directory / file_name
+        try:
+            if stale.is_file() and not stale.is_symlink():
+                stale.unlink()
+        except OSError as exc:
+            raise output_error(stale, exc) from None
     return written
