@@ -128,6 +128,16 @@ class Publisher:
         be found (no git, no --hevval-model-version), ``this run``."""
         return "this run" if self.model_version == UNKNOWN_MODEL_VERSION else self.model_version
 
+    def run_facts(self) -> dict[str, Any]:
+        """The run's model version, start and tool versions, as its history record has them."""
+        from .history import default_tool_versions, format_utc
+
+        return {
+            "model_version": self.model_version,
+            "started_utc": format_utc(self.started),
+            "tool_versions": default_tool_versions(),
+        }
+
     @property
     def wants_comparison(self) -> bool:
         return bool(self.options.compare or self.options.compare_fail)
@@ -234,6 +244,7 @@ class Publisher:
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
+                    facts=self.run_facts(),
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")

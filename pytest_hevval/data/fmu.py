@@ -19,6 +19,7 @@ import numpy.typing as npt
 from ..errors import DataError, MissingExtraError, did_you_mean
 from ..files import check_input
 from .record import Channel, Record
+from .runtime import measure_call
 
 __all__ = ["run_fmu"]
 
@@ -116,20 +117,30 @@ def run_fmu(
         except Exception as exc:
             raise _failure(fmu_path, "cannot load the FMU's binary", exc, messages) from None
         fatal = False
+        steps = 0
+
+        def count_step(*_: Any) -> bool:
+            nonlocal steps
+            steps += 1
+            return True
+
         try:
-            result = fmpy.simulate_fmu(
-                unzipdir,
-                validate=False,
-                start_time=start_time,
-                stop_time=stop_time,
-                step_size=step_size,
-                output_interval=step_size,
-                fmi_type=fmi_type,
-                start_values=parameters,
-                input=signals,
-                output=list(dict.fromkeys(outputs.values())),
-                model_description=description,
-                fmu_instance=instance,
+            result, cost = measure_call(
+                lambda: fmpy.simulate_fmu(
+                    unzipdir,
+                    validate=False,
+                    start_time=start_time,
+                    stop_time=stop_time,
+                    step_size=step_size,
+                    output_interval=step_size,
+                    fmi_type=fmi_type,
+                    start_values=parameters,
+                    input=signals,
+                    output=list(dict.fromkeys(outputs.values())),
+                    model_description=description,
+                    fmu_instance=instance,
+                    step_finished=count_step,
+                )
             )
         except Exception as exc:
             fatal = getattr(exc, "status", None) == _STATUS_FATAL
@@ -142,7 +153,10 @@ def run_fmu(
             if not fatal:
                 _free(instance)
 
-    return _result_record(fmu_path, result, outputs, variables, description, fmi_type)
+    record = _result_record(fmu_path, result, outputs, variables, description, fmi_type)
+    record.meta["cost"] = cost
+    record.meta["steps"] = steps
+    return record
 
 
 def _import_fmpy() -> Any:
@@ -319,6 +333,7 @@ def _result_record(
     # value after the event is the one that holds from then on.
     keep = np.append(np.diff(time) > 0, True)
     time = time[keep]
+    events = int(keep.size - np.count_nonzero(keep)) if fmi_type == "ModelExchange" else None
     if time.size == 0 or np.any(np.diff(time) <= 0):
         raise DataError(
             "the simulation returned no usable time stamps",
@@ -345,5 +360,12 @@ def _result_record(
             "fmi_type": fmi_type,
             "model_name": str(description.modelName),
             "outputs": dict(outputs),
+            # FMI 1 and 2 name the build by its GUID, FMI 3 by its instantiation token.
+            "guid": str(
+                getattr(description, "guid", None)
+                or getattr(description, "instantiationToken", None)
+                or ""
+            ),
+            **({"events": events} if events is not None else {}),
         },
     )

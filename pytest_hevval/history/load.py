@@ -16,7 +16,7 @@ from .compare import specs_of
 from .records import migrate_record
 from .store import HistoryStore
 
-__all__ = ["HISTORY_PREFIX", "load_side", "report_problems"]
+__all__ = ["HISTORY_PREFIX", "load_document", "load_side", "report_problems"]
 
 #: How a compare operand names a recorded run.
 HISTORY_PREFIX = "history:"
@@ -35,6 +35,16 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
     ``history:<model version>`` (looked up in ``directory``),
     a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
     """
+    document, source = load_document(ref, directory)
+    version = document.get("model_version")
+    if source == "hevval run" and not (isinstance(version, str) and version):
+        version = Path(ref).name
+    return document["specs"], str(version)
+
+
+def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
+    """The whole run ``ref`` names (the forms of :func:`load_side`), and where it comes from:
+    ``history record`` (migrated to the current schema) or ``hevval run`` (its JSON output)."""
     if ref.startswith(HISTORY_PREFIX):
         wanted = ref[len(HISTORY_PREFIX) :]
         store = HistoryStore(directory)
@@ -66,7 +76,7 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
                 key=ref,
                 hint="recorded versions: " + ", ".join(versions[-10:]),
             )
-        return specs_of(record), record["model_version"]
+        return dict(record), "history record"
     path = Path(ref)
     try:
         document = read_json(path)
@@ -95,11 +105,9 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
         and "schema_version" in document
         and ("model_version" in document or "results" in document)
     ):
-        record = migrate_record(document, file=ref)
-        return specs_of(record), record["model_version"]
+        return migrate_record(document, file=ref), "history record"
     if isinstance(document, dict) and isinstance(document.get("specs"), list):
-        version = document.get("model_version")
-        return specs_of(document), version if isinstance(version, str) and version else path.name
+        return {**document, "specs": specs_of(document)}, "hevval run"
     raise HistoryError(
         "neither a history record nor a run result (no 'specs' list)",
         file=ref,

@@ -155,14 +155,18 @@ def outcome_line(
     failed_signals = sum(not s.passed for s in signals)
     failed_phi = sum(not r.phi_passed for r in results)
     failed_gates = sum(not v.passed for v in by_spec.values())
-    items = len(signals) + len(results) + len(by_spec)
-    failed = failed_signals + failed_phi + failed_gates
+    timed = [r.runtime for r in results if r.runtime is not None and r.runtime.gate is not None]
+    failed_runtimes = sum(not runtime.passed for runtime in timed)
+    items = len(signals) + len(results) + len(by_spec) + len(timed)
+    failed = failed_signals + failed_phi + failed_gates + failed_runtimes
     counts = [
         f"{failed_signals} of {len(signals)} signal{'s' * (len(signals) != 1)}",
         f"{failed_phi} of {len(results)} Φ",
     ]
     if by_spec:
         counts.append(f"{failed_gates} of {len(by_spec)} campaign gate{'s' * (len(by_spec) != 1)}")
+    if timed:
+        counts.append(f"{failed_runtimes} of {len(timed)} runtime gate{'s' * (len(timed) != 1)}")
     passing_files = sum(files.values())
     return (
         f"{len(files)} spec file{'s' * (len(files) != 1)}, {passing_files} pass; "

@@ -13,7 +13,12 @@ from ..files import output_error, write_atomic
 __all__ = ["FILE_NAMES", "FORMATS", "ReportOptionError", "parse_formats", "write_reports"]
 
 #: Report formats in the order they are written, with their file names.
-FILE_NAMES: dict[str, str] = {"html": "report.html", "json": "report.json", "md": "report.md"}
+FILE_NAMES: dict[str, str] = {
+    "html": "report.html",
+    "json": "report.json",
+    "md": "report.md",
+    "evidence": "evidence.json",
+}
 FORMATS: tuple[str, ...] = tuple(FILE_NAMES)
 _ALIASES = {"markdown": "md", "htm": "html"}
 
@@ -57,8 +62,11 @@ def write_reports(
     *,
     title: str = "hevval validation report",
     generated_utc: str | None = None,
+    facts: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """Write report.html / report.json / report.md for ``formats`` into ``directory``.
+    """Write report.html / report.json / report.md / evidence.json for ``formats`` into
+    ``directory``; ``facts`` are the run's model version, start and tool versions, which the
+    evidence record holds (docs/evidence.md).
 
     The directory is created if needed; each file is replaced atomically. Returns the written
     paths in the order html, json, md.
@@ -87,6 +95,10 @@ def write_reports(
             from .text import render_json
 
             text = render_json(spec_results)
+        elif name == "evidence":
+            from .evidence import render_evidence
+
+            text = render_evidence(spec_results, facts or {}, source="pytest run")
         else:
             from .text import render_markdown
 
