@@ -10,6 +10,7 @@ __all__ = [
     "REGION_BINS",
     "REGION_MIN_SAMPLES",
     "REPORT_DIR",
+    "RUNTIME_CLOCKS",
     "RUNTIME_REPEAT",
     "SPEC_GLOBS",
     "UNCERTAINTY_SIGMA",
@@ -43,6 +44,9 @@ WITHIN_UNCERTAINTY = "fail"
 RUNTIME_REPEAT = 1
 #: The most calls ``runtime.repeat`` may ask for.
 MAX_RUNTIME_REPEAT = 50
+#: The clocks a ``runtime:`` gate may judge, the default first: CPU time (the model's own work,
+#: which load on the machine barely moves) or wall time.
+RUNTIME_CLOCKS = ("cpu", "wall")
 
 #: Between a campaign spec's path and a recording id in a result's key and on the command line.
 RECORDING_SEPARATOR = "::"

@@ -18,6 +18,7 @@ from importlib import resources
 from typing import Any
 
 from ..results.codec import plain_json
+from .text import campaigns_of
 
 __all__ = ["EVIDENCE_SCHEMA_VERSION", "RunFacts", "evidence_record", "render_evidence", "schema"]
 
@@ -41,6 +42,16 @@ _MODEL_KEYS = (
     "digest",
     "guid",
     "params",
+)
+#: A campaign's gate verdict as the record keeps it.
+_CAMPAIGN_KEYS = (
+    "spec",
+    "name",
+    "passed",
+    "pass_rate",
+    "min_pass_rate",
+    "phi_quantile",
+    "failures",
 )
 _NO_RUNTIME = {
     "file": "the model is exported files: it ran elsewhere, so no runtime was measured",
@@ -141,13 +152,17 @@ def evidence_record(
     """
     versions = dict(facts.get("tool_versions") or {})
     specs = [_spec(spec) for spec in spec_results]
+    campaigns = [
+        {key: found[key] for key in _CAMPAIGN_KEYS} for found in campaigns_of(spec_results)
+    ]
     record = {
         "evidence_schema_version": EVIDENCE_SCHEMA_VERSION,
         "source": source,
         "run": {
             "model_version": facts.get("model_version"),
             "started_utc": facts.get("started_utc"),
-            "passed": all(s["verdict"]["passed"] for s in specs),
+            "passed": all(s["verdict"]["passed"] for s in specs)
+            and all(c["passed"] for c in campaigns),
         },
         "tool": {
             "name": "pytest-hevval",
@@ -162,6 +177,7 @@ def evidence_record(
             "platform": versions.get("platform"),
         },
         "specs": specs,
+        "campaigns": campaigns,
         "requirements": _links(spec_results),
     }
     plain: dict[str, Any] = plain_json(record)

@@ -293,7 +293,7 @@ def _load_model(
         peak_memory_bytes=max(peaks) if peaks else None,
         steps=record.meta.get("steps"),
         events=record.meta.get("events"),
-        gate=RuntimeGate(spec.runtime.min_realtime_factor, spec.runtime.max_s)
+        gate=RuntimeGate(spec.runtime.min_realtime_factor, spec.runtime.max_s, spec.runtime.clock)
         if spec.runtime.gated
         else None,
     )

@@ -33,6 +33,7 @@ from ..defaults import (
     MAX_RUNTIME_REPEAT,
     REGION_BINS,
     REGION_MIN_SAMPLES,
+    RUNTIME_CLOCKS,
     RUNTIME_REPEAT,
     UNCERTAINTY_SIGMA,
     WITHIN_UNCERTAINTY,
@@ -157,7 +158,7 @@ _MIN_PHI_ON = ("value", "lower", "upper")
 _CONDITION_KEYS = ("when", "thresholds")
 _UNCERTAINTY_KEYS = ("abs", "rel", "sigma")
 _MEASUREMENT_KEYS = ("within_uncertainty",)
-_RUNTIME_KEYS = ("min_realtime_factor", "max_s", "repeat")
+_RUNTIME_KEYS = ("min_realtime_factor", "max_s", "repeat", "clock")
 #: The settings of ``measurement.within_uncertainty``, the default first.
 _WITHIN_UNCERTAINTY = (WITHIN_UNCERTAINTY, *sorted({"fail", "pass"} - {WITHIN_UNCERTAINTY}))
 
@@ -532,6 +533,9 @@ def _runtime(context: _Context, top: LineDict, model: SourceSpec) -> RuntimeSpec
         ),
         max_s=context.get(mapping, "max_s", "runtime", context.positive, None),
         repeat=int(repeat),
+        clock=context.get(
+            mapping, "clock", "runtime", context.choice(RUNTIME_CLOCKS), RUNTIME_CLOCKS[0]
+        ),
         line=line,
     )
 

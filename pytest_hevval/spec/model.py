@@ -11,7 +11,13 @@ from ..core.measurement import MeasurementUncertainty, WithinUncertainty
 from ..core.registry import Characteristic, is_registered, select_characteristics
 from ..data.quality import QualityLimits
 from ..data.record import SourceOptions
-from ..defaults import RECORDING_SEPARATOR, RUNTIME_REPEAT, WITHIN_UNCERTAINTY, split_key
+from ..defaults import (
+    RECORDING_SEPARATOR,
+    RUNTIME_CLOCKS,
+    RUNTIME_REPEAT,
+    WITHIN_UNCERTAINTY,
+    split_key,
+)
 from .expressions import Expression
 
 __all__ = [
@@ -214,6 +220,8 @@ class RuntimeSpec:
     #: Seconds the fastest call may take.
     max_s: float | None = None
     repeat: int = RUNTIME_REPEAT
+    #: The clock the limits are judged by: "cpu" (the model's own work) or "wall".
+    clock: str = RUNTIME_CLOCKS[0]
     line: int = 1
 
     @property
