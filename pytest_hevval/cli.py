@@ -370,12 +370,16 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _trace(args: argparse.Namespace) -> int:
     """``hevval trace``: each requirement → the items that verify it → their latest verdict."""
-    from .history import load_side
+    from .history import latest_results, load_side
     from .report.trace import read_requirement_list, render_trace, trace_rows
 
     listed = read_requirement_list(args.requirements) if args.requirements else None
-    specs, label = load_side(args.run, Path(args.history_dir))
-    rows = trace_rows(specs, model_version=label, listed=listed)
+    if args.run is None:
+        # Each spec's newest recorded verdict, whichever run recorded it.
+        rows = trace_rows(latest_results(Path(args.history_dir)), listed=listed)
+    else:
+        specs, label = load_side(args.run, Path(args.history_dir))
+        rows = trace_rows(specs, model_version=label, listed=listed)
     if not rows:
         print(
             f"hevval trace: no spec of {args.run} names requirements "
@@ -393,7 +397,7 @@ def _evidence(args: argparse.Namespace) -> int:
     from .history import load_document
     from .report.evidence import render_evidence
 
-    document, source = load_document(args.run, Path(args.history_dir))
+    document, source = load_document(args.run or "history:latest", Path(args.history_dir))
     # A history record holds the run's facts at its top, a run's JSON under "run".
     facts = document if source == "history record" else document.get("run") or {}
     text = render_evidence(document["specs"], facts, source=source)
@@ -573,7 +577,7 @@ def _parser() -> argparse.ArgumentParser:
         "and their latest verdict with Φ and its interval, the model version and the data. "
         "With --requirements, listed requirements that nothing verifies show as uncovered.",
     )
-    _recorded_run(trace)
+    _recorded_run(trace, "default: each spec's newest recorded result")
     trace.add_argument(
         "--requirements",
         metavar="FILE",
@@ -588,7 +592,7 @@ def _parser() -> argparse.ArgumentParser:
         "data files' digests, the model's identity and parameters, every verdict with its "
         "interval, the requirement links and the model's runtime (docs/evidence.md).",
     )
-    _recorded_run(evidence)
+    _recorded_run(evidence, "default history:latest, the newest record")
     evidence.add_argument("--output", metavar="PATH", help="write here instead of stdout")
     kernel = commands.add_parser(
         "kernel",
@@ -606,14 +610,12 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _recorded_run(command: argparse.ArgumentParser) -> None:
+def _recorded_run(command: argparse.ArgumentParser, default_help: str) -> None:
     """The RUN operand of ``trace`` and ``evidence``, and the history folder it is looked up in."""
     command.add_argument(
         "run",
         nargs="?",
-        default="history:latest",
-        help="history:latest (default), history:<version>, a history record or a "
-        "`hevval run --json` file",
+        help=f"{default_help}; history:<version>, a history record or a `hevval run --json` file",
     )
     _shared(command, "history-dir")
 

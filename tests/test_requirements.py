@@ -176,6 +176,21 @@ def test_trace_command_lists_verdicts_and_uncovered_requirements(
     for fmt, marker in (("table", "PACK-1"), ("md", "| PACK-1 |"), ("html", "<td>PACK-1</td>")):
         assert main(["trace", "--format", fmt]) == 1
         assert marker in capsys.readouterr().out
+    # A later run of another spec only: each spec keeps its own latest verdict and version.
+    pytester.makefile(".hevval.yaml", other=SPEC.replace("name: pack", "name: other"))
+    pytester.runpytest(
+        "--hevval", "other.hevval.yaml", "--hevval-history", "--hevval-model-version=v8"
+    )
+    capsys.readouterr()
+    main(["trace", "--format", "json"])
+    versions = {
+        (row["spec"], row["model_version"])
+        for row in json.loads(capsys.readouterr().out)["rows"]
+        if row["requirement"] == "PACK-1"
+    }
+    assert versions == {("pack", "v7"), ("other", "v8")}
+    main(["trace", "history:latest", "--format", "json"])
+    assert {row["spec"] for row in json.loads(capsys.readouterr().out)["rows"]} == {"other"}
 
 
 def test_trace_without_requirements_says_so(

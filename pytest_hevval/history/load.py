@@ -16,7 +16,13 @@ from .compare import specs_of
 from .records import migrate_record
 from .store import HistoryStore
 
-__all__ = ["HISTORY_PREFIX", "load_document", "load_side", "report_problems"]
+__all__ = [
+    "HISTORY_PREFIX",
+    "latest_results",
+    "load_document",
+    "load_side",
+    "report_problems",
+]
 
 #: How a compare operand names a recorded run.
 HISTORY_PREFIX = "history:"
@@ -26,6 +32,31 @@ def report_problems(store: HistoryStore) -> None:
     """Say on stderr which records of the store could not be read."""
     for problem in store.problems:
         print(f"skipped {problem}", file=sys.stderr)
+
+
+def latest_results(directory: Path) -> list[dict[str, Any]]:
+    """The newest recorded result of every spec (and campaign recording) in the history, each
+    with the ``model_version`` and ``started_utc`` of the run that recorded it: the latest
+    verdict of each, where the newest run may have scored only some of them."""
+    store = HistoryStore(directory)
+    records = store.records()
+    report_problems(store)
+    if not records:
+        raise HistoryError(
+            f"no readable records in {directory}",
+            hint="point --history-dir at the history folder, or record runs first",
+        )
+    newest: dict[str, dict[str, Any]] = {}
+    for record in reversed(records):
+        for spec in specs_of(record):
+            key = str(spec.get("spec", spec.get("name", "")))
+            if key not in newest:
+                newest[key] = {
+                    **spec,
+                    "model_version": record["model_version"],
+                    "started_utc": record["started_utc"],
+                }
+    return list(newest.values())
 
 
 def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:

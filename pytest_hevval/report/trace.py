@@ -120,7 +120,8 @@ def trace_rows(
     """The traceability rows of a run's spec results, requirement by requirement.
 
     ``listed``: the team's requirement IDs; those no item verifies become uncovered rows,
-    and linked IDs not among them are marked ``listed=False``.
+    and linked IDs not among them are marked ``listed=False``. A result's own
+    ``model_version`` (a history's newest result of each spec) wins over ``model_version``.
     """
     team = list(dict.fromkeys(listed)) if listed is not None else None
     rows: list[TraceRow] = []
@@ -141,7 +142,7 @@ def trace_rows(
             "phi": spec.get("phi"),
             "phi_low": interval.get("low"),
             "phi_high": interval.get("high"),
-            "model_version": model_version,
+            "model_version": spec.get("model_version", model_version),
             "reference": reference.get("path"),
             "reference_digest": _digest_text(reference),
             "model": _model_text(data.get("model") or {}),
