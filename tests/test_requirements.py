@@ -250,3 +250,19 @@ def test_trace_rows_of_a_whole_spec_requirement_judge_the_whole_spec() -> None:
         ("R-2", "PASS", "a"),
     ]
     assert "ref.csv (sha256:ab)" in render_trace(rows, "table")
+
+
+@pytest.mark.parametrize("parallel", [False, True], ids=["serial", "xdist"])
+def test_a_campaign_gate_verifies_the_specs_requirements(
+    pytester: pytest.Pytester, parallel: bool
+) -> None:
+    from tests.test_campaign import write_campaign
+
+    write_campaign(pytester.path)
+    spec = pytester.path / "fleet.hevval.yaml"
+    spec.write_text(spec.read_text().replace("sets:\n", "requirements: [FLEET-1]\nsets:\n"))
+    extra = ["-p", "xdist", "-n", "2"] if parallel else []
+    pytester.runpytest("--hevval", "--hevval-no-history", "--junitxml=out.xml", *extra)
+    links = _xray_links(pytester.path / "out.xml")
+    assert links["campaign"][:2] == (["FLEET-1"], ["FLEET-1"])
+    assert links["Phi"][0] == ["FLEET-1"]

@@ -16,6 +16,7 @@ from pytest_hevval.errors import SpecError
 from pytest_hevval.history.runtime import runtime_changes
 from pytest_hevval.results.runtime import RUNTIME_SLOWDOWN, ModelRuntime, RuntimeGate
 from pytest_hevval.spec.load import parse_spec_text
+from tests.strategies import call_times
 from tests.test_plugin import write_data
 
 pytest_plugins = ["pytester"]
@@ -164,10 +165,7 @@ def _result(spec: str, runtime: ModelRuntime) -> dict[str, object]:
     return {"spec": spec, "runtime": runtime.to_dict()}
 
 
-walls = st.lists(st.floats(0.01, 10.0), min_size=1, max_size=5)
-
-
-@given(walls, walls, st.floats(0.5, 3.0))
+@given(call_times, call_times, st.floats(0.5, 3.0))
 def test_the_rule_judges_the_fastest_calls_cpu_and_not_the_wall_clock(
     before: list[float], wall: list[float], work: float
 ) -> None:
@@ -185,7 +183,7 @@ def test_the_rule_judges_the_fastest_calls_cpu_and_not_the_wall_clock(
     assert change.regression == (min(before) * work > RUNTIME_SLOWDOWN * min(before))
 
 
-@given(walls)
+@given(call_times)
 def test_runtime_round_trips_through_json(calls: list[float]) -> None:
     runtime = ModelRuntime(
         kind="fmu",
@@ -228,3 +226,10 @@ def test_an_fmu_run_reports_its_cost_steps_and_guid(tmp_path: Path) -> None:
     assert record.meta["steps"] == 200
     assert "events" not in record.meta
     assert len(record.meta["guid"]) > 8
+
+
+def test_the_runtime_item_under_xdist(timed: pytest.Pytester) -> None:
+    timed.makefile(".hevval.yaml", timed=_spec(0.05, "runtime: {min_realtime_factor: 100000}"))
+    result = timed.runpytest("--hevval", "-p", "xdist", "-n", "2")
+    result.assert_outcomes(passed=4, failed=1)
+    result.stdout.fnmatch_lines(["*FAILED timed.hevval.yaml::runtime*"])

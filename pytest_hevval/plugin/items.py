@@ -300,6 +300,7 @@ class CampaignItem(_SpecItem):
                 for name, o in self.outcomes.items()
             }
         )
+        self.user_properties.extend(requirement_properties(list(self.spec.requirements)))
         if pass_rate is not None:
             self.user_properties.append(("pass_rate", f"{pass_rate:.6f}"))
         if failure is not None:
@@ -358,6 +359,10 @@ def defer_campaign_gates(items: list[pytest.Item], state: HevvalSession) -> list
                     "location": [fspath, lineno, domain],
                     "keywords": sorted(item.keywords),
                     "recordings": [state.relative(r.key) for r in item.spec.per_recording()],
+                    # The campaign verifies the spec's own requirements as a whole.
+                    "properties": [
+                        list(p) for p in requirement_properties(list(item.spec.requirements))
+                    ],
                 }
             )
         else:
