@@ -250,6 +250,7 @@ def test_trace_rows_of_a_whole_spec_requirement_judge_the_whole_spec() -> None:
         ("R-2", "PASS", "a"),
     ]
     assert "ref.csv (sha256:ab)" in render_trace(rows, "table")
+    assert render_trace(rows[:1], "table").endswith("\n1 requirement: 0 pass, 1 fail\n")
 
 
 @pytest.mark.parametrize("parallel", [False, True], ids=["serial", "xdist"])

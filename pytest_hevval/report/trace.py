@@ -251,7 +251,8 @@ def _summary(rows: Sequence[TraceRow]) -> str:
             requirements[row.requirement] = row.status
     counts = {s: sum(1 for v in requirements.values() if v == s) for s in ("PASS", "FAIL")}
     uncovered = sum(1 for v in requirements.values() if v == "UNCOVERED")
-    text = f"{len(requirements)} requirements: {counts['PASS']} pass, {counts['FAIL']} fail"
+    many = "s" * (len(requirements) != 1)
+    text = f"{len(requirements)} requirement{many}: {counts['PASS']} pass, {counts['FAIL']} fail"
     return text + (f", {uncovered} uncovered" if uncovered else "")
 
 
