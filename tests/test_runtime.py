@@ -118,6 +118,13 @@ def test_runtime_is_measured_reported_recorded_and_gated(timed: pytest.Pytester)
     )
     properties = {p.get("name"): p.get("value") for p in case.iter("property")}
     assert float(properties["realtime_factor"]) < 1000
+    phi = next(
+        c for c in ET.parse(timed.path / "out.xml").iter("testcase") if c.get("name") == "Phi"
+    )
+    assert (
+        float(next(p.get("value") for p in phi.iter("property") if p.get("name") == "model_cpu_s"))
+        >= 0.2
+    )
     assert case.find("failure") is not None
 
 

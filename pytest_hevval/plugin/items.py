@@ -193,6 +193,13 @@ class _SpecItem(pytest.Item):
             requirement_properties(result.requirements if signal is None else signal.requirements)
         )
         self.user_properties.append(("phi", f"{result.phi:.6f}"))
+        if signal is None and result.runtime is not None:
+            runtime = result.runtime
+            self.user_properties += [
+                ("model_wall_s", f"{runtime.wall_median_s:.6g}"),
+                ("model_cpu_s", f"{runtime.cpu_median_s:.6g}"),
+                ("realtime_factor", f"{runtime.realtime_factor:.6g}"),
+            ]
         if signal is not None:
             for name, value in signal.lambdas.items():
                 self.user_properties.append((junit_property(name), f"{value:.6f}"))
@@ -257,14 +264,7 @@ class RuntimeItem(_SpecItem):
         result = self.result
         self._record(None)
         runtime = result.runtime
-        if runtime is None:
-            return
-        self.user_properties += [
-            ("model_wall_s", f"{runtime.wall_median_s:.6g}"),
-            ("model_cpu_s", f"{runtime.cpu_median_s:.6g}"),
-            ("realtime_factor", f"{runtime.realtime_factor:.6g}"),
-        ]
-        if not runtime.passed:
+        if runtime is not None and not runtime.passed:
             raise ThresholdMissed(runtime_report(result, self.line))
 
 
