@@ -5,6 +5,8 @@
     hevval diagnose SPEC [--signal PATH] [--json PATH]
     hevval compare BEFORE AFTER [--format table|md|json] [--compare-fail EXPR]
     hevval history [--spec S] [--signal PATH] [--plot FILE]
+    hevval trace [RUN] [--requirements FILE] [--format table|md|csv|html|json]
+    hevval evidence [RUN] [--output PATH]
     hevval --version
 
 One argparse tree. An option that also exists as a pytest flag is spelled the same, without
@@ -135,6 +137,8 @@ def _run(args: argparse.Namespace) -> int:
         payload = {
             "schema_version": 1,
             "hevval_version": __version__,
+            # The run's facts, as a history record holds them (hevval evidence reads them).
+            "run": publisher.run_facts(),
             "passed": verdict.passed,
             "verdict": verdict.to_dict(),
             "specs": dicts(),
@@ -325,6 +329,8 @@ def _compare(args: argparse.Namespace) -> int:
     from .history import compare, load_side, parse_compare_fail, regressions
     from .history.compare import campaign_change_lines
     from .history.render import render
+    from .history.runtime import runtime_change_lines, runtime_changes
+    from .results.codec import plain_json
 
     rules = (
         parse_compare_fail(args.compare_fail, option="--compare-fail")
@@ -343,10 +349,57 @@ def _compare(args: argparse.Namespace) -> int:
     )
     found = regressions(comparison, rules) if rules is not None else None
     text = _with_pairings(render(comparison, args.format, found), comparison, args.format)
+    slower = runtime_changes(before, after)
     if args.format != "json":
         text += "".join(f"\n{line}\n" for line in campaign_change_lines(comparison))
+        text += "".join(
+            f"\n{line}\n" for line in runtime_change_lines(slower, before_label, after_label)
+        )
+    elif slower:
+        document = json.loads(text)
+        document["runtime"] = plain_json([change.to_dict() for change in slower])
+        text = json.dumps(document, indent=2, ensure_ascii=False, allow_nan=False) + "\n"
     _write(text, args.output)
-    return 1 if found else 0
+    # A runtime regression fails the comparison as any other when regressions are to fail it.
+    slowed = rules is not None and any(change.regression for change in slower)
+    return 1 if found or slowed else 0
+
+
+def _trace(args: argparse.Namespace) -> int:
+    """``hevval trace``: each requirement → the items that verify it → their latest verdict."""
+    from .history import latest_results, load_side
+    from .report.trace import read_requirement_list, render_trace, trace_rows
+
+    listed = read_requirement_list(args.requirements) if args.requirements else None
+    if args.run is None:
+        # Each spec's newest recorded verdict, whichever run recorded it.
+        rows = trace_rows(latest_results(Path(args.history_dir)), listed=listed)
+    else:
+        specs, label = load_side(args.run, Path(args.history_dir))
+        rows = trace_rows(specs, model_version=label, listed=listed)
+    if not rows:
+        print(
+            f"hevval trace: no spec of {args.run} names requirements "
+            "(give specs `requirements: [ID, ...]`, see docs/spec.md)",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    _write(render_trace(rows, args.format), args.output)
+    failed = any(row.passed is not True for row in rows)
+    return EXIT_FAILED if failed else EXIT_OK
+
+
+def _evidence(args: argparse.Namespace) -> int:
+    """``hevval evidence``: the evidence record of a run, from its JSON or its history record."""
+    from .history import load_document
+    from .report.evidence import render_evidence
+
+    document, source = load_document(args.run or "history:latest", Path(args.history_dir))
+    # A history record holds the run's facts at its top, a run's JSON under "run".
+    facts = document if source == "history record" else document.get("run") or {}
+    text = render_evidence(document["specs"], facts, source=source)
+    _write(text, args.output)
+    return EXIT_OK
 
 
 def _with_pairings(text: str, comparison: Comparison, fmt: str) -> str:
@@ -516,6 +569,30 @@ def _parser() -> argparse.ArgumentParser:
         default=0.01,
         help="smallest change of Φ or λ reported as a step (default 0.01)",
     )
+    trace = commands.add_parser(
+        "trace",
+        help="requirements → the specs and signals that verify them → their latest verdict",
+        description="Each requirement the specs name, the specs and signals that verify it, "
+        "and their latest verdict with Φ and its interval, the model version and the data. "
+        "With --requirements, listed requirements that nothing verifies show as uncovered.",
+    )
+    _recorded_run(trace, "default: each spec's newest recorded result")
+    trace.add_argument(
+        "--requirements",
+        metavar="FILE",
+        help="the team's requirement IDs: one a line, or a CSV file whose first column holds them",
+    )
+    trace.add_argument("--format", choices=("table", "md", "csv", "html", "json"), default="table")
+    trace.add_argument("--output", metavar="PATH", help="write here instead of stdout")
+    evidence = commands.add_parser(
+        "evidence",
+        help="the evidence record of a run (JSON, with a published schema)",
+        description="Write the evidence record of a run: tool and environment, the spec and "
+        "data files' digests, the model's identity and parameters, every verdict with its "
+        "interval, the requirement links and the model's runtime (docs/evidence.md).",
+    )
+    _recorded_run(evidence, "default history:latest, the newest record")
+    evidence.add_argument("--output", metavar="PATH", help="write here instead of stdout")
     kernel = commands.add_parser(
         "kernel",
         help="show which path scores records; --compile fills the compiled kernel's cache",
@@ -530,6 +607,16 @@ def _parser() -> argparse.ArgumentParser:
         "environment; NUMBA_CACHE_DIR chooses the folder)",
     )
     return parser
+
+
+def _recorded_run(command: argparse.ArgumentParser, default_help: str) -> None:
+    """The RUN operand of ``trace`` and ``evidence``, and the history folder it is looked up in."""
+    command.add_argument(
+        "run",
+        nargs="?",
+        help=f"{default_help}; history:<version>, a history record or a `hevval run --json` file",
+    )
+    _shared(command, "history-dir")
 
 
 def _kernel(args: argparse.Namespace) -> int:
@@ -576,6 +663,8 @@ _COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "diagnose": _diagnose,
     "compare": _compare,
     "history": _history,
+    "trace": _trace,
+    "evidence": _evidence,
     "kernel": _kernel,
 }
 

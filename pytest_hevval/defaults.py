@@ -10,10 +10,13 @@ __all__ = [
     "REGION_BINS",
     "REGION_MIN_SAMPLES",
     "REPORT_DIR",
+    "RUNTIME_CLOCKS",
+    "RUNTIME_REPEAT",
     "SPEC_GLOBS",
     "UNCERTAINTY_SIGMA",
     "UNKNOWN_MODEL_VERSION",
     "WITHIN_UNCERTAINTY",
+    "requirement_id_problem",
     "split_key",
 ]
 
@@ -36,6 +39,14 @@ UNCERTAINTY_SIGMA = 2.0
 #: What a threshold missed by less than the measurement uncertainty does when the spec's
 #: ``measurement.within_uncertainty`` does not say: it still fails.
 WITHIN_UNCERTAINTY = "fail"
+#: Calls of a model that runs itself per recording, when ``runtime.repeat`` does not say: once,
+#: since every extra call is the model's full cost again.
+RUNTIME_REPEAT = 1
+#: The most calls ``runtime.repeat`` may ask for.
+MAX_RUNTIME_REPEAT = 50
+#: The clocks a ``runtime:`` gate may judge, the default first: CPU time (the model's own work,
+#: which load on the machine barely moves) or wall time.
+RUNTIME_CLOCKS = ("cpu", "wall")
 
 #: Between a campaign spec's path and a recording id in a result's key and on the command line.
 RECORDING_SEPARATOR = "::"
@@ -49,3 +60,11 @@ def split_key(key: str) -> tuple[str, str | None]:
 
 #: The model version of a run that names none, outside a git checkout.
 UNKNOWN_MODEL_VERSION = "unknown"
+
+
+def requirement_id_problem(text: str) -> str | None:
+    """Why ``text`` is no requirement ID, or None: an ID is one non-empty line of printable
+    characters without commas or blanks around it (JUnit carries IDs comma-separated)."""
+    if not text.strip() or text != text.strip() or "," in text or not text.isprintable():
+        return "must be a non-empty requirement ID on one line, without commas or blanks around it"
+    return None

@@ -62,7 +62,7 @@ OPTIONS: tuple[Option, ...] = (
         "failed",
         ("off", "failed", "all"),
     ),
-    Option("report", "string", "write reports: comma-separated html,json,md", ""),
+    Option("report", "string", "write reports: comma-separated html,json,md,evidence", ""),
     Option("report-dir", "string", "folder for reports", REPORT_DIR),
     Option(
         "history",

@@ -135,6 +135,16 @@ class Publisher:
         be found (no git, no --hevval-model-version), ``this run``."""
         return "this run" if self.model_version == UNKNOWN_MODEL_VERSION else self.model_version
 
+    def run_facts(self) -> dict[str, Any]:
+        """The run's model version, start and tool versions, as its history record has them."""
+        from .history import default_tool_versions, format_utc
+
+        return {
+            "model_version": self.model_version,
+            "started_utc": format_utc(self.started),
+            "tool_versions": default_tool_versions(),
+        }
+
     @property
     def baseline_label(self) -> str | None:
         """The baseline in words (model version, commit, time), or None without one."""
@@ -291,6 +301,7 @@ class Publisher:
                     title=REPORT_TITLE,
                     verdict=out.verdict,
                     comparison=None if comparison is None else comparison.to_dict(),
+                    facts=self.run_facts(),
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")

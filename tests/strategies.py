@@ -26,6 +26,8 @@ SERIES_KINDS = ("persistent", "random_walk", "oscillating", "trending", "heavy_t
 
 #: Finite sample values over twelve orders of magnitude.
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_infinity=False)
+#: The times of one to five calls of a model, in seconds.
+call_times = st.lists(st.floats(0.01, 10.0), min_size=1, max_size=5)
 
 
 @st.composite

@@ -76,6 +76,7 @@ __all__ = [
     "finish_run",
     "kernel_for",
     "load_or_raise",
+    "loaded_path",
     "squares_rule_out_scale",
     "start_background_compile",
 ]
@@ -528,6 +529,12 @@ def active_path() -> str:
     if requested_path() == "numpy" or not _numba_installed():
         return "numpy"
     return "numba" if _load() is not None else "numpy"
+
+
+def loaded_path() -> str:
+    """``numba`` when this process has loaded the compiled kernel (some record took it),
+    else ``numpy``; loads nothing. Recorded with a run as the path its scoring took."""
+    return "numba" if _loaded.get("module") is not None else "numpy"
 
 
 def compile_note() -> str | None:

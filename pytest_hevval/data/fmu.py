@@ -22,6 +22,7 @@ import numpy.typing as npt
 from ..errors import DataError, MissingExtraError, did_you_mean
 from ..files import check_input
 from .record import Channel, Record
+from .runtime import measure_call
 
 __all__ = ["FMU_INTERFACES", "run_fmu", "tolerance_problem"]
 
@@ -142,24 +143,37 @@ def run_fmu(
         except Exception as exc:
             raise _failure(fmu_path, "cannot load the FMU's binary", exc, messages) from None
         fatal = False
+        steps = 0
+
+        def count_step(*_: Any) -> bool:
+            nonlocal steps
+            steps += 1
+            return True
+
         try:
-            result = fmpy.simulate_fmu(
-                unzipdir,
-                validate=False,
-                start_time=start_time,
-                stop_time=stop_time,
-                step_size=step_size,
-                output_interval=step_size,
-                fmi_type=fmi_type,
-                relative_tolerance=tolerance,
-                start_values=start_values,
-                input=signals,
-                output=list(dict.fromkeys(ref.variable for ref in recorded.values())),
-                model_description=description,
-                fmu_instance=instance,
-                step_finished=_discrete_inputs_held(
-                    instance, variables, signals, fmi_version, fmi_type
-                ),
+            held = _discrete_inputs_held(instance, variables, signals, fmi_version, fmi_type)
+
+            def step_finished(time: float, recorder: Any) -> bool:
+                count_step()
+                return held(time, recorder) if held is not None else True
+
+            result, cost = measure_call(
+                lambda: fmpy.simulate_fmu(
+                    unzipdir,
+                    validate=False,
+                    start_time=start_time,
+                    stop_time=stop_time,
+                    step_size=step_size,
+                    output_interval=step_size,
+                    fmi_type=fmi_type,
+                    relative_tolerance=tolerance,
+                    start_values=start_values,
+                    input=signals,
+                    output=list(dict.fromkeys(ref.variable for ref in recorded.values())),
+                    model_description=description,
+                    fmu_instance=instance,
+                    step_finished=step_finished,
+                )
             )
         except Exception as exc:
             fatal = getattr(exc, "status", None) == _STATUS_FATAL
@@ -174,6 +188,8 @@ def run_fmu(
 
     record = _result_record(fmu_path, result, recorded, variables, description, fmi_type)
     record.meta["unscored"] = unscored
+    record.meta["cost"] = cost
+    record.meta["steps"] = steps
     return record
 
 
@@ -757,6 +773,7 @@ def _result_record(
     # value after the event is the one that holds from then on.
     keep = np.append(np.diff(time) > 0, True)
     time = time[keep]
+    events = int(keep.size - np.count_nonzero(keep)) if fmi_type == "ModelExchange" else None
     if time.size == 0 or np.any(np.diff(time) <= 0):
         raise DataError(
             "the simulation returned no usable time stamps",
@@ -791,6 +808,13 @@ def _result_record(
             "fmi_type": fmi_type,
             "model_name": str(description.modelName),
             "outputs": {signal: ref.name for signal, ref in outputs.items()},
+            # FMI 1 and 2 name the build by its GUID, FMI 3 by its instantiation token.
+            "guid": str(
+                getattr(description, "guid", None)
+                or getattr(description, "instantiationToken", None)
+                or ""
+            ),
+            **({"events": events} if events is not None else {}),
         },
     )
 

@@ -6,6 +6,7 @@ and runs that function. Nothing runs unless a spec names it.
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import sys
 import traceback
@@ -18,8 +19,15 @@ import numpy as np
 
 from ..errors import DataError, HevvalError
 from .record import Channel, Record, SourceOptions
+from .runtime import measure_call
 
-__all__ = ["import_callable", "record_from_frame", "reference_frame", "run_callable"]
+__all__ = [
+    "callable_identity",
+    "import_callable",
+    "record_from_frame",
+    "reference_frame",
+    "run_callable",
+]
 
 
 @contextmanager
@@ -59,6 +67,21 @@ def import_callable(reference: str, folders: Iterable[Path], *, source: str) -> 
     if not callable(target):
         raise DataError(f"{reference!r} is not callable", file=source, key="model.callable")
     return target  # type: ignore[no-any-return]
+
+
+def callable_identity(reference: str) -> dict[str, str]:
+    """The file of an imported model callable's module and its SHA-256 (empty when the module
+    has no file): what names the model's code in an evidence record. Only that file: modules
+    it imports and data files it reads are not covered."""
+    module = sys.modules.get(reference.partition(":")[0])
+    file = getattr(module, "__file__", None)
+    if not file:
+        return {}
+    try:
+        digest = hashlib.sha256(Path(file).read_bytes()).hexdigest()
+    except OSError:
+        return {"module_file": str(file)}
+    return {"module_file": str(file), "module_sha256": digest}
 
 
 def reference_frame(reference: Record, inputs: Iterable[str], time_name: str) -> Any:
@@ -165,7 +188,7 @@ def run_callable(
     label = f"model {reference_to}"
     try:
         with _search_path(folders):
-            output = function(frame, **params)
+            output, cost = measure_call(lambda: function(frame, **params))
     except HevvalError:
         raise
     except SystemExit as exc:
@@ -202,7 +225,9 @@ def run_callable(
             hint=f"run {reference_to} on the columns it was given ({_listing(given)}; "
             "`inputs:` under `model:` chooses them) to debug it",
         ) from None
-    return record_from_frame(output, model_time, label, options)
+    record = record_from_frame(output, model_time, label, options)
+    record.meta["cost"] = cost
+    return record
 
 
 def _model_line(exc: BaseException, folders: Iterable[Path]) -> str:

@@ -25,7 +25,7 @@ from .compare import (
     specs_of,
 )
 from .index import TREND_RUNS
-from .load import load_side, report_problems
+from .load import latest_results, load_document, load_side, report_problems
 from .ratchet import (
     DEFAULT_MARGIN,
     RatchetOutcome,
@@ -100,6 +100,8 @@ __all__ = [
     "format_utc",
     "history_table",
     "is_ci",
+    "latest_results",
+    "load_document",
     "load_side",
     "load_sidecar",
     "make_record",

@@ -16,7 +16,15 @@ from .compare import specs_of
 from .records import migrate_record
 from .store import HistoryStore
 
-__all__ = ["HISTORY_PREFIX", "NAMED_BASELINES", "baseline_record", "load_side", "report_problems"]
+__all__ = [
+    "HISTORY_PREFIX",
+    "NAMED_BASELINES",
+    "baseline_record",
+    "latest_results",
+    "load_document",
+    "load_side",
+    "report_problems",
+]
 
 #: How a compare operand names a recorded run.
 HISTORY_PREFIX = "history:"
@@ -40,6 +48,31 @@ def report_problems(store: HistoryStore) -> None:
         print(f"skipped {problem}", file=sys.stderr)
 
 
+def latest_results(directory: Path) -> list[dict[str, Any]]:
+    """The newest recorded result of every spec (and campaign recording) in the history, each
+    with the ``model_version`` and ``started_utc`` of the run that recorded it: the latest
+    verdict of each, where the newest run may have scored only some of them."""
+    store = HistoryStore(directory)
+    records = store.records()
+    report_problems(store)
+    if not records:
+        raise HistoryError(
+            f"no readable records in {directory}",
+            hint="point --history-dir at the history folder, or record runs first",
+        )
+    newest: dict[str, dict[str, Any]] = {}
+    for record in reversed(records):
+        for spec in specs_of(record):
+            key = str(spec.get("spec", spec.get("name", "")))
+            if key not in newest:
+                newest[key] = {
+                    **spec,
+                    "model_version": record["model_version"],
+                    "started_utc": record["started_utc"],
+                }
+    return list(newest.values())
+
+
 def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
     """Resolve a compare operand to (spec results, label).
 
@@ -48,6 +81,16 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
     ``history:<model version>`` (looked up in ``directory``),
     a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
     """
+    document, source = load_document(ref, directory)
+    version = document.get("model_version")
+    if source == "hevval run" and not (isinstance(version, str) and version):
+        version = Path(ref).name
+    return document["specs"], str(version)
+
+
+def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
+    """The whole run ``ref`` names (the forms of :func:`load_side`), and where it comes from:
+    ``history record`` (migrated to the current schema) or ``hevval run`` (its JSON output)."""
     if ref.startswith(HISTORY_PREFIX):
         wanted = ref[len(HISTORY_PREFIX) :]
         store = HistoryStore(directory)
@@ -85,7 +128,7 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
                 key=ref,
                 hint="recorded versions: " + ", ".join(versions[-10:]),
             )
-        return specs_of(record), record["model_version"]
+        return dict(record), "history record"
     path = Path(ref)
     try:
         document = read_json(path)
@@ -114,11 +157,9 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
         and "schema_version" in document
         and ("model_version" in document or "results" in document)
     ):
-        record = migrate_record(document, file=ref)
-        return specs_of(record), record["model_version"]
+        return migrate_record(document, file=ref), "history record"
     if isinstance(document, dict) and isinstance(document.get("specs"), list):
-        version = document.get("model_version")
-        return specs_of(document), version if isinstance(version, str) and version else path.name
+        return {**document, "specs": specs_of(document)}, "hevval run"
     raise HistoryError(
         "neither a history record nor a run result (no 'specs' list)",
         file=ref,

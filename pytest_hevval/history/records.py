@@ -82,6 +82,8 @@ _SPEC_KEYS = (
     "data",
     "alignment",
     "local",
+    "requirements",
+    "runtime",
 )
 _SIGNAL_KEYS = (
     "path",
@@ -105,6 +107,7 @@ _SIGNAL_KEYS = (
     "intervals",
     "block_samples",
     "within_uncertainty",
+    "requirements",
 )
 _HINT_CORRUPT = (
     "the file was not written by pytest-hevval or was edited by hand; "
@@ -157,14 +160,19 @@ def record_time(record: Mapping[str, Any]) -> datetime:
 
 
 def default_tool_versions() -> dict[str, str]:
-    """Versions of pytest-hevval, numpy, scipy and Python, for reproducing a recorded run."""
+    """Versions of pytest-hevval, numpy, scipy, pandas and Python, the scoring path (``kernel``:
+    numba or numpy) and the platform, for reproducing a recorded run."""
+    from ..core.kernel import loaded_path
+
     versions: dict[str, str] = {}
-    for dist in ("pytest-hevval", "numpy", "scipy"):
+    for dist in ("pytest-hevval", "numpy", "scipy", "pandas"):
         try:
             versions[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:
             versions[dist] = "unknown"
     versions["python"] = platform.python_version()
+    versions["kernel"] = loaded_path()
+    versions["platform"] = platform.platform()
     return versions
 
 

@@ -20,7 +20,7 @@ from _pytest._code.code import TerminalRepr
 
 from ..core.registry import describe
 from ..errors import HevvalError
-from ..report.terminal import phi_report, signal_failure_report
+from ..report.terminal import phi_report, runtime_report, signal_failure_report
 from ..results.spec_result import SignalResult, SpecResult
 from ..scoring.engine import Evaluation
 from ..spec.load import load_spec
@@ -32,11 +32,29 @@ __all__ = [
     "CampaignItem",
     "PhiItem",
     "Recording",
+    "RuntimeItem",
     "SignalItem",
     "SpecFile",
     "carry_spec_items",
     "defer_campaign_gates",
 ]
+
+
+#: JUnit ``<property>`` names that link an item to requirements: Xray's ``requirements``
+#: (comma-separated issue keys) and the generic ``requirement``, one property per ID
+#: (docs/reports.md, "Requirements in JUnit").
+REQUIREMENTS_PROPERTY = "requirements"
+REQUIREMENT_PROPERTY = "requirement"
+
+
+def requirement_properties(requirements: list[str]) -> list[tuple[str, str]]:
+    """The JUnit properties that carry ``requirements``, in the importers' conventions."""
+    if not requirements:
+        return []
+    return [
+        (REQUIREMENTS_PROPERTY, ",".join(requirements)),
+        *((REQUIREMENT_PROPERTY, requirement) for requirement in requirements),
+    ]
 
 
 def junit_property(name: str) -> str:
@@ -84,6 +102,8 @@ def _spec_items(parent: pytest.Collector, spec: Spec) -> Iterator[pytest.Item]:
     for _, path, node in spec.walk():
         yield SignalItem.from_parent(parent, name="/".join(path), spec=spec, line=node.line)
     yield PhiItem.from_parent(parent, name="Phi", spec=spec, line=spec.min_phi_line)
+    if spec.runtime.gated:
+        yield RuntimeItem.from_parent(parent, name="runtime", spec=spec, line=spec.runtime.line)
 
 
 class Recording(pytest.Collector):
@@ -169,7 +189,17 @@ class _SpecItem(pytest.Item):
 
     def _record(self, signal: SignalResult | None) -> None:
         result = self.result
+        self.user_properties.extend(
+            requirement_properties(result.requirements if signal is None else signal.requirements)
+        )
         self.user_properties.append(("phi", f"{result.phi:.6f}"))
+        if signal is None and result.runtime is not None:
+            runtime = result.runtime
+            self.user_properties += [
+                ("model_wall_s", f"{runtime.wall_median_s:.6g}"),
+                ("model_cpu_s", f"{runtime.cpu_median_s:.6g}"),
+                ("realtime_factor", f"{runtime.realtime_factor:.6g}"),
+            ]
         if signal is not None:
             for name, value in signal.lambdas.items():
                 self.user_properties.append((junit_property(name), f"{value:.6f}"))
@@ -227,6 +257,17 @@ class PhiItem(_SpecItem):
         _raise_regressions(self.state.regressions_for(result, None), "Φ")
 
 
+class RuntimeItem(_SpecItem):
+    """The model's runtime on the recording against the spec's ``runtime:`` gate."""
+
+    def judge(self) -> None:
+        result = self.result
+        self._record(None)
+        runtime = result.runtime
+        if runtime is not None and not runtime.passed:
+            raise ThresholdMissed(runtime_report(result, self.line))
+
+
 def _raise_regressions(found: list[str], what: str) -> None:
     if found:
         raise ThresholdMissed(
@@ -259,6 +300,7 @@ class CampaignItem(_SpecItem):
                 for name, o in self.outcomes.items()
             }
         )
+        self.user_properties.extend(requirement_properties(list(self.spec.requirements)))
         if pass_rate is not None:
             self.user_properties.append(("pass_rate", f"{pass_rate:.6f}"))
         if failure is not None:
@@ -295,7 +337,7 @@ def carry_spec_items(items: list[pytest.Item]) -> None:
     """
     groups: dict[str, list[_SpecItem]] = {}
     for item in items:
-        if isinstance(item, (SignalItem, PhiItem)):
+        if isinstance(item, (SignalItem, PhiItem, RuntimeItem)):
             groups.setdefault(item.spec.key, []).append(item)
     for *carried, carrier in groups.values():
         carrier.carried = carried
@@ -317,6 +359,10 @@ def defer_campaign_gates(items: list[pytest.Item], state: HevvalSession) -> list
                     "location": [fspath, lineno, domain],
                     "keywords": sorted(item.keywords),
                     "recordings": [state.relative(r.key) for r in item.spec.per_recording()],
+                    # The campaign verifies the spec's own requirements as a whole.
+                    "properties": [
+                        list(p) for p in requirement_properties(list(item.spec.requirements))
+                    ],
                 }
             )
         else:

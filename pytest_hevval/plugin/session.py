@@ -431,7 +431,10 @@ def _log_gate(
             "outcome": "passed" if failure is None else "failed",
             "when": "call",
             "longrepr": failure,
-            "user_properties": [] if pass_rate is None else [["pass_rate", f"{pass_rate:.6f}"]],
+            "user_properties": [
+                *gate.get("properties", []),
+                *([] if pass_rate is None else [["pass_rate", f"{pass_rate:.6f}"]]),
+            ],
         },
     )
 

@@ -23,7 +23,9 @@ from ..results.local import LocalFailure
 from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg
 from .sentences import local_failure_text
+from .terminal import runtime_of, runtime_text
 from .text import campaigns_of
+from .trace import trace_rows
 
 __all__ = ["render_html"]
 
@@ -141,7 +143,10 @@ def _spec_view(index: int, spec: Mapping[str, Any], share: svg.PathShare) -> dic
     phi = spec.get("phi")
     min_phi = spec.get("min_phi")
     phi_low, phi_high = model.interval_bounds(spec.get("phi_interval"))
+    runtime, model_kind = runtime_of(spec)
     return {
+        "runtime_text": runtime_text(runtime, model_kind),
+        "runtime_failures": runtime.failures() if runtime is not None else [],
         "phi_low": phi_low,
         "phi_high": phi_high,
         "phi_low_bar": _percent(phi_low) if phi_low is not None else None,
@@ -253,6 +258,7 @@ def render_html(
         specs=specs,
         worst=worst,
         campaigns=campaigns_of(spec_results),
+        trace=trace_rows(spec_results),
         characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,
         short_labels=model.SHORT_LABELS,

@@ -167,14 +167,18 @@ def outcome_line(
     for key, verdict in by_spec.items():
         files[key] = files.get(key, True) and verdict.passed
     failed_gates = sum(not v.passed for v in by_spec.values())
-    items = signal_count + len(results) + len(by_spec)
-    failed = failed_signals + failed_phi + failed_gates
+    timed = [r.runtime for r in results if r.runtime is not None and r.runtime.gate is not None]
+    failed_runtimes = sum(not runtime.passed for runtime in timed)
+    items = signal_count + len(results) + len(by_spec) + len(timed)
+    failed = failed_signals + failed_phi + failed_gates + failed_runtimes
     counts = [
         f"{failed_signals} of {signal_count} signal{'s' * (signal_count != 1)}",
         f"{failed_phi} of {len(results)} Φ",
     ]
     if by_spec:
         counts.append(f"{failed_gates} of {len(by_spec)} campaign gate{'s' * (len(by_spec) != 1)}")
+    if timed:
+        counts.append(f"{failed_runtimes} of {len(timed)} runtime gate{'s' * (len(timed) != 1)}")
     passing_files = sum(files.values())
     cause = f" ({by_regression} by regression)" if by_regression else ""
     return (

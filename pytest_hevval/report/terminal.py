@@ -6,10 +6,12 @@ Pure functions over :mod:`pytest_hevval.results.spec_result` objects; no pytest,
 from __future__ import annotations
 
 import shlex
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 from ..core.registry import describe
 from ..results.campaign import CampaignVerdict, campaign_verdicts
+from ..results.runtime import ModelRuntime
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from .sentences import (
@@ -114,6 +116,48 @@ def phi_report(result: SpecResult) -> str:
     return "\n".join(lines)
 
 
+def runtime_text(runtime: ModelRuntime | None, model_kind: object) -> str:
+    """``model 0.21 s (median of 3) for 1413 s simulated: real-time factor 6728, CPU 0.2 s,
+    peak +38 MiB``; or why there is no runtime."""
+    if runtime is None:
+        if model_kind == "file":
+            return "none (the model is exported files: it ran elsewhere)"
+        return "not recorded"
+    calls = f" (median of {runtime.repeats})" if runtime.repeats > 1 else ""
+    parts = [
+        f"model {runtime.wall_median_s:.3g} s{calls} for {runtime.simulated_s:.4g} s simulated",
+        f"real-time factor {runtime.realtime_factor:.4g}",
+        f"CPU {runtime.cpu_median_s:.3g} s",
+    ]
+    if runtime.peak_memory_bytes is not None:
+        parts.append(f"peak +{runtime.peak_memory_bytes / 2**20:.1f} MiB")
+    if runtime.steps is not None:
+        parts.append(f"{runtime.steps} steps")
+    if runtime.events is not None:
+        parts.append(f"{runtime.events} events")
+    return parts[0] + ": " + ", ".join(parts[1:])
+
+
+def runtime_of(spec: Mapping[str, Any]) -> tuple[ModelRuntime | None, object]:
+    """A spec result's runtime (JSON data) and its model's kind, for :func:`runtime_text`."""
+    raw = spec.get("runtime")
+    runtime = ModelRuntime.from_dict(raw) if isinstance(raw, Mapping) else None
+    return runtime, ((spec.get("data") or {}).get("model") or {}).get("kind")
+
+
+def runtime_report(result: SpecResult, line: int) -> str:
+    """Why the model's runtime misses the spec's ``runtime:`` gate."""
+    assert result.runtime is not None
+    lines = [
+        f"the model's runtime missed its gate ({_location(result.spec, line)})",
+        *(f"  {failure}" for failure in result.runtime.failures()),
+        f"  {runtime_text(result.runtime, 'callable')}",
+        "  next: find what made the model slower (hevval compare shows the runtime against a "
+        "recorded run), or, on a loaded machine, let the gate judge more calls (runtime.repeat)",
+    ]
+    return "\n".join(lines)
+
+
 def phi_verdict(result: SpecResult) -> str:
     """``Φ = 0.9207 [0.9139, 0.9276] ≥ min 0.9, FAIL on its signals``: Φ against its own
     minimum, then the spec's verdict, which says why it fails when Φ is not the reason."""
@@ -124,6 +168,8 @@ def phi_verdict(result: SpecResult) -> str:
         gate = f" {sign} min {result.min_phi:g}{on}"
     if result.passed:
         verdict = "PASS"
+    elif result.phi_passed and all(s.passed for s in result.signals):
+        verdict = "FAIL on the model's runtime"
     elif result.phi_passed:
         verdict = "FAIL on its signals"
     else:

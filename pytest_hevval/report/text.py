@@ -268,6 +268,27 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
     return lines
 
 
+def _runtime_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The model's runtime per spec that ran its model (a callable or an FMU)."""
+    from .terminal import runtime_of, runtime_text
+
+    rows = []
+    for spec in spec_results:
+        runtime, kind = runtime_of(spec)
+        if runtime is None and kind != "file":
+            continue
+        failures = runtime.failures() if runtime is not None else []
+        mark = "❌" if failures else "✅" if runtime is not None and runtime.gate else ""
+        gate = "; ".join(failures) or ("met" if mark else "—")
+        rows.append(
+            f"| {mark} {_md(spec.get('name', ''))} | {_md(runtime_text(runtime, kind))} "
+            f"| {_md(gate)} |"
+        )
+    if not rows:
+        return []
+    return ["", "**Model runtime**", "", "| spec | runtime | gate |", "|---|---|---|", *rows]
+
+
 def headline(spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None) -> str:
     """The Markdown headline of a run: its verdict in one line."""
     counts = model.summary(spec_results, verdict)
@@ -329,6 +350,12 @@ def render_markdown(
     lines += _measurement_markdown(spec_results)
     lines += _standard_metrics_markdown(spec_results)
     lines += _campaign_markdown(spec_results)
+    lines += _runtime_markdown(spec_results)
+    from .trace import trace_markdown_section, trace_rows
+
+    trace = trace_rows(spec_results)
+    if trace:
+        lines += ["", *trace_markdown_section(trace, heading="**Requirements**")]
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
         quality = (spec.get("data") or {}).get("quality")

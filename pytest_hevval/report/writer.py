@@ -21,7 +21,12 @@ __all__ = [
 ]
 
 #: Report formats in the order they are written, with their file names.
-FILE_NAMES: dict[str, str] = {"html": "report.html", "json": "report.json", "md": "report.md"}
+FILE_NAMES: dict[str, str] = {
+    "html": "report.html",
+    "json": "report.json",
+    "md": "report.md",
+    "evidence": "evidence.json",
+}
 FORMATS: tuple[str, ...] = tuple(FILE_NAMES)
 #: The comparison with the baseline alone, written beside report.md when a comparison ran.
 COMPARISON_FILE = "comparison.md"
@@ -69,11 +74,14 @@ def write_reports(
     generated_utc: str | None = None,
     verdict: RunVerdict | None = None,
     comparison: Mapping[str, Any] | None = None,
+    facts: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """Write report.html / report.json / report.md for ``formats`` into ``directory``; each
-    says ``verdict``, the run's (else the verdict of the results alone). With ``comparison``
-    (the comparison with the baseline, ``Comparison.to_dict()``) and a verdict, report.json
-    and report.md carry it, and with ``md`` it is also written alone to comparison.md.
+    """Write report.html / report.json / report.md / evidence.json for ``formats`` into
+    ``directory``; each says ``verdict``, the run's (else the verdict of the results alone).
+    With ``comparison`` (the comparison with the baseline, ``Comparison.to_dict()``) and a
+    verdict, report.json and report.md carry it, and with ``md`` it is also written alone to
+    comparison.md. ``facts`` are the run's model version, start and tool versions, which the
+    evidence record holds (docs/evidence.md).
 
     The directory is created if needed; each file is replaced atomically. Returns the written
     paths in the order html, json, md.
@@ -104,6 +112,10 @@ def write_reports(
             from .text import render_json
 
             text = render_json(spec_results, verdict, comparison)
+        elif name == "evidence":
+            from .evidence import render_evidence
+
+            text = render_evidence(spec_results, facts or {}, source="pytest run")
         else:
             from .text import render_markdown
 

@@ -18,6 +18,7 @@ from ..core.uncertainty import Interval, value_text
 from .codec import json_number, keyed_lambdas
 from .local import LocalFailure, LocalResult
 from .measurement import ErrorCheck
+from .runtime import ModelRuntime
 
 __all__ = [
     "ERROR_KEYS",
@@ -125,6 +126,8 @@ class SignalResult:
     #: Thresholds missed by no more than the measurement uncertainty that the spec lets pass
     #: (``measurement.within_uncertainty: pass``); kept to be shown, never failing.
     within_uncertainty: list[Failure] = field(default_factory=list)
+    #: The requirement IDs this signal verifies (the spec's, its ancestors' and its own).
+    requirements: list[str] = field(default_factory=list)
 
     @property
     def passed(self) -> bool:
@@ -210,6 +213,8 @@ class SignalResult:
             out["block_samples"] = self.block_samples
         if self.within_uncertainty:
             out["within_uncertainty"] = [f.to_dict() for f in self.within_uncertainty]
+        if self.requirements:
+            out["requirements"] = list(self.requirements)
         return out
 
     @classmethod
@@ -249,6 +254,7 @@ class SignalResult:
             intervals=_intervals(data.get("intervals"), lambdas),
             block_samples=data.get("block_samples"),
             within_uncertainty=[Failure.from_dict(f) for f in data.get("within_uncertainty") or []],
+            requirements=[str(r) for r in data.get("requirements") or []],
         )
 
 
@@ -277,6 +283,11 @@ class SpecResult:
     phi_interval: Interval | None = None
     #: What ``min_phi`` judges: Φ itself, or the lower or upper bound of its interval.
     min_phi_on: str = "value"
+    #: The requirement IDs the spec as a whole verifies (its ``Phi`` item's).
+    requirements: list[str] = field(default_factory=list)
+    #: What running the model cost; None for a model given as exported files (it ran
+    #: elsewhere) and for results recorded before runtimes were.
+    runtime: ModelRuntime | None = None
 
     @property
     def phi_judged(self) -> float:
@@ -293,8 +304,12 @@ class SpecResult:
         return value_text(self.phi, self.phi_interval)
 
     @property
+    def runtime_passed(self) -> bool:
+        return self.runtime is None or self.runtime.passed
+
+    @property
     def passed(self) -> bool:
-        return self.phi_passed and all(s.passed for s in self.signals)
+        return self.phi_passed and self.runtime_passed and all(s.passed for s in self.signals)
 
     def signal(self, path: str) -> SignalResult:
         for candidate in self.signals:
@@ -339,6 +354,8 @@ class SpecResult:
             "data": self.data,
             "alignment": self.alignment,
             "signals": [s.to_dict() for s in self.signals],
+            **({"requirements": list(self.requirements)} if self.requirements else {}),
+            **({"runtime": self.runtime.to_dict()} if self.runtime is not None else {}),
             **({"local": self.local} if self.local is not None else {}),
             **(
                 {"recording": self.recording, "role": self.role, "campaign": self.campaign}
@@ -370,6 +387,8 @@ class SpecResult:
             campaign=data.get("campaign"),
             phi_interval=_interval(float(data["phi"]), data.get("phi_interval")),
             min_phi_on=str(data.get("min_phi_on", "value")),
+            requirements=[str(r) for r in data.get("requirements") or []],
+            runtime=ModelRuntime.from_dict(data["runtime"]) if data.get("runtime") else None,
         )
 
 

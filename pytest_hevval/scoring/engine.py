@@ -39,6 +39,7 @@ from ..errors import (
 )
 from ..results.diagnosis import SignalDiagnosis
 from ..results.local import LocalFailure, LocalResult
+from ..results.runtime import ModelRuntime, RuntimeGate
 from ..results.spec_result import Failure, SignalResult, SpecResult
 from ..spec.expressions import Expression
 from ..spec.model import SignalSpec, SourceSpec, Spec
@@ -258,18 +259,60 @@ def _check_model_output(spec: Spec) -> None:
 
 def _load_model(
     spec: Spec, reference: Record, cache: DataCache, folders: list[Path]
-) -> tuple[Record, dict[str, Any]]:
+) -> tuple[Record, dict[str, Any], ModelRuntime | None]:
+    """The model's output, what identifies the model, and what running it cost (None for
+    exported files: they ran elsewhere)."""
     model = spec.model
     if model.kind == "file":
         record = cache.read(model, spec.model_columns())
         # The file's digest is computed while the spec is scored; _spec_result waits for it.
-        return record, {"path": model.path, "kind": "file"}
+        return record, {"path": model.path, "kind": "file"}, None
+    runs = [_run_model(spec, reference, folders) for _ in range(spec.runtime.repeat)]
+    record = runs[0]
+    info: dict[str, Any]
+    if model.kind == "callable":
+        from ..data.models import callable_identity
+
+        info = {
+            "callable": model.callable,
+            "params": dict(model.params),
+            "kind": "callable",
+            **callable_identity(str(model.callable)),
+        }
+    else:
+        info = {"path": model.path, "kind": "fmu", "params": dict(model.params)}
+        if record.meta.get("guid"):
+            info["guid"] = record.meta["guid"]
+        if record.meta.get("unscored"):
+            # Outputs without numbers (text, bytes), left out when the spec names no outputs.
+            info["unscored_outputs"] = dict(record.meta["unscored"])
+    costs = [run.meta["cost"] for run in runs]
+    peaks = [c.peak_bytes for c in costs if c.peak_bytes is not None]
+    time = next(iter(record.channels.values())).time if record.channels else None
+    runtime = ModelRuntime(
+        kind=model.kind,
+        simulated_s=float(time[-1] - time[0]) if time is not None and time.size else 0.0,
+        wall_s=tuple(c.wall_s for c in costs),
+        cpu_s=tuple(c.cpu_s for c in costs),
+        peak_memory_bytes=max(peaks) if peaks else None,
+        steps=record.meta.get("steps"),
+        events=record.meta.get("events"),
+        gate=RuntimeGate(spec.runtime.min_realtime_factor, spec.runtime.max_s, spec.runtime.clock)
+        if spec.runtime.gated
+        else None,
+    )
+    return record, info, runtime
+
+
+def _run_model(spec: Spec, reference: Record, folders: list[Path]) -> Record:
+    """One run of a model that runs itself (a callable or an FMU) on ``reference``."""
+    model = spec.model
     if model.kind == "callable":
         from ..data.models import run_callable
 
         inputs = list(model.inputs) or sorted(spec.reference_columns())
         try:
-            record = run_callable(
+            return run_callable(
                 str(model.callable),
                 reference,
                 inputs=inputs,
@@ -283,11 +326,6 @@ def _load_model(
         except DataError as exc:
             # The spec's `model:` line: where the inputs it names are given.
             raise exc.with_context(line=model.line) from None
-        return record, {
-            "callable": model.callable,
-            "params": dict(model.params),
-            "kind": "callable",
-        }
     from ..data.fmu import run_fmu
 
     times = [c.time for c in reference.channels.values() if c.time.shape[0]]
@@ -296,7 +334,7 @@ def _load_model(
     run = model.fmu_run
     start = max(float(t[0]) for t in times) if run.start_time is None else run.start_time
     stop = min(float(t[-1]) for t in times) if run.stop_time is None else run.stop_time
-    record = run_fmu(
+    return run_fmu(
         str(model.path),
         reference,
         dict(model.fmu_inputs),
@@ -308,11 +346,6 @@ def _load_model(
         interface=run.interface,
         tolerance=run.tolerance,
     )
-    info: dict[str, Any] = {"path": model.path, "kind": "fmu"}
-    if record.meta["unscored"]:
-        # Outputs without numbers (text, bytes), left out when the spec names no outputs.
-        info["unscored_outputs"] = dict(record.meta["unscored"])
-    return record, info
 
 
 def _check_model_columns(node: SignalSpec, model: Record) -> tuple[str, ...]:
@@ -491,7 +524,7 @@ def _evaluate(
     reference = cache.read(spec.reference, spec.reference_columns())
     nodes = list(spec.walk())
     kernel.expect(len(nodes) * max((c.values.size for c in reference.channels.values()), default=0))
-    model_record, model_info = _load_model(spec, reference, cache, folders)
+    model_record, model_info, runtime = _load_model(spec, reference, cache, folders)
     aligned = _align(spec, nodes, reference, model_record, workers)
     unique, values = _signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
@@ -542,6 +575,7 @@ def _evaluate(
     for signal in signals:
         signal.within_uncertainty = within.get(signal.path, [])
     result = _spec_result(spec, signals, aligned, model_info, cache)
+    result.runtime = runtime
     if intervals:
         blocks = _block_sums({k: values[k] for k in values if k not in scored.blocks}, workers)
         _add_intervals(spec, result, roots, node_specs, fused, {**scored.blocks, **blocks})
@@ -1082,6 +1116,7 @@ def _signal_result(
         figures=figures,
         local=local,
         local_failures=missed_locally[path],
+        requirements=list(node.requirements),
     )
 
 
@@ -1104,6 +1139,7 @@ def _spec_result(
         min_phi_on=spec.min_phi_on,
         weights=weights,
         signals=signals,
+        requirements=list(spec.requirements),
         data={
             "reference": {
                 "path": spec.reference.path,

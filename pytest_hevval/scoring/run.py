@@ -55,6 +55,8 @@ def _relative_result(result: SpecResult, rootdir: Path) -> None:
     for side in result.data.values():
         if isinstance(side, dict) and side.get("path"):
             side["path"] = relative_to(rootdir, str(side["path"]))
+        if isinstance(side, dict) and side.get("module_file"):
+            side["module_file"] = relative_to(rootdir, str(side["module_file"]))
     if result.campaign and result.campaign.get("unused_models"):
         result.campaign["unused_models"] = [
             relative_to(rootdir, str(path)) for path in result.campaign["unused_models"]

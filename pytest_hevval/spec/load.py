@@ -31,10 +31,14 @@ from ..data.record import SourceOptions
 from ..data.remote import is_url
 from ..defaults import (
     LOCAL_WINDOW_S,
+    MAX_RUNTIME_REPEAT,
     REGION_BINS,
     REGION_MIN_SAMPLES,
+    RUNTIME_CLOCKS,
+    RUNTIME_REPEAT,
     UNCERTAINTY_SIGMA,
     WITHIN_UNCERTAINTY,
+    requirement_id_problem,
 )
 from ..errors import ExpressionError, SpecError, did_you_mean
 from ..files import read_input
@@ -54,6 +58,7 @@ from .model import (
     RecordingSpec,
     RegionSpec,
     Role,
+    RuntimeSpec,
     SignalSpec,
     SourceSpec,
     Spec,
@@ -94,6 +99,8 @@ _TOP_KEYS = (
     "recordings",
     "campaign",
     "measurement",
+    "requirements",
+    "runtime",
     "sets",
 )
 _DIAGNOSIS_KEYS = ("min_share", "responses", "causes", "groups")
@@ -152,6 +159,7 @@ _SIGNAL_KEYS = (
     "local_thresholds",
     "region_thresholds",
     "uncertainty",
+    "requirements",
     "children",
 )
 _LOCAL_KEYS = ("window_s", "phases", "conditions", "gate")
@@ -163,6 +171,7 @@ _MIN_PHI_ON = ("value", "lower", "upper")
 _CONDITION_KEYS = ("when", "thresholds")
 _UNCERTAINTY_KEYS = ("abs", "rel", "sigma")
 _MEASUREMENT_KEYS = ("within_uncertainty",)
+_RUNTIME_KEYS = ("min_realtime_factor", "max_s", "repeat", "clock")
 #: The settings of ``measurement.within_uncertainty``, the default first.
 _WITHIN_UNCERTAINTY = (WITHIN_UNCERTAINTY, *sorted({"fail", "pass"} - {WITHIN_UNCERTAINTY}))
 
@@ -457,8 +466,9 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         raise context.error(
             sets_line, "sets", "must be a non-empty list of signals", got=sets_value
         )
+    requirements = _requirements(context, top, "", {})
     roots = tuple(
-        _signal(context, item, sets_value.line_of(i), f"sets[{i}]")
+        _signal(context, item, sets_value.line_of(i), f"sets[{i}]", requirements)
         for i, item in enumerate(sets_value)
     )
     _check_unique_paths(context, roots)
@@ -506,6 +516,43 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
         regions=regions,
         campaign=campaign,
         measurement=_measurement(context, top),
+        requirements=tuple(requirements),
+        runtime=_runtime(context, top, model),
+    )
+
+
+def _runtime(context: _Context, top: LineDict, model: SourceSpec) -> RuntimeSpec:
+    """``runtime: {min_realtime_factor, max_s, repeat}`` for a model that runs itself."""
+    if "runtime" not in top or top["runtime"] is None:
+        return RuntimeSpec()
+    line = top.line_of("runtime")
+    mapping = context.mapping(top["runtime"], line, "runtime")
+    context.check_keys(mapping, _RUNTIME_KEYS, "runtime")
+    if model.kind == "file":
+        raise context.error(
+            line,
+            "runtime",
+            "the model is exported files, which ran elsewhere and carry no runtime to measure",
+            hint="remove `runtime:`, or name the model's callable or FMU so that it runs here",
+        )
+    repeat = context.get(mapping, "repeat", "runtime", context.positive, float(RUNTIME_REPEAT))
+    if repeat != int(repeat) or repeat > MAX_RUNTIME_REPEAT:
+        raise context.error(
+            mapping.line_of("repeat"),
+            "runtime.repeat",
+            f"must be a whole number of calls from 1 to {MAX_RUNTIME_REPEAT}",
+            got=mapping["repeat"],
+        )
+    return RuntimeSpec(
+        min_realtime_factor=context.get(
+            mapping, "min_realtime_factor", "runtime", context.positive, None
+        ),
+        max_s=context.get(mapping, "max_s", "runtime", context.positive, None),
+        repeat=int(repeat),
+        clock=context.get(
+            mapping, "clock", "runtime", context.choice(RUNTIME_CLOCKS), RUNTIME_CLOCKS[0]
+        ),
+        line=line,
     )
 
 
@@ -1038,7 +1085,63 @@ def _item_name(context: _Context, name: str, line: int, key: str) -> str:
     return name
 
 
-def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
+def _requirements(
+    context: _Context, mapping: LineDict, key: str, inherited: Mapping[str, int]
+) -> dict[str, int]:
+    """``requirements: [ID, ...]`` of a spec or a signal, merged after ``inherited`` (the
+    spec's and the ancestors' IDs, each with the line that gave it): ID → its line.
+
+    An ID given twice, here or already above, is an error.
+    """
+    merged = dict(inherited)
+    if "requirements" not in mapping or mapping["requirements"] is None:
+        return merged
+    where = _join(key, "requirements")
+    raw = mapping["requirements"]
+    line = mapping.line_of("requirements")
+    if isinstance(raw, str):
+        raw = LineList([raw])
+        raw.line, raw.item_lines = line, [line]
+    if not isinstance(raw, LineList):
+        raise context.error(
+            line,
+            where,
+            "must be a list of requirement IDs",
+            got=raw,
+            hint="write e.g. requirements: [BATT-012, BATT-013]",
+        )
+    for index, item in enumerate(raw):
+        item_line = raw.line_of(index)
+        entry = _join(where, index)
+        text = context.text(item, item_line, entry)
+        problem = requirement_id_problem(text)
+        if problem is not None:
+            raise context.error(
+                item_line,
+                entry,
+                problem,
+                got=text,
+                hint="give the ID as your requirements tool shows it, e.g. BATT-012",
+            )
+        if text in merged:
+            first = merged[text]
+            above = first not in (raw.line_of(i) for i in range(index))
+            raise context.error(
+                item_line,
+                entry,
+                f"duplicate requirement {text!r} (first given at line {first}"
+                + (", and inherited here" if above else "")
+                + ")",
+                hint="a signal verifies the requirements of the spec and of the signals above "
+                "it already; list each ID once",
+            )
+        merged[text] = item_line
+    return merged
+
+
+def _signal(
+    context: _Context, value: Any, line: int, key: str, inherited: Mapping[str, int]
+) -> SignalSpec:
     mapping = context.mapping(value, line, key)
     context.check_keys(mapping, _SIGNAL_KEYS, key)
     if "signal" not in mapping:
@@ -1049,6 +1152,7 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
         mapping.line_of("signal"),
         _join(key, "signal"),
     )
+    requirements = _requirements(context, mapping, key, inherited)
     ref = _expression(context, mapping.get("ref", name), mapping.line_of("ref"), _join(key, "ref"))
     sim = _expression(context, mapping.get("sim", name), mapping.line_of("sim"), _join(key, "sim"))
     children_value = mapping.get("children")
@@ -1063,7 +1167,7 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
                 got=children_value,
             )
         children = tuple(
-            _signal(context, item, children_value.line_of(i), f"{key}.children[{i}]")
+            _signal(context, item, children_value.line_of(i), f"{key}.children[{i}]", requirements)
             for i, item in enumerate(children_value)
         )
     ref_unit = context.get(mapping, "ref_unit", key, context.unit_text, None)
@@ -1101,6 +1205,7 @@ def _signal(context: _Context, value: Any, line: int, key: str) -> SignalSpec:
             context, mapping, "region_thresholds", _join(key, "region_thresholds")
         ),
         uncertainty=_uncertainty(context, mapping, key),
+        requirements=tuple(requirements),
     )
 
 

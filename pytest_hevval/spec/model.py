@@ -11,7 +11,13 @@ from ..core.measurement import MeasurementUncertainty, WithinUncertainty
 from ..core.registry import Characteristic, is_registered, select_characteristics
 from ..data.quality import QualityLimits
 from ..data.record import SourceOptions
-from ..defaults import RECORDING_SEPARATOR, WITHIN_UNCERTAINTY, split_key
+from ..defaults import (
+    RECORDING_SEPARATOR,
+    RUNTIME_CLOCKS,
+    RUNTIME_REPEAT,
+    WITHIN_UNCERTAINTY,
+    split_key,
+)
 from .expressions import Expression
 
 __all__ = [
@@ -30,6 +36,7 @@ __all__ = [
     "RecordingSpec",
     "RegionSpec",
     "Role",
+    "RuntimeSpec",
     "SignalSpec",
     "SourceSpec",
     "Spec",
@@ -206,6 +213,8 @@ class SignalSpec:
     region_thresholds: Mapping[str, float] = field(default_factory=dict)
     #: The sensor's declared accuracy (``uncertainty:``); None: not declared.
     uncertainty: MeasurementUncertainty | None = None
+    #: The requirement IDs this signal verifies: the spec's, its ancestors' and its own.
+    requirements: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -215,6 +224,24 @@ class MeasurementSpec:
     #: A threshold missed by no more than the measurement uncertainty: "fail" or "pass".
     within_uncertainty: WithinUncertainty = WITHIN_UNCERTAINTY  # type: ignore[assignment]
     line: int = 1
+
+
+@dataclass(frozen=True)
+class RuntimeSpec:
+    """The spec's ``runtime:``: how often the model is called per recording, and its gate."""
+
+    #: Simulated seconds per wall-clock second the fastest call must reach.
+    min_realtime_factor: float | None = None
+    #: Seconds the fastest call may take.
+    max_s: float | None = None
+    repeat: int = RUNTIME_REPEAT
+    #: The clock the limits are judged by: "cpu" (the model's own work) or "wall".
+    clock: str = RUNTIME_CLOCKS[0]
+    line: int = 1
+
+    @property
+    def gated(self) -> bool:
+        return self.min_realtime_factor is not None or self.max_s is not None
 
 
 @dataclass(frozen=True)
@@ -294,6 +321,10 @@ class Spec:
     role: Role = "validation"
     #: What a threshold missed within the measurement uncertainty does.
     measurement: MeasurementSpec = field(default_factory=MeasurementSpec)
+    #: The requirement IDs the spec as a whole verifies (``requirements:`` at the top).
+    requirements: tuple[str, ...] = ()
+    #: How the model's run is timed and gated (a callable or an FMU only).
+    runtime: RuntimeSpec = field(default_factory=RuntimeSpec)
 
     @property
     def key(self) -> str:

@@ -1,0 +1,192 @@
+"""One evidence record per run: what an auditor needs to reproduce and trust its verdicts.
+
+The record is one JSON document (``evidence.json``) that validates against the schema shipped
+with the package (``pytest_hevval/schemas/evidence.schema.json``, :func:`schema`): the tool
+and its scoring path, the environment, each spec file's digest, each data file's digest, the
+model's identity and parameters, every verdict with its interval, the requirement links and the
+model's runtime. It is made from a run's spec results and the facts of the run (model version,
+start time, tool versions), so ``hevval evidence`` makes the same record from a history record
+or a ``hevval run --json`` file as ``--hevval-report=evidence`` does during the run
+(docs/evidence.md).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from importlib import resources
+from typing import Any
+
+from ..results.codec import plain_json
+from .text import campaigns_of
+
+__all__ = ["EVIDENCE_SCHEMA_VERSION", "RunFacts", "evidence_record", "render_evidence", "schema"]
+
+EVIDENCE_SCHEMA_VERSION = 1
+#: The schema's file inside the package.
+SCHEMA_FILE = "evidence.schema.json"
+
+#: What a run's facts hold: ``model_version``, ``started_utc`` and ``tool_versions`` (the
+#: history record's keys), any of which may be missing.
+RunFacts = Mapping[str, Any]
+
+#: Signal keys an evidence record keeps: the verdict and what it was judged on.
+_SIGNAL_KEYS = ("path", "passed", "lambdas", "thresholds", "failures", "requirements")
+#: Model keys that identify it (beside its kind).
+_MODEL_KEYS = (
+    "callable",
+    "module_file",
+    "module_sha256",
+    "path",
+    "hash",
+    "digest",
+    "guid",
+    "params",
+)
+#: A campaign's gate verdict as the record keeps it.
+_CAMPAIGN_KEYS = (
+    "spec",
+    "name",
+    "passed",
+    "pass_rate",
+    "min_pass_rate",
+    "phi_quantile",
+    "failures",
+)
+_NO_RUNTIME = {
+    "file": "the model is exported files: it ran elsewhere, so no runtime was measured",
+    None: "no runtime was recorded with this result",
+}
+
+
+def schema() -> dict[str, Any]:
+    """The evidence record's JSON Schema (draft 2020-12), as shipped with the package."""
+    shipped = resources.files("pytest_hevval").joinpath("schemas").joinpath(SCHEMA_FILE)
+    document: dict[str, Any] = json.loads(shipped.read_text("utf-8"))
+    return document
+
+
+def _interval(bounds: Any) -> dict[str, Any] | None:
+    if isinstance(bounds, Mapping) and bounds.get("low") is not None:
+        return {"low": bounds["low"], "high": bounds["high"]}
+    return None
+
+
+def _signal(signal: Mapping[str, Any]) -> dict[str, Any]:
+    out = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
+    out.setdefault("requirements", [])
+    intervals = signal.get("intervals") or {}
+    out["intervals"] = {name: _interval(bounds) for name, bounds in intervals.items()}
+    return out
+
+
+def _source(side: Mapping[str, Any] | None) -> dict[str, Any]:
+    side = side or {}
+    return {
+        "path": side.get("path"),
+        "hash": side.get("hash"),
+        "digest": side.get("digest"),
+    }
+
+
+def _model(model: Mapping[str, Any] | None) -> dict[str, Any]:
+    model = model or {}
+    out: dict[str, Any] = {"kind": model.get("kind", "file")}
+    out.update({key: model[key] for key in _MODEL_KEYS if key in model})
+    out.setdefault("params", {})
+    return out
+
+
+def _spec(spec: Mapping[str, Any]) -> dict[str, Any]:
+    data = spec.get("data") or {}
+    model = _model(data.get("model"))
+    runtime = spec.get("runtime")
+    out: dict[str, Any] = {
+        "key": spec.get("spec"),
+        "name": spec.get("name"),
+        "spec_sha256": spec.get("spec_hash") or None,
+        "recording": spec.get("recording"),
+        "role": spec.get("role", "validation"),
+        "reference": _source(data.get("reference")),
+        "model": model,
+        "verdict": {
+            "passed": spec.get("passed") is not False,
+            "phi": spec.get("phi"),
+            "phi_interval": _interval(spec.get("phi_interval")),
+            "min_phi": spec.get("min_phi"),
+            "min_phi_on": spec.get("min_phi_on", "value"),
+            "phi_passed": spec.get("phi_passed") is not False,
+        },
+        "requirements": list(spec.get("requirements") or []),
+        "signals": [_signal(s) for s in spec.get("signals") or []],
+        "runtime": runtime if isinstance(runtime, Mapping) else None,
+    }
+    if out["runtime"] is None:
+        out["runtime_note"] = _NO_RUNTIME.get(model["kind"], _NO_RUNTIME[None])
+    return out
+
+
+def _links(specs: Sequence[Mapping[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+    """Requirement ID → the items that verify it, spec by spec."""
+    links: dict[str, list[dict[str, Any]]] = {}
+    for spec in specs:
+        for requirement in spec.get("requirements") or []:
+            links.setdefault(requirement, []).append({"spec": spec.get("spec"), "items": ["Phi"]})
+        found: dict[str, list[str]] = {}
+        for signal in spec.get("signals") or []:
+            for requirement in signal.get("requirements") or []:
+                if requirement not in (spec.get("requirements") or []):
+                    found.setdefault(requirement, []).append(signal["path"])
+        for requirement, paths in found.items():
+            links.setdefault(requirement, []).append({"spec": spec.get("spec"), "items": paths})
+    return dict(sorted(links.items()))
+
+
+def evidence_record(
+    spec_results: Sequence[Mapping[str, Any]], facts: RunFacts, *, source: str
+) -> dict[str, Any]:
+    """The evidence record of a run: its spec results (JSON data) and facts.
+
+    ``source`` says where the results come from: ``pytest run``, ``hevval run`` output or a
+    ``history record``.
+    """
+    versions = dict(facts.get("tool_versions") or {})
+    specs = [_spec(spec) for spec in spec_results]
+    campaigns = [
+        {key: found[key] for key in _CAMPAIGN_KEYS} for found in campaigns_of(spec_results)
+    ]
+    record = {
+        "evidence_schema_version": EVIDENCE_SCHEMA_VERSION,
+        "source": source,
+        "run": {
+            "model_version": facts.get("model_version"),
+            "started_utc": facts.get("started_utc"),
+            "passed": all(s["verdict"]["passed"] for s in specs)
+            and all(c["passed"] for c in campaigns),
+        },
+        "tool": {
+            "name": "pytest-hevval",
+            "version": versions.get("pytest-hevval"),
+            "kernel": versions.get("kernel"),
+        },
+        "environment": {
+            "python": versions.get("python"),
+            "numpy": versions.get("numpy"),
+            "scipy": versions.get("scipy"),
+            "pandas": versions.get("pandas"),
+            "platform": versions.get("platform"),
+        },
+        "specs": specs,
+        "campaigns": campaigns,
+        "requirements": _links(spec_results),
+    }
+    plain: dict[str, Any] = plain_json(record)
+    return plain
+
+
+def render_evidence(
+    spec_results: Sequence[Mapping[str, Any]], facts: RunFacts, *, source: str
+) -> str:
+    """:func:`evidence_record` as sorted, strict JSON text."""
+    record = evidence_record(spec_results, facts, source=source)
+    return json.dumps(record, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False) + "\n"
