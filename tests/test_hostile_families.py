@@ -198,3 +198,97 @@ def test_a_leap_second_is_named_where_it_is(project: Path) -> None:
     pd.DataFrame({"time": stamps, "v": v}).to_csv(project / "ref.csv", index=False)
     done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
     _clear_error(done, "ref.csv:102: column 'time'", "at index 100", "leap second")
+
+
+# -- text from specs and data reaching a terminal, a CI log or Markdown ------------------------
+
+FORGED = "::error file=evil.py::FORGED"
+#: A channel or signal name that would start a workflow command on a line of its own and
+#: clear the screen.
+HOSTILE_NAME = f"amb\n{FORGED}\x1b[2J\x1b]0;title\x07\u202e"
+
+
+def _forges(output: str) -> list[str]:
+    """Lines that a CI runner would take as a workflow command, and escape sequences."""
+    forged = [line for line in output.splitlines() if line.lstrip().startswith(FORGED)]
+    return forged + [char for char in "\x1b\x07\u202e" if char in output]
+
+
+def _hostile_channel(project: Path) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    frame = pd.DataFrame({"t": t, "v": np.sin(t), HOSTILE_NAME: np.cos(t)})
+    frame.to_csv(project / "ref.csv", index=False)
+    sim = pd.DataFrame({"t": t, "v": np.sin(t) + 0.3 * np.cos(t)})
+    sim.to_csv(project / "sim.csv", index=False)
+
+
+def test_diagnose_in_ci_prints_a_data_header_as_text(
+    project: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The header's channel explains the residual, so the diagnosis names it."""
+    _hostile_channel(project)
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    done = hevval(project, "diagnose", "hostile.hevval.yaml", "--signal", "v")
+    assert done.returncode == 0, done.stderr
+    assert "amb" in done.stdout, done.stdout
+    assert _forges(done.stdout + done.stderr) == []
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("run", "hostile.hevval.yaml", "--no-history", "--compare"),
+        ("history",),
+        ("compare", "history:latest", "hostile.json"),
+    ],
+    ids=["run --compare", "history", "compare"],
+)
+def test_a_model_version_from_history_is_printed_as_text(
+    project: Path, monkeypatch: pytest.MonkeyPatch, argv: tuple[str, ...]
+) -> None:
+    """A record written by another tool, whose model version and spec name forge commands."""
+    _record(project, model_version=HOSTILE_NAME)
+    assert hevval(project, "run", "hostile.hevval.yaml", "--json", "hostile.json").returncode == 0
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    done = hevval(project, *argv)
+    assert "amb" in done.stdout, done.stdout + done.stderr
+    assert _forges(done.stdout + done.stderr) == []
+
+
+def test_pytest_prints_a_model_version_from_history_as_text(
+    pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "sim.csv", index=False)
+    _spec(pytester.path, SPEC)
+    _record(pytester.path, model_version=HOSTILE_NAME)
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    result = pytester.runpytest_subprocess("--hevval", "--hevval-compare", "-p", "no:cacheprovider")
+    output = result.stdout.str() + result.stderr.str()
+    assert result.ret == 0, output
+    assert "amb" in output, output
+    assert _forges(output) == []
+
+
+def test_compare_markdown_holds_no_raw_html_or_broken_code_span(project: Path) -> None:
+    for version in ("<img src=a onerror=alert(2)>", "v2`<b>`|"):
+        argv = ("run", "hostile.hevval.yaml", "--history", "--model-version", version)
+        assert hevval(project, *argv).returncode == 0
+    done = hevval(project, "compare", "history:previous", "history:latest", "--format", "md")
+    assert done.returncode == 0, done.stderr
+    assert "<img" not in done.stdout, done.stdout
+    assert "<b>" not in done.stdout, done.stdout
+    assert "&lt;img src=a" in done.stdout, done.stdout
+    for line in done.stdout.splitlines():
+        assert line.replace("\\`", "").count("`") % 2 == 0, line
+
+
+def test_an_output_stream_that_cannot_encode_phi(
+    project: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PYTHONIOENCODING", "ascii")
+    for argv in (("run", "hostile.hevval.yaml", "--no-history", "--details"),):
+        done = hevval(project, *argv)
+        assert done.returncode == 0, done.stderr
+        assert "\\u03a6" in done.stdout, done.stdout

@@ -23,6 +23,7 @@ from _pytest._io import TerminalWriter
 
 from ..data.remote import relative_to
 from ..errors import HevvalError
+from ..escape import terminal
 from ..options import get_option
 from ..publish import Publisher, PublishOptions, diagnosis_panels
 from ..report.terminal import run_summary
@@ -353,10 +354,10 @@ class HevvalSession:
             terminalreporter.write_line(line)
         terminalreporter.write_sep("=", "hevval validation summary")
         for line in run_summary(results, details=bool(self.option("details"))):
-            terminalreporter.write_line(line)
+            terminalreporter.write_line(terminal(line))
         for note in self.notes:
             for line in note.splitlines():
-                terminalreporter.write_line(line)
+                terminalreporter.write_line(terminal(line))
 
 
 def judge_campaign(
@@ -407,7 +408,7 @@ def _log_gate(
             "keywords": gate["keywords"],
             "outcome": "passed" if failure is None else "failed",
             "when": "call",
-            "longrepr": failure,
+            "longrepr": None if failure is None else terminal(failure),
             "user_properties": [] if pass_rate is None else [["pass_rate", f"{pass_rate:.6f}"]],
         },
     )
