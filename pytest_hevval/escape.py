@@ -9,6 +9,8 @@ file names, model versions or history records.
   project's own annotations are the only workflow commands it prints, and they bypass this.
 - **Markdown** (:func:`markdown`, :func:`markdown_code`): the same control characters, then
   no raw HTML, no table breaks, no code span broken out of.
+- **Plot labels** (:func:`plot_text`): matplotlib reads ``$…$`` as maths markup, which a
+  name may hold without meaning it.
 - **HTML**: jinja2's autoescape and ``html.escape`` (``report/html.py``, ``report/svg.py``).
 
 Every front end (``hevval`` and ``pytest --hevval``) and every command writes through these.
@@ -19,7 +21,7 @@ from __future__ import annotations
 import re
 from typing import IO, Any
 
-__all__ = ["TerminalStream", "markdown", "markdown_code", "terminal"]
+__all__ = ["TerminalStream", "markdown", "markdown_code", "plot_text", "terminal"]
 
 #: C0 controls but tab and line feed, DEL, C1 controls (CSI among them), the line and paragraph
 #: separators and the bidirectional embeddings, overrides and isolates.
@@ -60,6 +62,11 @@ def markdown_code(text: object) -> str:
     # Inside a code span a backslash escapes nothing: the backtick becomes a quote.
     body = markdown(str(text).replace("`", "'"))
     return f"`{body}`"
+
+
+def plot_text(text: object) -> str:
+    """``text`` as a matplotlib label shows it: dollar signs literal, controls visible."""
+    return _controls(str(text)).replace("$", r"\$")
 
 
 class TerminalStream:

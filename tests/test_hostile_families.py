@@ -292,3 +292,37 @@ def test_an_output_stream_that_cannot_encode_phi(
         done = hevval(project, *argv)
         assert done.returncode == 0, done.stderr
         assert "\\u03a6" in done.stdout, done.stdout
+
+
+# -- encodings a file announces -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32"])
+def test_a_csv_with_a_byte_order_mark_is_read_in_its_encoding(project: Path, encoding: str) -> None:
+    text = (project / "ref.csv").read_text("utf-8")
+    bom = {"utf-16-be": "\ufeff"}.get(encoding, "")
+    (project / "ref.csv").write_bytes((bom + text).encode(encoding))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == pytest.approx(0.01, abs=1e-9)
+
+
+# -- names that mean something to a library ---------------------------------------------------
+
+
+def test_a_plot_of_a_signal_named_with_maths_markup(project: Path) -> None:
+    pytest.importorskip("matplotlib")
+    name = json.dumps("fuel $_$ rate")
+    _spec(project, SPEC.replace("{signal: v}", f"{{signal: {name}, ref: v, sim: v}}"))
+    _record(project, model_version="$\\frac{1}{$")
+    done = hevval(project, "history", "--signal", "fuel $_$ rate", "--plot", "trend.png")
+    assert done.returncode == 0, done.stderr
+    assert (project / "trend.png").stat().st_size > 0
+
+
+def test_a_rate_limit_on_a_misspelt_channel_says_which_was_meant(project: Path) -> None:
+    quality = "data_quality: {action: error, rate_limits: {w: 0.001}}\n"
+    _spec(project, SPEC.replace("sets:", quality + "sets:"))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, "hostile.hevval.yaml", "data_quality.rate_limits.w", "never be checked")
