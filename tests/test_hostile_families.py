@@ -326,3 +326,38 @@ def test_a_rate_limit_on_a_misspelt_channel_says_which_was_meant(project: Path) 
     _spec(project, SPEC.replace("sets:", quality + "sets:"))
     done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
     _clear_error(done, "hostile.hevval.yaml", "data_quality.rate_limits.w", "never be checked")
+
+
+# -- globbing only where a spec asks for it ----------------------------------------------------
+
+
+def test_a_reference_path_naming_an_existing_file_is_that_file(project: Path) -> None:
+    """``trip[1].csv`` exists beside ``trip1.csv`` (other data): the named file is scored."""
+    (project / "ref.csv").rename(project / "trip[1].csv")
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.cos(t) * 5}).to_csv(project / "trip1.csv", index=False)
+    _spec(project, SPEC.replace("{path: ref.csv}", '{path: "trip[1].csv"}'))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == pytest.approx(0.01, abs=1e-9)
+
+
+def test_a_campaign_in_a_folder_whose_name_looks_like_a_pattern(tmp_path: Path) -> None:
+    folder = tmp_path / "camp[abc]"
+    for side in ("ref", "sim"):
+        (folder / side).mkdir(parents=True)
+    t = np.arange(0.0, 30.0, 0.1)
+    for trip in ("A", "B"):
+        frame = pd.DataFrame({"t": t, "v": np.sin(t)})
+        frame.to_csv(folder / "ref" / f"{trip}.csv", index=False)
+        frame.assign(v=frame.v + 0.01).to_csv(folder / "sim" / f"{trip}.csv", index=False)
+    spec = (
+        "name: campaign\nreference: {path: ref/*.csv}\n"
+        "model: {path: 'sim/{id}.csv'}\nsets:\n  - {signal: v}\n"
+    )
+    _spec(folder, spec)
+    done = hevval(folder, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    specs = json.loads((folder / "out.json").read_text("utf-8"))["specs"]
+    assert len(specs) == 2

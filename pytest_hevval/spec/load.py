@@ -11,6 +11,7 @@ import glob
 import hashlib
 import itertools
 import math
+import os
 import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -410,7 +411,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
                 hint="see docs/spec.md for the format",
             )
     base = path.parent
-    table = "recordings" in top and not _is_pattern(top["reference"])
+    table = "recordings" in top and not _is_pattern(top["reference"], base)
     reference = _source(
         context, top["reference"], top.line_of("reference"), "reference", base, path_optional=table
     )
@@ -1320,17 +1321,33 @@ def thresholds_mapping(values: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
-def _is_pattern(reference: Any) -> bool:
-    """A reference path with glob wildcards names a campaign's recordings."""
-    raw = reference.get("path") if isinstance(reference, LineDict) else reference
-    return isinstance(raw, str) and not is_url(raw) and glob.has_magic(raw)
+def _is_pattern(reference: Any, base: Path) -> bool:
+    """A reference path with glob wildcards names a campaign's recordings, unless it names an
+    existing file: ``trip[1].csv`` is that file, not ``trip1.csv``."""
+    raw = _raw_path(reference)
+    return (
+        isinstance(raw, str)
+        and not is_url(raw)
+        and glob.has_magic(raw)
+        and not os.path.exists(base / raw)
+    )
+
+
+def _raw_path(reference: Any) -> Any:
+    return reference.get("path") if isinstance(reference, LineDict) else reference
+
+
+def _matches(raw: str, base: Path) -> list[str]:
+    """The files a pattern matches, relative to ``base``, whose own name is never a pattern
+    (a spec in a folder named ``camp[abc]``)."""
+    return sorted(glob.glob(os.path.join(glob.escape(str(base)), raw)))
 
 
 def _campaign(
     context: _Context, top: LineDict, reference: SourceSpec, model: SourceSpec, base: Path
 ) -> CampaignSpec | None:
     """The recordings of a campaign: the files a reference pattern matches, or a table."""
-    pattern = _is_pattern(top["reference"])
+    pattern = _is_pattern(top["reference"], base)
     if not pattern and "recordings" not in top:
         if model.kind == "file" and model.path is not None and ID_FIELD in model.path:
             raise context.error(
@@ -1358,7 +1375,7 @@ def _campaign(
     matched: dict[str, str] = {}
     if pattern:
         assert reference.path is not None
-        for found in sorted(glob.glob(reference.path)):
+        for found in _matches(str(_raw_path(top["reference"])), base):
             matched.setdefault(_recording_id(found), found)
         if not matched:
             raise context.error(
