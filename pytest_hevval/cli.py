@@ -607,7 +607,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     text from specs, data files and history records cannot forge a workflow command or send
     escape sequences, and a console that cannot encode ``Φ`` gets an escape, not an error."""
     from .escape import TerminalStream
+    from .files import remove_temporaries_on_signals
 
+    remove_temporaries_on_signals()
     stdout, stderr = sys.stdout, sys.stderr
     sys.stdout, sys.stderr = TerminalStream(stdout), TerminalStream(stderr)
     try:

@@ -361,3 +361,52 @@ def test_a_campaign_in_a_folder_whose_name_looks_like_a_pattern(tmp_path: Path) 
     assert done.returncode == 0, done.stdout + done.stderr
     specs = json.loads((folder / "out.json").read_text("utf-8"))["specs"]
     assert len(specs) == 2
+
+
+# -- signals and cleanup on every write --------------------------------------------------------
+
+SLOW_REPORT = """\
+import os
+import sys
+import time
+
+from pytest_hevval import cli
+
+fsync = os.fsync
+
+
+def slow_fsync(fd):
+    if os.readlink(f"/proc/self/fd/{fd}").endswith(".part") and "report" in os.readlink(
+        f"/proc/self/fd/{fd}"
+    ):
+        print("writing", flush=True)
+        time.sleep(60)
+    fsync(fd)
+
+
+os.fsync = slow_fsync
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc to see the file")
+def test_sigterm_while_a_report_is_written_leaves_no_temporary_file(project: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+
+    (project / "slow.py").write_text(SLOW_REPORT, encoding="utf-8")
+    argv = ["run", "hostile.hevval.yaml", "--no-history", "--report", "html,json,md"]
+    with subprocess.Popen(
+        [sys.executable, "slow.py", *argv], cwd=project, stdout=subprocess.PIPE, text=True
+    ) as child:
+        try:
+            assert child.stdout is not None
+            lines = iter(child.stdout.readline, "")
+            assert "writing\n" in lines, "the report was never written"
+            assert list((project / ".hevval" / "report").glob(".tmp-*.part"))
+            child.send_signal(signal.SIGTERM)
+            assert child.wait(timeout=30) == -signal.SIGTERM
+        finally:
+            child.kill()
+    assert list((project / ".hevval" / "report").glob(".tmp-*")) == []

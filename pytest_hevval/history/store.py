@@ -16,7 +16,6 @@ it compares with, not every record. :meth:`HistoryStore.entries` still reads the
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
@@ -28,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from ..defaults import HISTORY_DIR
-from ..files import fsync_directory, publish, read_json, write_temporary
+from ..files import forget_temporary, fsync_directory, publish, read_json, write_temporary
 from ._base import HistoryError
 from .index import TREND_RUNS, HistoryIndex, IndexStale, load_index, micros, save_index
 from .records import migrate_record, parse_utc, validate_record
@@ -113,8 +112,7 @@ class HistoryStore:
         except OSError as exc:
             raise _write_error(self.directory, exc) from None
         finally:
-            with contextlib.suppress(FileNotFoundError):
-                temp.unlink()
+            forget_temporary(temp)
         self._index_new(final, len(payload), checked)
         return final
 

@@ -27,8 +27,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     if not get_option(config, ""):
         return
+    from ..files import remove_temporaries_on_signals
     from .session import HevvalSession
 
+    remove_temporaries_on_signals()
     state = HevvalSession(config)
     config.stash[session_key] = state
     state.validate_options()
