@@ -410,3 +410,21 @@ def test_sigterm_while_a_report_is_written_leaves_no_temporary_file(project: Pat
         finally:
             child.kill()
     assert list((project / ".hevval" / "report").glob(".tmp-*")) == []
+
+
+# -- specs pytest's walk would pass by --------------------------------------------------------
+
+
+def test_pytest_names_a_spec_that_is_a_link_loop_or_dangling(pytester: pytest.Pytester) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "sim.csv", index=False)
+    _spec(pytester.path, SPEC)
+    (pytester.path / "loop.hevval.yaml").symlink_to("loop.hevval.yaml")
+    (pytester.path / "dangling.hevval.yaml").symlink_to("gone.hevval.yaml")
+    result = pytester.runpytest_subprocess("--hevval", "-p", "no:cacheprovider")
+    output = result.stdout.str()
+    assert result.ret == pytest.ExitCode.INTERRUPTED, output
+    assert "loop.hevval.yaml: cannot read the spec file" in output, output
+    assert "dangling.hevval.yaml: cannot read the spec file" in output, output
+    result.assert_outcomes(errors=2)
