@@ -428,3 +428,69 @@ def test_pytest_names_a_spec_that_is_a_link_loop_or_dangling(pytester: pytest.Py
     assert "loop.hevval.yaml: cannot read the spec file" in output, output
     assert "dangling.hevval.yaml: cannot read the spec file" in output, output
     result.assert_outcomes(errors=2)
+
+
+# -- a model callable gets what it declares, and never a scored signal unasked ------------------
+
+COPYCAT = '''\
+import pandas as pd
+
+
+def copy(frame):
+    """A wrong model that reads the measured signal it is scored on."""
+    return pd.DataFrame({"time": frame["time"], "v": frame["v"], "w": frame.get("w", 0.0)})
+'''
+
+
+def _copycat(project: Path, model_keys: str) -> str:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t), "w": np.cos(t)}).to_csv(project / "ref.csv", index=False)
+    (project / "copycat.py").write_text(COPYCAT, encoding="utf-8")
+    return _spec(
+        project,
+        "name: copycat\nreference: {path: ref.csv}\n"
+        f'model: {{callable: "copycat:copy"{model_keys}}}\n'
+        "candidates: {heat: w}\nsets:\n  - {signal: v}\n",
+    )
+
+
+def test_a_model_given_no_inputs_does_not_receive_the_signal_it_is_scored_on(
+    project: Path,
+) -> None:
+    spec = _copycat(project, "")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "model.inputs", "asked for the column 'v'")
+
+
+def test_a_scored_signal_among_the_inputs_is_refused_with_the_key_that_allows_it(
+    project: Path,
+) -> None:
+    spec = _copycat(project, ", inputs: [v]")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "model.inputs[0]", "a measured signal the spec scores", "driven_by:")
+
+
+def test_a_model_driven_by_a_scored_signal_on_purpose(project: Path) -> None:
+    spec = _copycat(project, ", driven_by: [v]")
+    done = hevval(project, "run", spec, "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == 0.0
+
+
+def test_a_link_in_place_of_an_output_does_not_carry_the_write_elsewhere(project: Path) -> None:
+    """The link is replaced by the new file; the file it pointed at is left as it was."""
+    outside = project / "outside.txt"
+    outside.write_text("keep", encoding="utf-8")
+    report = project / ".hevval" / "report"
+    report.mkdir(parents=True)
+    for name in ("report.html", "report.json", "report.md"):
+        (report / name).symlink_to(outside)
+    (project / "out.json").symlink_to(outside)
+    argv = ("run", "hostile.hevval.yaml", "--no-history", "--report", "html,json,md")
+    done = hevval(project, *argv, "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    assert outside.read_text("utf-8") == "keep"
+    for path in (report / "report.html", report / "report.json", project / "out.json"):
+        assert not path.is_symlink(), path
+        assert path.stat().st_size > 0

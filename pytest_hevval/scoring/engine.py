@@ -269,7 +269,7 @@ def _load_model(
     if model.kind == "callable":
         from ..data.models import run_callable
 
-        inputs = list(model.inputs) or sorted(spec.reference_columns())
+        inputs = spec.callable_inputs()
         try:
             record = run_callable(
                 str(model.callable),

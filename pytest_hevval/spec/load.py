@@ -110,7 +110,16 @@ _SOURCE_KEYS = (
     "check_time_unit",
     "dbc",
 )
-_MODEL_KEYS = (*_SOURCE_KEYS, "callable", "fmu", "params", "inputs", "outputs", "step_size")
+_MODEL_KEYS = (
+    *_SOURCE_KEYS,
+    "callable",
+    "fmu",
+    "params",
+    "inputs",
+    "driven_by",
+    "outputs",
+    "step_size",
+)
 _ALIGN_KEYS = (
     "rate_hz",
     "window",
@@ -462,6 +471,10 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     if regions and regions.gate:
         _check_local_scored(context, regions.gate.thresholds, None, "regions.gate.thresholds")
     _check_phi_defined(context, roots, sets_line)
+    if model.kind == "callable":
+        _check_callable_inputs(
+            context, model, {c for _, node in _all_nodes(roots) for c in node.ref.columns}
+        )
     name = context.get(top, "name", "", context.text, _default_name(path))
     if not name.isprintable():
         raise context.error(
@@ -612,15 +625,9 @@ def _source(
         input_line = mapping.line_of("inputs")
         if kind == "fmu":
             fmu_inputs = _string_mapping(context, raw_inputs, input_line, input_key)
-        elif isinstance(raw_inputs, LineList):
-            inputs = tuple(
-                context.text(v, raw_inputs.line_of(i), _join(input_key, i))
-                for i, v in enumerate(raw_inputs)
-            )
         else:
-            raise context.error(
-                input_line, input_key, "must be a list of column names", got=raw_inputs
-            )
+            inputs = _column_list(context, mapping, "inputs", key)
+    driven_by = _column_list(context, mapping, "driven_by", key) if "driven_by" in mapping else ()
     fmu_outputs: dict[str, str] = {}
     if "outputs" in mapping:
         fmu_outputs = _string_mapping(
@@ -635,9 +642,33 @@ def _source(
         params=params,
         inputs=inputs,
         fmu_inputs=fmu_inputs,
+        driven_by=driven_by,
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
     )
+
+
+def _column_list(context: _Context, mapping: LineDict, name: str, key: str) -> tuple[str, ...]:
+    raw = mapping[name]
+    where = _join(key, name)
+    if not isinstance(raw, LineList):
+        raise context.error(mapping.line_of(name), where, "must be a list of column names", got=raw)
+    return tuple(context.text(v, raw.line_of(i), _join(where, i)) for i, v in enumerate(raw))
+
+
+def _check_callable_inputs(context: _Context, model: SourceSpec, scored: set[str]) -> None:
+    """A model callable handed a signal it is scored on can pass by copying it: that takes
+    saying so, under ``driven_by:``."""
+    for i, name in enumerate(model.inputs):
+        if name in scored and name not in model.driven_by:
+            raise context.error(
+                model.line,
+                f"model.inputs[{i}]",
+                f"{name!r} is a measured signal the spec scores; a model handed it can pass by "
+                "copying it",
+                hint=f"if the model is meant to be driven by it (a drive cycle's speed), list "
+                f"{name!r} under `driven_by:` instead",
+            )
 
 
 def _can_format(context: _Context, mapping: LineDict, key: str, fmt: str | None) -> str:
