@@ -75,6 +75,17 @@ def check_input(path: Path | str) -> int:
     raise InputRefused(f"{kind}, not a regular file")
 
 
+def unreadable(path: Path | str, exc: OSError) -> str:
+    """Why ``path`` could not be opened, in words: a dangling link or a loop of links says
+    so, where the system's reason ("No such file or directory") would mislead."""
+    if exc.errno == errno.ELOOP:
+        return "a loop of symbolic links"
+    if exc.errno == errno.ENOENT and os.path.islink(path):
+        with contextlib.suppress(OSError):
+            return f"a symbolic link to {os.readlink(path)!r}, which does not exist"
+    return exc.strerror or str(exc)
+
+
 def read_input(path: Path | str, limit: int = MAX_DOCUMENT_BYTES) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes (see :func:`check_input`)."""
     size = check_input(path)

@@ -141,13 +141,17 @@ def text_time(frame):
 """
 
 
-def _callable_spec(project: Path, function: str, model_keys: str = "") -> str:
-    (project / "models.py").write_text(MODELS, encoding="utf-8")
+def _callable_spec(
+    project: Path, function: str, model_keys: str = "", *, source: str = MODELS, more: str = ""
+) -> str:
+    """A spec scoring ``v`` of ref.csv against ``models:FUNCTION`` (``source``); ``more``:
+    top-level keys besides."""
+    (project / "models.py").write_text(source, encoding="utf-8")
     return _spec(
         project,
         "name: hostile\nreference: {path: ref.csv}\n"
         f'model: {{callable: "models:{function}"{model_keys}}}\n'
-        "sets:\n  - {signal: v}\n",
+        f"{more}sets:\n  - {{signal: v}}\n",
     )
 
 
@@ -425,8 +429,11 @@ def test_pytest_names_a_spec_that_is_a_link_loop_or_dangling(pytester: pytest.Py
     result = pytester.runpytest_subprocess("--hevval", "-p", "no:cacheprovider")
     output = result.stdout.str()
     assert result.ret == pytest.ExitCode.INTERRUPTED, output
-    assert "loop.hevval.yaml: cannot read the spec file" in output, output
-    assert "dangling.hevval.yaml: cannot read the spec file" in output, output
+    assert "loop.hevval.yaml: cannot read the spec file (a loop of symbolic links)" in output
+    assert (
+        "dangling.hevval.yaml: cannot read the spec file (a symbolic link to "
+        "'gone.hevval.yaml', which does not exist)" in output
+    ), output
     result.assert_outcomes(errors=2)
 
 
@@ -445,12 +452,8 @@ def copy(frame):
 def _copycat(project: Path, model_keys: str) -> str:
     t = np.arange(0.0, 30.0, 0.1)
     pd.DataFrame({"t": t, "v": np.sin(t), "w": np.cos(t)}).to_csv(project / "ref.csv", index=False)
-    (project / "copycat.py").write_text(COPYCAT, encoding="utf-8")
-    return _spec(
-        project,
-        "name: copycat\nreference: {path: ref.csv}\n"
-        f'model: {{callable: "copycat:copy"{model_keys}}}\n'
-        "candidates: {heat: w}\nsets:\n  - {signal: v}\n",
+    return _callable_spec(
+        project, "copy", model_keys, source=COPYCAT, more="candidates: {heat: w}\n"
     )
 
 

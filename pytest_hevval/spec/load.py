@@ -37,7 +37,7 @@ from ..defaults import (
     WITHIN_UNCERTAINTY,
 )
 from ..errors import ExpressionError, SpecError, did_you_mean
-from ..files import read_input
+from ..files import read_input, unreadable
 from .expressions import Expression, parse_signal
 from .model import (
     ID_FIELD,
@@ -343,7 +343,7 @@ def load_spec(path: str | Path) -> Spec:
         raw = read_input(spec_path)
     except OSError as exc:
         raise SpecError(
-            f"cannot read the spec file ({exc.strerror or exc})", file=str(spec_path)
+            f"cannot read the spec file ({unreadable(spec_path, exc)})", file=str(spec_path)
         ) from None
     try:
         text = raw.decode("utf-8")
