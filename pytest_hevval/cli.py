@@ -150,7 +150,7 @@ def _run(args: argparse.Namespace) -> int:
             payload.update({k: v for k, v in dicts()[0].items() if k != "schema_version"})
         _write_json(args.json, payload)
     for line in published.annotations:
-        print(line)
+        _own_line(line)
     finish_run()
     kernel_note = compile_note()
     for note in [*notes, *published.notes, *([kernel_note] if kernel_note else [])]:
@@ -405,12 +405,14 @@ def _evidence(args: argparse.Namespace) -> int:
 def _with_pairings(text: str, comparison: Comparison, fmt: str) -> str:
     """Say under the title which different specs were compared and whose data changed; JSON
     carries ``pairings`` and each spec's ``data_changed``."""
+    from .escape import markdown
+
     if fmt == "json" or not comparison.notes:
         return text
     title, _, rest = text.partition("\n")
     if fmt == "md":
         # A blank line ends the heading; two trailing spaces break lines inside the paragraph.
-        notes = [note.replace("|", "\\|") for note in comparison.notes]
+        notes = [markdown(note) for note in comparison.notes]
         return title + "\n\n" + "  \n".join(notes) + "\n" + rest
     return title + "\n" + "".join(note + "\n" for note in comparison.notes) + rest
 
@@ -430,7 +432,8 @@ def _progress(total: int, *, enabled: bool) -> Any:
         from tqdm import tqdm
     except ImportError:
         return _NoProgress()
-    return tqdm(total=total, unit="spec", file=sys.stderr)
+    # The bar redraws itself with a carriage return, which the terminal rule would show.
+    return tqdm(total=total, unit="spec", file=getattr(sys.stderr, "raw", sys.stderr))
 
 
 class _UsageError(HevvalError):
@@ -673,7 +676,34 @@ def _dispatch(args: argparse.Namespace) -> int:
     return _COMMANDS[args.command](args)
 
 
+def _own_line(line: str) -> None:
+    """Print one of the project's own workflow commands, which the terminal rule would
+    neutralise (see :mod:`pytest_hevval.escape`)."""
+    from .escape import TerminalStream
+
+    if isinstance(sys.stdout, TerminalStream):
+        sys.stdout.writeraw(line + "\n")
+    else:
+        print(line)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """Every line hevval prints goes through the terminal rule of :mod:`pytest_hevval.escape`:
+    text from specs, data files and history records cannot forge a workflow command or send
+    escape sequences, and a console that cannot encode ``Φ`` gets an escape, not an error."""
+    from .escape import TerminalStream
+    from .files import remove_temporaries_on_signals
+
+    remove_temporaries_on_signals()
+    stdout, stderr = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = TerminalStream(stdout), TerminalStream(stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = stdout, stderr
+
+
+def _main(argv: Sequence[str] | None) -> int:
     arguments = list(sys.argv[1:] if argv is None else argv)
     try:
         args, unknown = _parser().parse_known_args(arguments)

@@ -31,10 +31,12 @@ __all__ = [
     "MAX_JSON_DEPTH",
     "InputRefused",
     "check_input",
+    "forget_temporary",
     "output_error",
     "publish",
     "read_input",
     "read_json",
+    "remove_temporaries_on_signals",
     "write_atomic",
     "write_temporary",
 ]
@@ -73,6 +75,17 @@ def check_input(path: Path | str) -> int:
     raise InputRefused(f"{kind}, not a regular file")
 
 
+def unreadable(path: Path | str, exc: OSError) -> str:
+    """Why ``path`` could not be opened, in words: a dangling link or a loop of links says
+    so, where the system's reason ("No such file or directory") would mislead."""
+    if exc.errno == errno.ELOOP:
+        return "a loop of symbolic links"
+    if exc.errno == errno.ENOENT and os.path.islink(path):
+        with contextlib.suppress(OSError):
+            return f"a symbolic link to {os.readlink(path)!r}, which does not exist"
+    return exc.strerror or str(exc)
+
+
 def read_input(path: Path | str, limit: int = MAX_DOCUMENT_BYTES) -> bytes:
     """The bytes of a regular file of at most ``limit`` bytes (see :func:`check_input`)."""
     size = check_input(path)
@@ -106,9 +119,50 @@ def read_json(path: Path | str, limit: int = MAX_DOCUMENT_BYTES) -> Any:
     return document
 
 
+#: Temporary files being written or not yet removed, which a termination signal removes.
+_IN_FLIGHT: set[Path] = set()
+#: The signals after which no temporary file may stay: a CI job cancelled, a terminal closed.
+_TERMINATING = ("SIGTERM", "SIGHUP")
+
+
+def remove_temporaries_on_signals() -> None:
+    """Make a termination signal remove the temporary files in flight before the process
+    ends as the signal ends it (its exit status unchanged). Front ends call this once, from
+    the main thread; a handler someone else installed is left alone."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for name in _TERMINATING:
+        number = getattr(signal, name, None)
+        if number is not None and signal.getsignal(number) is signal.SIG_DFL:
+            signal.signal(number, _remove_and_die)
+
+
+def _remove_and_die(number: int, _frame: object) -> None:
+    import signal
+
+    for temp in list(_IN_FLIGHT):
+        with contextlib.suppress(OSError):
+            os.unlink(temp)
+    signal.signal(number, signal.SIG_DFL)
+    os.kill(os.getpid(), number)
+
+
+def forget_temporary(temp: Path) -> None:
+    """Remove ``temp`` if it is still there, and stop tracking it."""
+    with contextlib.suppress(FileNotFoundError):
+        temp.unlink()
+    _IN_FLIGHT.discard(temp)
+
+
 def write_temporary(directory: Path, payload: bytes, *, stem: str = "hevval") -> Path:
-    """Write ``payload`` to a new hidden file in ``directory``, flushed to disk; its path."""
+    """Write ``payload`` to a new hidden file in ``directory``, flushed to disk; its path.
+    Until :func:`forget_temporary` a termination signal removes it (see
+    :func:`remove_temporaries_on_signals`)."""
     temp = directory / f".tmp-{stem}.{os.getpid()}.{secrets.token_hex(4)}.part"
+    _IN_FLIGHT.add(temp)
     # 0o666 before the umask: the mode a plain open() would give, not mkstemp's 0600.
     fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
     try:
@@ -124,6 +178,7 @@ def write_temporary(directory: Path, payload: bytes, *, stem: str = "hevval") ->
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(temp)
+        _IN_FLIGHT.discard(temp)
         raise
     return temp
 
@@ -199,8 +254,7 @@ def write_atomic(path: Path | str, content: str | bytes, *, replace: bool = True
                 fsync_directory(target.parent)
             return written
         finally:
-            with contextlib.suppress(FileNotFoundError):
-                temp.unlink()
+            forget_temporary(temp)
     except OutputError:
         raise
     except OSError as exc:

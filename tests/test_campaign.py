@@ -51,7 +51,7 @@ def run(frame, gain=1.0):
 SPEC = """\
 name: fleet
 reference: {{path: data/Trip*.csv, time: t}}
-model: {{callable: "campaign_model:run", inputs: [speed]}}
+model: {{callable: "campaign_model:run", driven_by: [speed]}}
 recordings:
   - {{id: Trip01, role: calibration}}
   - {{id: Trip03, params: {{gain: {gain}}}}}
@@ -435,7 +435,7 @@ def write_exported(root: Path, *, gain: float = 1.0, extra: str | None = "Trip99
     if extra:
         exported.to_csv(root / "sim" / f"{extra}.csv", index=False)
     spec = SPEC.format(gain=gain, rate=0.6).replace(
-        'model: {callable: "campaign_model:run", inputs: [speed]}',
+        'model: {callable: "campaign_model:run", driven_by: [speed]}',
         "model: {path: 'sim/{id}.csv', time: time_s}",
     )
     spec = spec.replace(f"  - {{id: Trip03, params: {{gain: {gain}}}}}\n", "")

@@ -6,6 +6,7 @@ a regression merged, and main's versions over time."""
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -23,6 +24,9 @@ EXAMPLE = ROOT / "example_project"
 WORKFLOW = EXAMPLE / ".github" / "workflows" / "validate.yml"
 
 pytestmark = pytest.mark.slow
+
+#: A folder to keep each job's summary in (unset: none kept).
+SUMMARIES_ENV = "HEVVAL_CI_SUMMARIES"
 
 #: The install line is the one thing a team edits; here the plugin under test is already
 #: installed, and pip must not reach for an index.
@@ -112,6 +116,12 @@ class _GitHub:
             env_overrides=INSTALLED,
             **kwargs,
         )
+        keep = os.environ.get(SUMMARIES_ENV)
+        if keep:
+            # The summaries docs/history.md quotes come from here.
+            name = f"{self.runs:02d}-{event.name}-{event.attempt}.md"
+            Path(keep).mkdir(parents=True, exist_ok=True)
+            (Path(keep) / name).write_text(job.summary, encoding="utf-8")
         return job
 
     def _next_id(self) -> int:

@@ -30,7 +30,7 @@ def simulate(frame):
 SPEC = """\
 name: trip
 reference: {path: trip.csv, time: t}
-model: {callable: "usermodel:simulate"%s}
+model: {callable: "usermodel:simulate", driven_by: [speed]%s}
 sets:
   - {signal: v, ref: speed, sim: v}
   - {signal: v_again, ref: speed, sim: v}
@@ -62,7 +62,7 @@ def test_a_column_the_model_was_not_given_names_inputs_the_line_and_what_it_got(
     assert expected in text
     assert "base.py" not in text
     # Giving it the column is the whole fix.
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     pytester.runpytest("--hevval", "--hevval-no-history").assert_outcomes(passed=3)
 
 
@@ -95,7 +95,7 @@ def test_a_local_run_is_not_recorded_unless_asked_and_says_so(
     pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A laptop's runs stay out of the team's history; CI's go in; asking records any."""
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     local = pytester.runpytest("--hevval")
     local.assert_outcomes(passed=3)
     local.stdout.fnmatch_lines(["history: not recorded (runs are recorded in CI, or when asked*"])
@@ -113,7 +113,7 @@ def test_a_local_run_is_not_recorded_unless_asked_and_says_so(
 
 
 def test_hevval_run_records_only_when_asked(pytester: pytest.Pytester) -> None:
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     plain = pytester.run(sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml")
     assert plain.ret == 0
     plain.stdout.fnmatch_lines(["history: not recorded*hevval run --history*"])
@@ -152,7 +152,7 @@ def test_hevval_run_finds_the_project_root_as_pytest_does(pytester: pytest.Pytes
     (pytester.path / "models" / "user.py").write_text(MODEL)
     folder = pytester.path / "validation"
     folder.mkdir()
-    _write(folder, inputs=", inputs: [speed, heater_kw]")
+    _write(folder, inputs=", inputs: [heater_kw]")
     text = (folder / "trip.hevval.yaml").read_text().replace("usermodel:", "models.user:")
     (folder / "trip.hevval.yaml").write_text(text)
     (folder / "usermodel.py").unlink()
@@ -183,7 +183,7 @@ def test_project_root(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 def test_a_closed_pipe_ends_hevval_run_without_a_traceback(pytester: pytest.Pytester) -> None:
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     child = subprocess.Popen(
         [sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml", "--details"],
         cwd=pytester.path,
@@ -204,7 +204,7 @@ def test_a_closed_pipe_ends_hevval_run_without_a_traceback(pytester: pytest.Pyte
 def test_a_column_the_model_does_not_return_names_the_spec_line(
     pytester: pytest.Pytester,
 ) -> None:
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     spec = pytester.path / "trip.hevval.yaml"
     spec.write_text(spec.read_text().replace("sim: v}", "sim: vee}", 1))
     done = pytester.run(
@@ -230,7 +230,7 @@ def test_an_unquoted_expression_gets_a_hint_to_quote_it(pytester: pytest.Pyteste
 def test_the_spec_line_says_phi_against_its_minimum_then_why_the_spec_fails(
     pytester: pytest.Pytester,
 ) -> None:
-    _write(pytester.path, inputs=", inputs: [speed, heater_kw]")
+    _write(pytester.path, inputs=", inputs: [heater_kw]")
     spec = pytester.path / "trip.hevval.yaml"
     spec.write_text(
         spec.read_text().replace("sim: v}", "sim: v * 1.3}", 1)

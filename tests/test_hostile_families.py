@@ -141,13 +141,17 @@ def text_time(frame):
 """
 
 
-def _callable_spec(project: Path, function: str, model_keys: str = "") -> str:
-    (project / "models.py").write_text(MODELS, encoding="utf-8")
+def _callable_spec(
+    project: Path, function: str, model_keys: str = "", *, source: str = MODELS, more: str = ""
+) -> str:
+    """A spec scoring ``v`` of ref.csv against ``models:FUNCTION`` (``source``); ``more``:
+    top-level keys besides."""
+    (project / "models.py").write_text(source, encoding="utf-8")
     return _spec(
         project,
         "name: hostile\nreference: {path: ref.csv}\n"
         f'model: {{callable: "models:{function}"{model_keys}}}\n'
-        "sets:\n  - {signal: v}\n",
+        f"{more}sets:\n  - {{signal: v}}\n",
     )
 
 
@@ -198,3 +202,298 @@ def test_a_leap_second_is_named_where_it_is(project: Path) -> None:
     pd.DataFrame({"time": stamps, "v": v}).to_csv(project / "ref.csv", index=False)
     done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
     _clear_error(done, "ref.csv:102: column 'time'", "at index 100", "leap second")
+
+
+# -- text from specs and data reaching a terminal, a CI log or Markdown ------------------------
+
+FORGED = "::error file=evil.py::FORGED"
+#: A channel or signal name that would start a workflow command on a line of its own and
+#: clear the screen.
+HOSTILE_NAME = f"amb\n{FORGED}\x1b[2J\x1b]0;title\x07\u202e"
+
+
+def _forges(output: str) -> list[str]:
+    """Lines that a CI runner would take as a workflow command, and escape sequences."""
+    forged = [line for line in output.splitlines() if line.lstrip().startswith(FORGED)]
+    return forged + [char for char in "\x1b\x07\u202e" if char in output]
+
+
+def _hostile_channel(project: Path) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    frame = pd.DataFrame({"t": t, "v": np.sin(t), HOSTILE_NAME: np.cos(t)})
+    frame.to_csv(project / "ref.csv", index=False)
+    sim = pd.DataFrame({"t": t, "v": np.sin(t) + 0.3 * np.cos(t)})
+    sim.to_csv(project / "sim.csv", index=False)
+
+
+def test_diagnose_in_ci_prints_a_data_header_as_text(
+    project: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The header's channel explains the residual, so the diagnosis names it."""
+    _hostile_channel(project)
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    done = hevval(project, "diagnose", "hostile.hevval.yaml", "--signal", "v")
+    assert done.returncode == 0, done.stderr
+    assert "amb" in done.stdout, done.stdout
+    assert _forges(done.stdout + done.stderr) == []
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("run", "hostile.hevval.yaml", "--no-history", "--compare"),
+        ("history",),
+        ("compare", "history:latest", "hostile.json"),
+    ],
+    ids=["run --compare", "history", "compare"],
+)
+def test_a_model_version_from_history_is_printed_as_text(
+    project: Path, monkeypatch: pytest.MonkeyPatch, argv: tuple[str, ...]
+) -> None:
+    """A record written by another tool, whose model version and spec name forge commands."""
+    _record(project, model_version=HOSTILE_NAME)
+    assert hevval(project, "run", "hostile.hevval.yaml", "--json", "hostile.json").returncode == 0
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    done = hevval(project, *argv)
+    assert "amb" in done.stdout, done.stdout + done.stderr
+    assert _forges(done.stdout + done.stderr) == []
+
+
+def test_pytest_prints_a_model_version_from_history_as_text(
+    pytester: pytest.Pytester, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "sim.csv", index=False)
+    _spec(pytester.path, SPEC)
+    _record(pytester.path, model_version=HOSTILE_NAME)
+    monkeypatch.setenv("GITHUB_ACTIONS", "true")
+    result = pytester.runpytest_subprocess("--hevval", "--hevval-compare", "-p", "no:cacheprovider")
+    output = result.stdout.str() + result.stderr.str()
+    assert result.ret == 0, output
+    assert "amb" in output, output
+    assert _forges(output) == []
+
+
+def test_compare_markdown_holds_no_raw_html_or_broken_code_span(project: Path) -> None:
+    for version in ("<img src=a onerror=alert(2)>", "v2`<b>`|"):
+        argv = ("run", "hostile.hevval.yaml", "--history", "--model-version", version)
+        assert hevval(project, *argv).returncode == 0
+    done = hevval(project, "compare", "history:previous", "history:latest", "--format", "md")
+    assert done.returncode == 0, done.stderr
+    assert "<img" not in done.stdout, done.stdout
+    assert "<b>" not in done.stdout, done.stdout
+    assert "&lt;img src=a" in done.stdout, done.stdout
+    for line in done.stdout.splitlines():
+        assert line.replace("\\`", "").count("`") % 2 == 0, line
+
+
+def test_an_output_stream_that_cannot_encode_phi(
+    project: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("PYTHONIOENCODING", "ascii")
+    for argv in (("run", "hostile.hevval.yaml", "--no-history", "--details"),):
+        done = hevval(project, *argv)
+        assert done.returncode == 0, done.stderr
+        assert "\\u03a6" in done.stdout, done.stdout
+
+
+# -- encodings a file announces -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-be", "utf-32"])
+def test_a_csv_with_a_byte_order_mark_is_read_in_its_encoding(project: Path, encoding: str) -> None:
+    text = (project / "ref.csv").read_text("utf-8")
+    bom = {"utf-16-be": "\ufeff"}.get(encoding, "")
+    (project / "ref.csv").write_bytes((bom + text).encode(encoding))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == pytest.approx(0.01, abs=1e-9)
+
+
+# -- names that mean something to a library ---------------------------------------------------
+
+
+def test_a_plot_of_a_signal_named_with_maths_markup(project: Path) -> None:
+    pytest.importorskip("matplotlib")
+    name = json.dumps("fuel $_$ rate")
+    _spec(project, SPEC.replace("{signal: v}", f"{{signal: {name}, ref: v, sim: v}}"))
+    _record(project, model_version="$\\frac{1}{$")
+    done = hevval(project, "history", "--signal", "fuel $_$ rate", "--plot", "trend.png")
+    assert done.returncode == 0, done.stderr
+    assert (project / "trend.png").stat().st_size > 0
+
+
+def test_a_rate_limit_on_a_misspelt_channel_says_which_was_meant(project: Path) -> None:
+    quality = "data_quality: {action: error, rate_limits: {w: 0.001}}\n"
+    _spec(project, SPEC.replace("sets:", quality + "sets:"))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history")
+    _clear_error(done, "hostile.hevval.yaml", "data_quality.rate_limits.w", "never be checked")
+
+
+# -- globbing only where a spec asks for it ----------------------------------------------------
+
+
+def test_a_reference_path_naming_an_existing_file_is_that_file(project: Path) -> None:
+    """``trip[1].csv`` exists beside ``trip1.csv`` (other data): the named file is scored."""
+    (project / "ref.csv").rename(project / "trip[1].csv")
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.cos(t) * 5}).to_csv(project / "trip1.csv", index=False)
+    _spec(project, SPEC.replace("{path: ref.csv}", '{path: "trip[1].csv"}'))
+    done = hevval(project, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == pytest.approx(0.01, abs=1e-9)
+
+
+def test_a_campaign_in_a_folder_whose_name_looks_like_a_pattern(tmp_path: Path) -> None:
+    folder = tmp_path / "camp[abc]"
+    for side in ("ref", "sim"):
+        (folder / side).mkdir(parents=True)
+    t = np.arange(0.0, 30.0, 0.1)
+    for trip in ("A", "B"):
+        frame = pd.DataFrame({"t": t, "v": np.sin(t)})
+        frame.to_csv(folder / "ref" / f"{trip}.csv", index=False)
+        frame.assign(v=frame.v + 0.01).to_csv(folder / "sim" / f"{trip}.csv", index=False)
+    spec = (
+        "name: campaign\nreference: {path: ref/*.csv}\n"
+        "model: {path: 'sim/{id}.csv'}\nsets:\n  - {signal: v}\n"
+    )
+    _spec(folder, spec)
+    done = hevval(folder, "run", "hostile.hevval.yaml", "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stdout + done.stderr
+    specs = json.loads((folder / "out.json").read_text("utf-8"))["specs"]
+    assert len(specs) == 2
+
+
+# -- signals and cleanup on every write --------------------------------------------------------
+
+SLOW_REPORT = """\
+import os
+import sys
+import time
+
+from pytest_hevval import cli
+
+fsync = os.fsync
+
+
+def slow_fsync(fd):
+    if os.readlink(f"/proc/self/fd/{fd}").endswith(".part") and "report" in os.readlink(
+        f"/proc/self/fd/{fd}"
+    ):
+        print("writing", flush=True)
+        time.sleep(60)
+    fsync(fd)
+
+
+os.fsync = slow_fsync
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/fd").is_dir(), reason="needs /proc to see the file")
+def test_sigterm_while_a_report_is_written_leaves_no_temporary_file(project: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+
+    (project / "slow.py").write_text(SLOW_REPORT, encoding="utf-8")
+    argv = ["run", "hostile.hevval.yaml", "--no-history", "--report", "html,json,md"]
+    with subprocess.Popen(
+        [sys.executable, "slow.py", *argv], cwd=project, stdout=subprocess.PIPE, text=True
+    ) as child:
+        try:
+            assert child.stdout is not None
+            lines = iter(child.stdout.readline, "")
+            assert "writing\n" in lines, "the report was never written"
+            assert list((project / ".hevval" / "report").glob(".tmp-*.part"))
+            child.send_signal(signal.SIGTERM)
+            assert child.wait(timeout=30) == -signal.SIGTERM
+        finally:
+            child.kill()
+    assert list((project / ".hevval" / "report").glob(".tmp-*")) == []
+
+
+# -- specs pytest's walk would pass by --------------------------------------------------------
+
+
+def test_pytest_names_a_spec_that_is_a_link_loop_or_dangling(pytester: pytest.Pytester) -> None:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "ref.csv", index=False)
+    pd.DataFrame({"t": t, "v": np.sin(t)}).to_csv(pytester.path / "sim.csv", index=False)
+    _spec(pytester.path, SPEC)
+    (pytester.path / "loop.hevval.yaml").symlink_to("loop.hevval.yaml")
+    (pytester.path / "dangling.hevval.yaml").symlink_to("gone.hevval.yaml")
+    result = pytester.runpytest_subprocess("--hevval", "-p", "no:cacheprovider")
+    output = result.stdout.str()
+    assert result.ret == pytest.ExitCode.INTERRUPTED, output
+    assert "loop.hevval.yaml: cannot read the spec file (a loop of symbolic links)" in output
+    assert (
+        "dangling.hevval.yaml: cannot read the spec file (a symbolic link to "
+        "'gone.hevval.yaml', which does not exist)" in output
+    ), output
+    result.assert_outcomes(errors=2)
+
+
+# -- a model callable gets what it declares, and never a scored signal unasked ------------------
+
+COPYCAT = '''\
+import pandas as pd
+
+
+def copy(frame):
+    """A wrong model that reads the measured signal it is scored on."""
+    return pd.DataFrame({"time": frame["time"], "v": frame["v"], "w": frame.get("w", 0.0)})
+'''
+
+
+def _copycat(project: Path, model_keys: str) -> str:
+    t = np.arange(0.0, 30.0, 0.1)
+    pd.DataFrame({"t": t, "v": np.sin(t), "w": np.cos(t)}).to_csv(project / "ref.csv", index=False)
+    return _callable_spec(
+        project, "copy", model_keys, source=COPYCAT, more="candidates: {heat: w}\n"
+    )
+
+
+def test_a_model_given_no_inputs_does_not_receive_the_signal_it_is_scored_on(
+    project: Path,
+) -> None:
+    spec = _copycat(project, "")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "model.inputs", "asked for the column 'v'")
+
+
+def test_a_scored_signal_among_the_inputs_is_refused_with_the_key_that_allows_it(
+    project: Path,
+) -> None:
+    spec = _copycat(project, ", inputs: [v]")
+    done = hevval(project, "run", spec, "--no-history")
+    _clear_error(done, "model.inputs[0]", "a measured signal the spec scores", "driven_by:")
+
+
+def test_a_model_driven_by_a_scored_signal_on_purpose(project: Path) -> None:
+    spec = _copycat(project, ", driven_by: [v]")
+    done = hevval(project, "run", spec, "--no-history", "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    (signal,) = json.loads((project / "out.json").read_text("utf-8"))["signals"]
+    assert signal["mae"] == 0.0
+
+
+def test_a_link_in_place_of_an_output_does_not_carry_the_write_elsewhere(project: Path) -> None:
+    """The link is replaced by the new file; the file it pointed at is left as it was."""
+    outside = project / "outside.txt"
+    outside.write_text("keep", encoding="utf-8")
+    report = project / ".hevval" / "report"
+    report.mkdir(parents=True)
+    for name in ("report.html", "report.json", "report.md"):
+        (report / name).symlink_to(outside)
+    (project / "out.json").symlink_to(outside)
+    argv = ("run", "hostile.hevval.yaml", "--no-history", "--report", "html,json,md")
+    done = hevval(project, *argv, "--json", "out.json")
+    assert done.returncode == 0, done.stderr
+    assert outside.read_text("utf-8") == "keep"
+    for path in (report / "report.html", report / "report.json", project / "out.json"):
+        assert not path.is_symlink(), path
+        assert path.stat().st_size > 0

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from ..core.registry import describe
+from ..escape import markdown, markdown_code
 from .compare import Comparison, FieldDelta, Regression, SignalComparison
 
 __all__ = ["FORMATS", "comparison_json", "comparison_markdown", "comparison_table", "render"]
@@ -148,33 +149,32 @@ def _footer_text(comparison: Comparison, found: Sequence[Regression] | None) -> 
     return lines
 
 
-def _md_escape(text: str) -> str:
-    return text.replace("|", "\\|")
-
-
 def comparison_markdown(comparison: Comparison, found: Sequence[Regression] | None = None) -> str:
     """GitHub-flavoured Markdown: one table per signal, then a Φ table."""
-    before, after = _md_escape(comparison.before_label), _md_escape(comparison.after_label)
-    lines = [f"## hevval compare `{before}` → `{after}`"]
+    before, after = markdown(comparison.before_label), markdown(comparison.after_label)
+    lines = [
+        "## hevval compare "
+        f"{markdown_code(comparison.before_label)} → {markdown_code(comparison.after_label)}"
+    ]
     for spec in comparison.specs:
-        lines += ["", f"### {_md_escape(spec.name)} (`{_md_escape(spec.key)}`)"]
+        lines += ["", f"### {markdown(spec.name)} ({markdown_code(spec.key)})"]
         for signal in spec.signals:
-            unit = f" [{_md_escape(signal.unit)}]" if signal.unit else ""
+            unit = f" [{markdown(signal.unit)}]" if signal.unit else ""
             lines += [
                 "",
-                f"#### `{_md_escape(signal.path)}`{unit}: "
+                f"#### {markdown_code(signal.path)}{unit}: "
                 f"{_passed(signal.passed_before, signal.passed_after)}",
                 "",
                 f"| | {before} | {after} | Δ |",
                 "|---|---:|---:|---:|",
             ]
             lines += [
-                f"| {_md_escape(label)} | {b} | {a} | {d} |"
+                f"| {markdown(label)} | {b} | {a} | {d} |"
                 for label, b, a, d in _signal_rows(signal)
             ]
-        extra = [f"- `{_md_escape(p)}`: new (no baseline)" for p in spec.added_signals]
+        extra = [f"- {markdown_code(p)}: new (no baseline)" for p in spec.added_signals]
         extra += [
-            f"- `{_md_escape(p)}`: missing from the current run" for p in spec.removed_signals
+            f"- {markdown_code(p)}: missing from the current run" for p in spec.removed_signals
         ]
         if extra:
             lines += ["", *extra]
@@ -187,19 +187,19 @@ def comparison_markdown(comparison: Comparison, found: Sequence[Regression] | No
     ]
     for spec in comparison.specs:
         lines.append(
-            f"| `{_md_escape(spec.key)}` | {_value(spec.phi.before, physical=False)} | "
+            f"| {markdown_code(spec.key)} | {_value(spec.phi.before, physical=False)} | "
             f"{_value(spec.phi.after, physical=False)} | {_delta(spec.phi, physical=False)} | "
             f"{_passed(spec.passed_before, spec.passed_after)} |"
         )
-    notes = [f"- `{_md_escape(k)}`: new spec (no baseline)" for k in comparison.added_specs]
+    notes = [f"- {markdown_code(k)}: new spec (no baseline)" for k in comparison.added_specs]
     notes += [
-        f"- `{_md_escape(k)}`: missing from the current run" for k in comparison.removed_specs
+        f"- {markdown_code(k)}: missing from the current run" for k in comparison.removed_specs
     ]
     if notes:
         lines += ["", *notes]
     if found is not None:
         lines += ["", "### Regressions", ""]
-        lines += [f"- {_md_escape(str(item))}" for item in found] or ["None."]
+        lines += [f"- {markdown(str(item))}" for item in found] or ["None."]
     return "\n".join(lines) + "\n"
 
 

@@ -19,7 +19,6 @@ when something asks for older data. :meth:`HistoryStore.entries` still reads the
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import json
 import os
@@ -32,7 +31,14 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ..defaults import HISTORY_DIR
-from ..files import fsync_directory, publish, read_input, read_json, write_temporary
+from ..files import (
+    forget_temporary,
+    fsync_directory,
+    publish,
+    read_input,
+    read_json,
+    write_temporary,
+)
 from ._base import HistoryError
 from .index import (
     TREND_RUNS,
@@ -127,8 +133,7 @@ class HistoryStore:
         except OSError as exc:
             raise _write_error(self.directory, exc) from None
         finally:
-            with contextlib.suppress(FileNotFoundError):
-                temp.unlink()
+            forget_temporary(temp)
         self._index_new(final, len(payload), checked)
         return final
 

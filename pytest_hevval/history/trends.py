@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.registry import describe, order_names
+from ..escape import plot_text
 from ..files import write_atomic
 from ..results.codec import json_number, keyed_lambdas
 from ._base import HistoryError, spec_key
@@ -394,7 +395,7 @@ def plot_history(rows: Sequence[HistoryRow], path: Path | str) -> Path:
         )
     for spec, points in phi.items():
         xs = sorted(points)
-        axes[0].plot(xs, [points[x] for x in xs], "o-", label=spec)
+        axes[0].plot(xs, [points[x] for x in xs], "o-", label=plot_text(spec))
     if with_signals:
         for (_spec, signal), series in row_series(rows).items():
             xs = [x_of[(r.started_utc, r.model_version)] for r in series]
@@ -404,14 +405,14 @@ def plot_history(rows: Sequence[HistoryRow], path: Path | str) -> Path:
                     xs,
                     [np.nan if y is None else y for y in ys],
                     ".-",
-                    label=f"{signal} {describe(name).symbol}",
+                    label=f"{plot_text(signal)} {describe(name).symbol}",
                 )
         axes[1].set_ylabel("λ")
         axes[1].legend(fontsize="x-small", ncol=2, loc="best")
     axes[0].set_ylabel("Φ")
     axes[0].legend(fontsize="small", loc="best")
     axes[-1].set_xticks(range(len(runs)))
-    axes[-1].set_xticklabels([version for _, version in runs], rotation=45, ha="right")
+    axes[-1].set_xticklabels([plot_text(version) for _, version in runs], rotation=45, ha="right")
     axes[-1].set_xlabel("model version (oldest first)")
     buffer = io.BytesIO()
     figure.savefig(buffer, format=path.suffix.lower().lstrip("."))

@@ -9,7 +9,8 @@ installing the plugin costs other test runs in the environment nothing (see
 from __future__ import annotations
 
 import fnmatch
-from collections.abc import Generator
+import os
+from collections.abc import Generator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +28,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     if not get_option(config, ""):
         return
+    from ..files import remove_temporaries_on_signals
     from .session import HevvalSession
 
+    remove_temporaries_on_signals()
     state = HevvalSession(config)
     config.stash[session_key] = state
     state.validate_options()
@@ -52,6 +55,42 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> pytest.Col
 
         return SpecFile.from_parent(parent, path=file_path)
     return None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_collect_directory(
+    path: Path, parent: pytest.Collector
+) -> Generator[None, pytest.Collector | None, pytest.Collector | None]:
+    """A spec that is a dangling symbolic link or a link loop is neither a file nor a folder,
+    so pytest's walk passes it by without a word; collected as a spec, it is an error that
+    says why it cannot be read."""
+    collector = yield
+    state = state_of(parent.config)
+    if collector is None or state is None:
+        return collector
+    patterns = state.option("files")
+    try:
+        broken = sorted(
+            Path(entry.path)
+            for entry in os.scandir(path)
+            if any(fnmatch.fnmatch(entry.name, pattern) for pattern in patterns)
+            and entry.is_symlink()
+            and not os.path.exists(entry.path)
+        )
+    except OSError:
+        return collector
+    if broken:
+        walk = collector.collect
+
+        def collect() -> Iterator[pytest.Item | pytest.Collector]:
+            yield from walk()
+            for file_path in broken:
+                yield from collector.ihook.pytest_collect_file(
+                    file_path=file_path, parent=collector
+                )
+
+        collector.collect = collect  # type: ignore[method-assign]
+    return collector
 
 
 @pytest.hookimpl(wrapper=True)

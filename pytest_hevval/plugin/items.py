@@ -20,6 +20,7 @@ from _pytest._code.code import TerminalRepr
 
 from ..core.registry import describe
 from ..errors import HevvalError
+from ..escape import terminal
 from ..report.terminal import phi_report, runtime_report, signal_failure_report
 from ..results.spec_result import SignalResult, SpecResult
 from ..scoring.engine import Evaluation
@@ -69,7 +70,7 @@ class ThresholdMissed(Exception):
 
 def _hevval_repr(excinfo: pytest.ExceptionInfo[BaseException]) -> str | None:
     if isinstance(excinfo.value, (HevvalError, ThresholdMissed)):
-        return str(excinfo.value)
+        return terminal(excinfo.value)
     return None
 
 
@@ -88,7 +89,8 @@ class SpecFile(pytest.File):
             return
         for recording in spec.per_recording():
             state.register(recording)
-            yield Recording.from_parent(self, name=str(recording.recording), spec=recording)
+            name = terminal(recording.recording).replace("\n", "\\n")
+            yield Recording.from_parent(self, name=name, spec=recording)
         yield CampaignItem.from_parent(self, name="campaign", spec=spec, line=spec.campaign.line)
 
     def repr_failure(  # type: ignore[override]
@@ -100,7 +102,8 @@ class SpecFile(pytest.File):
 
 def _spec_items(parent: pytest.Collector, spec: Spec) -> Iterator[pytest.Item]:
     for _, path, node in spec.walk():
-        yield SignalItem.from_parent(parent, name="/".join(path), spec=spec, line=node.line)
+        name = terminal("/".join(path)).replace("\n", "\\n")
+        yield SignalItem.from_parent(parent, name=name, spec=spec, line=node.line)
     yield PhiItem.from_parent(parent, name="Phi", spec=spec, line=spec.min_phi_line)
     if spec.runtime.gated:
         yield RuntimeItem.from_parent(parent, name="runtime", spec=spec, line=spec.runtime.line)
@@ -144,7 +147,7 @@ class _SpecItem(pytest.Item):
             # In collection order, so that the spec's first item shows the error, as when
             # every item runs on its own (the items this one carries come before it).
             texts = {
-                item.nodeid: self.state.error_once(self.spec.key, item.nodeid, exc)
+                item.nodeid: terminal(self.state.error_once(self.spec.key, item.nodeid, exc))
                 for item in [*self.carried, self]
             }
             message = texts[self.nodeid]

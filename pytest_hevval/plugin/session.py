@@ -23,6 +23,7 @@ from _pytest._io import TerminalWriter
 
 from ..data.remote import relative_to
 from ..errors import HevvalError
+from ..escape import terminal
 from ..options import get_option
 from ..publish import Publisher, PublishOptions, diagnosis_panels
 from ..report.terminal import run_summary
@@ -370,10 +371,10 @@ class HevvalSession:
         for line in run_summary(
             results, details=bool(self.option("details")), verdict=self.verdict
         ):
-            terminalreporter.write_line(line)
+            terminalreporter.write_line(terminal(line))
         for note in self.notes:
             for line in note.splitlines():
-                terminalreporter.write_line(line)
+                terminalreporter.write_line(terminal(line))
 
 
 def _is_spec_item(report: pytest.TestReport) -> bool:
@@ -430,7 +431,7 @@ def _log_gate(
             "keywords": gate["keywords"],
             "outcome": "passed" if failure is None else "failed",
             "when": "call",
-            "longrepr": failure,
+            "longrepr": None if failure is None else terminal(failure),
             "user_properties": [
                 *gate.get("properties", []),
                 *([] if pass_rate is None else [["pass_rate", f"{pass_rate:.6f}"]]),

@@ -13,6 +13,7 @@ from typing import Any
 
 from .. import __version__
 from ..defaults import split_key
+from ..escape import markdown, markdown_code
 from ..results.codec import plain_json
 from ..results.verdict import RunVerdict
 from . import model
@@ -174,19 +175,11 @@ def _phi_cell(recording: Mapping[str, Any]) -> str:
 
 def _md(text: object) -> str:
     """Text safe inside a GitHub Markdown table cell (no table breaks, no raw HTML)."""
-    return (
-        str(text)
-        .replace("\\", "\\\\")
-        .replace("|", "\\|")
-        .replace("<", "&lt;")
-        .replace(">", "&gt;")
-        .replace("\n", " ")
-    )
+    return markdown(text)
 
 
 def _code(text: object) -> str:
-    body = _md(text).replace("`", "'")
-    return f"`{body}`"
+    return markdown_code(text)
 
 
 def _phi(spec: Mapping[str, Any]) -> str:

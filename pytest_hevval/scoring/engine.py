@@ -36,6 +36,8 @@ from ..errors import (
     DegenerateSignalError,
     ExpressionError,
     HevvalError,
+    SpecError,
+    did_you_mean,
 )
 from ..results.diagnosis import SignalDiagnosis
 from ..results.local import LocalFailure, LocalResult
@@ -310,7 +312,7 @@ def _run_model(spec: Spec, reference: Record, folders: list[Path]) -> Record:
     if model.kind == "callable":
         from ..data.models import run_callable
 
-        inputs = list(model.inputs) or sorted(spec.reference_columns())
+        inputs = spec.callable_inputs()
         try:
             return run_callable(
                 str(model.callable),
@@ -593,6 +595,23 @@ def _evaluate(
     )
 
 
+def _check_rate_limits(spec: Spec, examined: set[str]) -> None:
+    """A rate limit on a channel the quality check does not examine would never run: a
+    misspelt channel, most likely, which the spec must hear of."""
+    for channel in spec.data_quality.rate_limits:
+        if channel not in examined:
+            suggestion = did_you_mean(channel, sorted(examined))
+            raise SpecError(
+                "no signal of the spec reads this measured channel, so its rate limit "
+                "would never be checked",
+                file=str(spec.path),
+                key=f"data_quality.rate_limits.{channel}",
+                hint=suggestion
+                or "name a measured channel the spec reads: "
+                + ", ".join(repr(c) for c in sorted(examined)[:12]),
+            )
+
+
 def _align(
     spec: Spec,
     nodes: list[tuple[int, NodePath, SignalSpec]],
@@ -609,6 +628,7 @@ def _align(
     for expression in _local_expressions(spec):
         ref_columns.update(_columns_of(expression, reference))
     alignment = spec.alignment
+    _check_rate_limits(spec, ref_columns)
     # On the scoring threads: the channels' values are examined side by side.
     findings = assess(
         reference, sorted(ref_columns), spec.data_quality, threads=scoring_threads(workers)

@@ -11,6 +11,7 @@ import glob
 import hashlib
 import itertools
 import math
+import os
 import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -41,7 +42,7 @@ from ..defaults import (
     requirement_id_problem,
 )
 from ..errors import ExpressionError, SpecError, did_you_mean
-from ..files import read_input
+from ..files import read_input, unreadable
 from .expressions import Expression, parse_signal
 from .model import (
     ID_FIELD,
@@ -126,6 +127,7 @@ _MODEL_KEYS = (
     "fmu",
     "params",
     "inputs",
+    "driven_by",
     "outputs",
     "step_size",
     *_FMU_KEYS,
@@ -355,7 +357,7 @@ def load_spec(path: str | Path) -> Spec:
         raw = read_input(spec_path)
     except OSError as exc:
         raise SpecError(
-            f"cannot read the spec file ({exc.strerror or exc})", file=str(spec_path)
+            f"cannot read the spec file ({unreadable(spec_path, exc)})", file=str(spec_path)
         ) from None
     try:
         text = raw.decode("utf-8")
@@ -432,7 +434,7 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
                 hint="see docs/spec.md for the format",
             )
     base = path.parent
-    table = "recordings" in top and not _is_pattern(top["reference"])
+    table = "recordings" in top and not _is_pattern(top["reference"], base)
     reference = _source(
         context, top["reference"], top.line_of("reference"), "reference", base, path_optional=table
     )
@@ -487,6 +489,10 @@ def parse_spec_text(text: str, path: Path, text_hash: str | None = None) -> Spec
     if regions and regions.gate:
         _check_local_scored(context, regions.gate.thresholds, None, "regions.gate.thresholds")
     _check_phi_defined(context, roots, sets_line)
+    if model.kind == "callable":
+        _check_callable_inputs(
+            context, model, {c for _, node in _all_nodes(roots) for c in node.ref.columns}
+        )
     name = context.get(top, "name", "", context.text, _default_name(path))
     if not name.isprintable():
         raise context.error(
@@ -674,15 +680,9 @@ def _source(
         input_line = mapping.line_of("inputs")
         if kind == "fmu":
             fmu_inputs = _string_mapping(context, raw_inputs, input_line, input_key)
-        elif isinstance(raw_inputs, LineList):
-            inputs = tuple(
-                context.text(v, raw_inputs.line_of(i), _join(input_key, i))
-                for i, v in enumerate(raw_inputs)
-            )
         else:
-            raise context.error(
-                input_line, input_key, "must be a list of column names", got=raw_inputs
-            )
+            inputs = _column_list(context, mapping, "inputs", key)
+    driven_by = _column_list(context, mapping, "driven_by", key) if "driven_by" in mapping else ()
     fmu_outputs: dict[str, str] = {}
     if "outputs" in mapping:
         fmu_outputs = _string_mapping(
@@ -697,6 +697,7 @@ def _source(
         params=params,
         inputs=inputs,
         fmu_inputs=fmu_inputs,
+        driven_by=driven_by,
         fmu_outputs=fmu_outputs,
         step_size=context.get(mapping, "step_size", key, context.positive, None),
         fmu_run=_fmu_run(context, mapping, key, kind),
@@ -736,6 +737,29 @@ def _with_events(source: SourceSpec) -> SourceSpec:
     """``source`` read with events: two rows at one time stamp (docs/data.md#fmu-models)."""
     options = dataclasses.replace(source.options, extra={**source.options.extra, "events": True})
     return dataclasses.replace(source, options=options)
+
+
+def _column_list(context: _Context, mapping: LineDict, name: str, key: str) -> tuple[str, ...]:
+    raw = mapping[name]
+    where = _join(key, name)
+    if not isinstance(raw, LineList):
+        raise context.error(mapping.line_of(name), where, "must be a list of column names", got=raw)
+    return tuple(context.text(v, raw.line_of(i), _join(where, i)) for i, v in enumerate(raw))
+
+
+def _check_callable_inputs(context: _Context, model: SourceSpec, scored: set[str]) -> None:
+    """A model callable handed a signal it is scored on can pass by copying it: that takes
+    saying so, under ``driven_by:``."""
+    for i, name in enumerate(model.inputs):
+        if name in scored and name not in model.driven_by:
+            raise context.error(
+                model.line,
+                f"model.inputs[{i}]",
+                f"{name!r} is a measured signal the spec scores; a model handed it can pass by "
+                "copying it",
+                hint=f"if the model is meant to be driven by it (a drive cycle's speed), list "
+                f"{name!r} under `driven_by:` instead",
+            )
 
 
 def _can_format(context: _Context, mapping: LineDict, key: str, fmt: str | None) -> str:
@@ -1477,17 +1501,33 @@ def thresholds_mapping(values: Mapping[str, float]) -> dict[str, float]:
     return out
 
 
-def _is_pattern(reference: Any) -> bool:
-    """A reference path with glob wildcards names a campaign's recordings."""
-    raw = reference.get("path") if isinstance(reference, LineDict) else reference
-    return isinstance(raw, str) and not is_url(raw) and glob.has_magic(raw)
+def _is_pattern(reference: Any, base: Path) -> bool:
+    """A reference path with glob wildcards names a campaign's recordings, unless it names an
+    existing file: ``trip[1].csv`` is that file, not ``trip1.csv``."""
+    raw = _raw_path(reference)
+    return (
+        isinstance(raw, str)
+        and not is_url(raw)
+        and glob.has_magic(raw)
+        and not os.path.exists(base / raw)
+    )
+
+
+def _raw_path(reference: Any) -> Any:
+    return reference.get("path") if isinstance(reference, LineDict) else reference
+
+
+def _matches(raw: str, base: Path) -> list[str]:
+    """The files a pattern matches, relative to ``base``, whose own name is never a pattern
+    (a spec in a folder named ``camp[abc]``)."""
+    return sorted(glob.glob(os.path.join(glob.escape(str(base)), raw)))
 
 
 def _campaign(
     context: _Context, top: LineDict, reference: SourceSpec, model: SourceSpec, base: Path
 ) -> CampaignSpec | None:
     """The recordings of a campaign: the files a reference pattern matches, or a table."""
-    pattern = _is_pattern(top["reference"])
+    pattern = _is_pattern(top["reference"], base)
     if not pattern and "recordings" not in top:
         if model.kind == "file" and model.path is not None and ID_FIELD in model.path:
             raise context.error(
@@ -1515,7 +1555,7 @@ def _campaign(
     matched: dict[str, str] = {}
     if pattern:
         assert reference.path is not None
-        for found in sorted(glob.glob(reference.path)):
+        for found in _matches(str(_raw_path(top["reference"])), base):
             matched.setdefault(_recording_id(found), found)
         if not matched:
             raise context.error(

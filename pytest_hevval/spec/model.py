@@ -79,6 +79,9 @@ class SourceSpec:
     #: Callable: reference channels handed over. FMU: FMU input name → reference channel.
     inputs: tuple[str, ...] = ()
     fmu_inputs: Mapping[str, str] = field(default_factory=dict)
+    #: Callable: measured channels the spec scores that the model is meant to be driven by
+    #: (a drive cycle's speed), handed over on purpose.
+    driven_by: tuple[str, ...] = ()
     #: FMU: signal column → FMU output variable.
     fmu_outputs: Mapping[str, str] = field(default_factory=dict)
     step_size: float | None = None
@@ -391,6 +394,18 @@ class Spec:
         """β of every scored characteristic, keyed by name."""
         return {c.name: self.weights.get(c.name, c.default_weight) for c in self.characteristics()}
 
+    def scored_reference_columns(self) -> set[str]:
+        """The measured channels the spec's signals are scored on."""
+        return {column for _, _, node in self.walk() for column in node.ref.columns}
+
+    def callable_inputs(self) -> list[str]:
+        """What a model callable receives: its ``inputs`` and ``driven_by``, and the measured
+        channels the spec reads but does not score; never, unasked, a scored signal, which a
+        model could pass by copying."""
+        scored = self.scored_reference_columns()
+        unscored = sorted(self.reference_columns() - scored)
+        return list(dict.fromkeys([*self.model.inputs, *self.model.driven_by, *unscored]))
+
     def reference_columns(self) -> set[str]:
         columns: set[str] = set()
         for _, _, node in self.walk():
@@ -398,6 +413,7 @@ class Spec:
         for expression in self.candidates.values():
             columns.update(expression.columns)
         columns.update(self.model.inputs)
+        columns.update(self.model.driven_by)
         columns.update(self.model.fmu_inputs.values())
         if self.alignment.offset_from:
             columns.add(self.alignment.offset_from[0])

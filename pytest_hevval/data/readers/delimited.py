@@ -48,7 +48,7 @@ def _read_head(path: str) -> bytes:
 def _check_text(path: str, head: bytes) -> None:
     """A delimited file is text: NUL bytes say it is binary (or a file still being written)."""
     at = head.find(b"\x00")
-    if at >= 0 and not head.startswith((b"\xff\xfe", b"\xfe\xff")):
+    if at >= 0:
         raise DataError(
             f"byte {at} is a NUL byte: this is not a text CSV or TSV file",
             file=path,
@@ -57,9 +57,21 @@ def _check_text(path: str, head: bytes) -> None:
         )
 
 
+#: Byte-order marks and the encodings they announce; UTF-32's before UTF-16's, which they
+#: begin with.
+_BOMS = (
+    (b"\xef\xbb\xbf", "utf-8-sig"),
+    (b"\xff\xfe\x00\x00", "utf-32"),
+    (b"\x00\x00\xfe\xff", "utf-32"),
+    (b"\xff\xfe", "utf-16"),
+    (b"\xfe\xff", "utf-16"),
+)
+
+
 def _sniff_encoding(head: bytes) -> str:
-    if head.startswith(b"\xef\xbb\xbf"):
-        return "utf-8-sig"
+    for bom, encoding in _BOMS:
+        if head.startswith(bom):
+            return encoding
     try:
         head.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -136,7 +148,8 @@ def _read_delimited(
     head = _read_head(path)
     if options.encoding is not None:
         _check_encoding(path, options.encoding)
-    else:  # a declared encoding (UTF-16, UTF-32) has NUL bytes of its own
+    elif not any(head.startswith(bom) for bom, _ in _BOMS):
+        # A declared or announced encoding (UTF-16, UTF-32) has NUL bytes of its own.
         _check_text(path, head)
     encoding = options.encoding or _sniff_encoding(head)
     header = _header_line(head, encoding)
