@@ -42,12 +42,8 @@ reference: {path: ../data/TripA01.parquet, time: "Time [s]"}
 model:
   callable: "models.ev:simulate"
   params: {version: 2}
-  inputs:
-    - "Velocity [km/h]"
-    - "SoC [%]"
-    - "Elevation [m]"
-    - "Heating Power CAN [kW]"
-    - "AirCon Power [kW]"
+  inputs: ["Elevation [m]", "Heating Power CAN [kW]", "AirCon Power [kW]"]
+  driven_by: ["Velocity [km/h]", "SoC [%]"]
 alignment: {max_lag_s: 5}
 thresholds: {lag_correlation: 0.9, mae: 0.95, rms: 0.93}
 min_phi: 0.9
@@ -176,7 +172,8 @@ def _headline(job: Job) -> str:
 
 def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_path: Path) -> None:
     hub = _GitHub(tmp_path)
-    _set_capacity(hub.origin, 1.0)
+    # Main's model starts with a battery 2 % larger than the fitted one.
+    _set_capacity(hub.origin, 1.02)
 
     # 1. main's first run: no baseline yet, and none is made behind the team's back.
     first = hub.push_main("Model v1 on main")
@@ -197,30 +194,39 @@ def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_pat
     assert len(hub.history()) == 2
     assert hub.records()[-1]["accepted"] is True
 
-    # 4. a pull request that lowers the capacity by 5 %: fails, naming the signal.
+    # 4. a pull request that lowers the capacity to 95 % of the fitted one: fails, naming the
+    #    signal, in the summary and the comment.
     hub.origin.switch("smaller-battery", create=True)
     _set_capacity(hub.origin, 0.95)
-    regressing, regressing_event = hub.pull_request("smaller-battery", "Capacity -5 %")
+    regressing, regressing_event = hub.pull_request("smaller-battery", "Capacity -7 %")
     assert not regressing.passed, regressing.log
-    assert "SoC" in regressing.summary
+    assert "SoC: λ4 rms dropped" in regressing.summary
     assert "❌" in _headline(regressing)
+    assert "regression" in _headline(regressing)
     assert len(hub.history()) == 2  # a pull request never writes the history
     comments = [call for call in regressing.gh_calls if call["args"][:2] == ["pr", "comment"]]
     assert comments
-    assert "SoC" in (comments[-1]["body"] or "")
+    assert "SoC: λ4 rms dropped" in (comments[-1]["body"] or "")
+    report = json.loads((regressing.artifacts / "hevval-report" / "report.json").read_text())
+    assert report["summary"]["passed"] is False
+    junit = (regressing.artifacts / "hevval-report" / "junit.xml").read_text()
+    assert 'failures="1"' in junit
 
     # 5. re-running the failed job gives the same verdict.
     rerun = hub.rerun(regressing_event)
     assert not rerun.passed
     assert _headline(rerun) == _headline(regressing)
 
-    # 6. a pull request that improves nothing worse: passes, and says what changed.
+    # 6. a pull request that fits the capacity: passes, and says what got better.
     hub.origin.switch("main")
-    hub.origin.switch("tidy", create=True)
-    (hub.origin.clone / "README.md").write_text("A model repository.\n")
-    tidy, _ = hub.pull_request("tidy", "Add a README")
-    assert tidy.passed, tidy.log
-    assert "✅" in _headline(tidy)
+    hub.origin.switch("fitted-battery", create=True)
+    _set_capacity(hub.origin, 1.0)
+    improving, _ = hub.pull_request("fitted-battery", "Capacity as fitted")
+    assert improving.passed, improving.log
+    assert "✅" in _headline(improving)
+    better = re.search(r"(\d+) better", improving.summary)
+    assert better is not None, improving.summary
+    assert int(better.group(1)) > 0
 
     # 7. the regressing pull request merged anyway: main fails, its record is kept but not
     #    accepted, so it does not become the baseline.
@@ -243,6 +249,15 @@ def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_pat
     calm = hub.push_main("After acceptance")
     assert calm.passed, calm.log
 
+    # The headlines docs/history.md quotes are the ones these jobs wrote.
+    _docs_quote(
+        {
+            "regressing pull request": regressing,
+            "improving pull request": improving,
+            "accepting run": accepted,
+        }
+    )
+
     # 10. main's versions over time: `hevval history` on the branch shows the trend.
     shown = subprocess.run(
         [
@@ -259,6 +274,19 @@ def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_pat
     assert shown.returncode == 0, shown.stderr
     versions = {line.split()[2] for line in shown.stdout.splitlines() if re.match(r"\d{4}-", line)}
     assert len(versions) >= 5, shown.stdout
+
+
+def _normalised(line: str) -> str:
+    line = re.sub(r"\b[0-9a-f]{7,40}\b", "<commit>", line)
+    return re.sub(r"\d{4}-\d\d-\d\d \d\d:\d\d", "<time>", line)
+
+
+def _docs_quote(jobs: dict[str, Job]) -> None:
+    text = (ROOT / "docs" / "history.md").read_text(encoding="utf-8")
+    for name, job in jobs.items():
+        found = re.search(rf"<!-- emulated summary: {name} -->\n```markdown\n(.*?)\n", text)
+        assert found is not None, f"docs/history.md quotes no summary of the {name}"
+        assert _normalised(found.group(1)) == _normalised(_headline(job)), name
 
 
 def _checkout_history(hub: _GitHub, folder: Path) -> Path:

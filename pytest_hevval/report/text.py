@@ -271,10 +271,10 @@ def _runtime_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
         if runtime is None and kind != "file":
             continue
         failures = runtime.failures() if runtime is not None else []
-        mark = "❌" if failures else "✅" if runtime is not None and runtime.gate else ""
+        mark = "❌ " if failures else "✅ " if runtime is not None and runtime.gate else ""
         gate = "; ".join(failures) or ("met" if mark else "—")
         rows.append(
-            f"| {mark} {_md(spec.get('name', ''))} | {_md(runtime_text(runtime, kind))} "
+            f"| {mark}{_md(spec.get('name', ''))} | {_md(runtime_text(runtime, kind))} "
             f"| {_md(gate)} |"
         )
     if not rows:
@@ -305,12 +305,15 @@ def render_markdown(
         "|:-:|---|--:|--:|--:|",
     ]
     for spec in spec_results:
-        failing = model.failing_signals(spec)
-        failed = spec.get("passed") is False or str(spec.get("spec")) in regressed
+        failing_paths = {str(s.get("path")) for s in model.failing_signals(spec)}
+        worse = regressed.get(str(spec.get("spec")), frozenset())
+        # A signal failed by a regression counts as failing, as its item does.
+        failing_paths |= {path for path in worse if path is not None}
+        failed = spec.get("passed") is False or bool(worse)
         lines.append(
             f"| {'❌' if failed else '✅'} | {_md(spec.get('name', ''))} "
             f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
-            f"| {len(failing)} / {len(model.items(spec.get('signals')))} |"
+            f"| {len(failing_paths)} / {len(model.items(spec.get('signals')))} |"
         )
     if verdict is not None and comparison is not None:
         from .comparison import comparison_markdown
