@@ -462,7 +462,7 @@ def test_a_model_given_no_inputs_does_not_receive_the_signal_it_is_scored_on(
 ) -> None:
     spec = _copycat(project, "")
     done = hevval(project, "run", spec, "--no-history")
-    _clear_error(done, "model.inputs", "asked for the column 'v'")
+    _clear_error(done, "model.inputs", "asked for the column 'v'", "scores", "driven_by:")
 
 
 def test_a_scored_signal_among_the_inputs_is_refused_with_the_key_that_allows_it(

@@ -281,6 +281,7 @@ def _load_model(
                 folders=folders,
                 spec_file=str(spec.path),
                 options=model.options,
+                scored=spec.scored_reference_columns(),
             )
         except DataError as exc:
             # The spec's `model:` line: where the inputs it names are given.
