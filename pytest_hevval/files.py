@@ -21,6 +21,7 @@ import json
 import os
 import secrets
 import stat
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -141,13 +142,32 @@ def remove_temporaries_on_signals() -> None:
 
 
 def _remove_and_die(number: int, _frame: object) -> None:
+    import shutil
     import signal
 
     for temp in list(_IN_FLIGHT):
         with contextlib.suppress(OSError):
-            os.unlink(temp)
+            if temp.is_dir() and not temp.is_symlink():
+                shutil.rmtree(temp, ignore_errors=True)
+            else:
+                os.unlink(temp)
     signal.signal(number, signal.SIG_DFL)
     os.kill(os.getpid(), number)
+
+
+@contextlib.contextmanager
+def temporary_folder(prefix: str = "hevval-") -> Iterator[Path]:
+    """A new temporary folder, removed afterwards, and by a termination signal before that
+    (see :func:`remove_temporaries_on_signals`)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix=prefix) as folder:
+        path = Path(folder)
+        _IN_FLIGHT.add(path)
+        try:
+            yield path
+        finally:
+            _IN_FLIGHT.discard(path)
 
 
 def forget_temporary(temp: Path) -> None:

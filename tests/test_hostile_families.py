@@ -462,7 +462,7 @@ def test_a_model_given_no_inputs_does_not_receive_the_signal_it_is_scored_on(
 ) -> None:
     spec = _copycat(project, "")
     done = hevval(project, "run", spec, "--no-history")
-    _clear_error(done, "model.inputs", "asked for the column 'v'")
+    _clear_error(done, "model.inputs", "asked for the column 'v'", "scores", "driven_by:")
 
 
 def test_a_scored_signal_among_the_inputs_is_refused_with_the_key_that_allows_it(
@@ -497,3 +497,36 @@ def test_a_link_in_place_of_an_output_does_not_carry_the_write_elsewhere(project
     for path in (report / "report.html", report / "report.json", project / "out.json"):
         assert not path.is_symlink(), path
         assert path.stat().st_size > 0
+
+
+HELD_FOLDER = """\
+import time
+
+from pytest_hevval import files
+
+files.remove_temporaries_on_signals()
+with files.temporary_folder() as folder:
+    (folder / "download.parquet").write_bytes(b"x" * 1000)
+    print(folder, flush=True)
+    time.sleep(60)
+"""
+
+
+def test_sigterm_removes_a_download_folder_in_flight(tmp_path: Path) -> None:
+    """Data read from a URL is copied into a temporary folder first."""
+    import signal
+    import subprocess
+    import sys
+
+    with subprocess.Popen(
+        [sys.executable, "-c", HELD_FOLDER], cwd=tmp_path, stdout=subprocess.PIPE, text=True
+    ) as child:
+        try:
+            assert child.stdout is not None
+            folder = Path(child.stdout.readline().strip())
+            assert (folder / "download.parquet").is_file()
+            child.send_signal(signal.SIGTERM)
+            assert child.wait(timeout=30) == -signal.SIGTERM
+        finally:
+            child.kill()
+    assert not folder.exists()

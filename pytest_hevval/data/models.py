@@ -180,9 +180,11 @@ def run_callable(
     folders: Iterable[Path],
     spec_file: str,
     options: SourceOptions | None = None,
+    scored: Iterable[str] = (),
 ) -> Record:
     """Run ``module:function(reference_frame, **params)`` and return its output as a Record
-    (``options``: how to read its time column, from the spec's ``model:``)."""
+    (``options``: how to read its time column, from the spec's ``model:``; ``scored``: the
+    measured channels the spec scores, which it gets only when they are asked for)."""
     function = import_callable(reference_to, folders, source=spec_file)
     frame = reference_frame(reference, inputs, reference_time)
     label = f"model {reference_to}"
@@ -206,6 +208,15 @@ def run_callable(
         missing = exc.args[0] if isinstance(exc, KeyError) and exc.args else None
         if isinstance(missing, str) and missing not in given:
             in_file = missing in reference.available
+            if missing in set(scored):
+                raise DataError(
+                    f"the model asked for the column {missing!r}{where}, a measured signal "
+                    "the spec scores: a model handed it can pass by copying it",
+                    file=spec_file,
+                    key="model.inputs",
+                    hint=f"if the model is meant to be driven by it, list {missing!r} under "
+                    "`driven_by:` under `model:` in the spec; else the model must compute it",
+                ) from None
             raise DataError(
                 f"the model asked for the column {missing!r}{where}, which it was not given: "
                 "it receives only the columns the spec names"

@@ -24,12 +24,12 @@ import hashlib
 import os
 import re
 import shutil
-import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from typing import IO, Any, cast
 
 from ..errors import DataError, HevvalError, MissingExtraError
+from ..files import temporary_folder
 from .record import Reader, Record, SourceOptions
 
 __all__ = [
@@ -140,7 +140,7 @@ def local_copy(url: str) -> Iterator[str]:
     """
     filesystem, path = _check_file(url)
     name = os.path.basename(path.rstrip("/")) or "data"
-    with tempfile.TemporaryDirectory(prefix="hevval-") as folder:
+    with temporary_folder() as folder:
         local = os.path.join(folder, name)
         try:
             with filesystem.open(path, "rb") as source, open(local, "wb") as target:

@@ -324,6 +324,7 @@ def _run_model(spec: Spec, reference: Record, folders: list[Path]) -> Record:
                 folders=folders,
                 spec_file=str(spec.path),
                 options=model.options,
+                scored=spec.scored_reference_columns(),
             )
         except DataError as exc:
             # The spec's `model:` line: where the inputs it names are given.
