@@ -117,7 +117,8 @@ def test_an_echo_is_a_response_and_declaring_it_a_cause_brings_it_back() -> None
     candidates = [Candidate("load", "channel", load), Candidate("bus_v", "channel", echo)]
     found = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
     assert [r.name for r in found.responses] == ["bus_v"]
-    assert found.responses[0].reason == "follows"
+    # The bus voltage is an instrument of the measured signal: an echo, never a cause.
+    assert found.responses[0].reason == "echo"
     assert found.relevant[0].name == "load"
     assert all(e.name != "bus_v" for e in found.effects)
     declared = diagnose_residual(

@@ -73,11 +73,23 @@ MIN_EXPLAINED_INCREASE = 0.005
 #: mean square. 5 % lowers the RMS error by 2.5 % (√0.95): anything smaller cannot move λ4 by
 #: more than a fortieth of its distance to 1, so it is listed as minor rather than as a cause.
 MIN_SHARE = 0.05
-#: A channel is a response (an echo of the scored signal) when the measured signal and its
-#: running sum explain at least this share of its variance ...
+#: A channel is a response (a consequence of what the model reproduces) when the simulated
+#: signal explains at least this share of its variance ...
 RESPONSE_MIN_R2 = 0.1
-#: ... and the residual adds less than this fraction of that share on top of it.
-RESPONSE_RESIDUAL_RATIO = 0.25
+#: ... and the residual adds less than this fraction of that share on top of it. A response
+#: to the measured signal moves with its simulated part and its residual alike, so the
+#: residual adds about as much as the simulation explains times the residual's share of the
+#: measured signal's variance; a missing load moves with the residual only.
+RESPONSE_RESIDUAL_RATIO = 1.0
+#: A channel is an echo of the scored signal (an instrument of it, its derivative or its
+#: integral) when, on block means of :data:`SLOW_SCALE_S`, the measured signal explains at least
+#: this share of its variance (instrument, derivative) ...
+ECHO_MIN_R2 = 0.8
+#: ... or this share of the variance of its increments (integral: a state of charge) ...
+ECHO_INCREMENT_MIN_R2 = 0.5
+#: ... and the simulated signal explains at least this fraction of that: a missing load that
+#: makes most of the measured signal is explained by it too, but not by the simulation.
+ECHO_SIMULATED_RATIO = 0.5
 #: A channel whose cross-correlation with the measured signal peaks with the channel ahead by
 #: at least RESPONSE_MIN_LEAD_S, within ±RESPONSE_LEAD_WINDOW_S, is treated as an input (the
 #: driver acts, then the power follows), however well the measured signal explains it. A
@@ -233,8 +245,17 @@ class Effect:
     time_scale_s:
         The block length its coefficient was estimated on.
     alone_share:
-        What adding it alone removes of the residual's sum of squares; negative for a term
-        that only helps together with another.
+        What its own least-squares fit removes of the residual's sum of squares about its
+        mean: what the effect does on its own, whatever a correlated term did to its joint
+        coefficient.
+    fix_coefficient, fix_constant:
+        The fix as a user applies it: add ``fix_coefficient`` × the candidate and
+        ``fix_constant`` (in the signal's units) to the model's output. The coefficient is the
+        effect's own least-squares fit to the residual; the constant makes the mean error
+        zero with it, so a model whose constant term already covers part of the effect's
+        mean is told to lower that term. ``predicted`` are the λ of exactly that fix. For the
+        gain: the model's output times 1 + ``fix_coefficient``, plus the constant; for the
+        offset and the lag, the constant and the delay.
     """
 
     name: str
@@ -253,6 +274,8 @@ class Effect:
     stands_in_for: tuple[str, ...] = ()
     time_scale_s: float = 0.0
     alone_share: float = 0.0
+    fix_coefficient: float = 0.0
+    fix_constant: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -264,11 +287,15 @@ class Response:
     name, kind:
         As in the :class:`Candidate`.
     reason:
-        ``"declared"`` (the spec lists it under ``responses:``) or ``"follows"`` (the rule).
+        ``"declared"`` (the spec lists it under ``responses:``), ``"echo"`` (an instrument,
+        derivative or integral of the measured signal) or ``"follows"`` (it moves with the
+        simulated signal, and the residual adds little).
     measured_r2:
-        Share of the channel's variance the measured signal and its running sum explain.
+        ``"follows"``: share of the channel's variance the simulated signal explains.
+        ``"echo"``: share of the variance of the channel (or of its increments) the measured
+        signal explains on block means of :data:`SLOW_SCALE_S`.
     residual_r2:
-        What the residual adds to that share.
+        What the residual adds to that share (``"follows"``).
     lead_s:
         Lead of the channel over the measured signal at the peak of their |cross-correlation|
         within ±2 s (negative: the channel follows).
@@ -450,6 +477,8 @@ def diagnose_residual(
     window_s: float = LOCAL_WINDOW_S,
     groups: Sequence[Collection[str]] = (),
     in_dimension: Collection[str] = (),
+    first: Collection[str] = (),
+    exogenous: Collection[str] = (),
 ) -> Diagnosis:
     """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
 
@@ -475,7 +504,7 @@ def diagnose_residual(
         regressions and tests (explained fractions are computed at the original rate).
     responses, causes:
         Candidate names declared as responses of the scored signal (never offered as the
-        missing effect) or as causes (never classified as responses).
+        missing effect) or as causes (never classified as responses or echoes).
     min_share:
         A significant effect is relevant when fixing it alone removes at least this share of
         the residual's mean square; smaller ones are minor.
@@ -485,8 +514,16 @@ def diagnose_residual(
         Sets of candidate names that measure one effect, whatever their correlation; each is
         reported as one effect (strongly correlated candidates are grouped anyway).
     in_dimension:
-        Candidate names measured in the scored signal's own physical dimension. Of two effects
-        the record cannot tell apart, one of these is named before one that is not.
+        Candidate names measured in the scored signal's own physical dimension. They are
+        tested first (with ``first``), and of two effects the record cannot tell apart, one of
+        these is named before one that is not.
+    first:
+        Further candidate names tested first: the spec's declared suspects. The automatic lag
+        and gain, ``in_dimension`` and these form the first family of the gatekeeping order;
+        every other candidate is tested only on what the first family's effects leave.
+    exogenous:
+        Candidate names the vehicle cannot move (ambient temperature, elevation, time, the
+        model's inputs): never classified as consequences of the scored signal.
 
     Returns
     -------
@@ -563,7 +600,7 @@ def diagnose_residual(
     if not sim_varies:
         notes.append("the simulated signal is constant: gain and lag cannot be estimated")
 
-    user, echoes = _split_responses(ref, ref - sim, dt, user, responses, causes)
+    user, echoes = _split_responses(ref, sim, dt, user, responses, causes, exogenous)
     series = _grouped(
         _candidate_series(sim, lag, dt, window, factor, user, units, names),
         r_g,
@@ -579,9 +616,19 @@ def diagnose_residual(
     slow = _slow_scale(r, kept, dt, factor) if m else None
     if slow is not None:
         scales.append(slow)
-    weights = _holm_weights([s.kind for s in kept])
+    leading = set(in_dimension) | set(first)
+    named = np.array([bool(leading & {s.name, *s.members}) for s in kept], dtype=bool)
+    # The automatic lag and gain are in the signal's dimension: with a first family, they
+    # belong to it. Without one (no unit or suspect given), there is no order to keep.
+    family = named | np.array([s.kind in ("lag", "gain") for s in kept], dtype=bool)
+    gatekeeping = bool(np.any(named))
+    weights = _holm_weights(family if gatekeeping else np.zeros(len(kept), dtype=bool))
     selected, holm_levels, bases = _forward_selection(
-        scales, alpha=alpha, max_selected=max_selected, weights=weights
+        scales,
+        alpha=alpha,
+        max_selected=max_selected,
+        weights=weights,
+        first=family if gatekeeping else None,
     )
     base = bases[0]
 
@@ -990,21 +1037,30 @@ def _slow_scale(r: FloatArray, kept: Sequence[_Series], dt: float, factor: int) 
     return _Scale(slow, r_s, rows, ar_order(r_s - float(np.mean(r_s))))
 
 
-def _holm_weights(kinds: Sequence[str]) -> FloatArray:
-    """Weights of the weighted Holm procedure: the spec's declared candidates (the user's own
-    suspects) share half of the level, every other candidate the other half; equal weights when
-    there are only one or the other."""
-    declared = np.array([k == "declared" for k in kinds])
-    d = int(np.count_nonzero(declared))
-    if d == 0 or d == len(kinds):
-        return np.ones(len(kinds))
-    return np.where(declared, (len(kinds) - d) / d, 1.0)
+def _holm_weights(first: npt.NDArray[np.bool_]) -> FloatArray:
+    """Weights of the weighted Holm procedure: the first family of the gatekeeping order (the
+    automatic terms, the loads in the signal's dimension and the spec's declared suspects)
+    shares half of the level, every other candidate the other half; equal weights when there
+    are only one or the other."""
+    d = int(np.count_nonzero(first))
+    if d == 0 or d == first.shape[0]:
+        return np.ones(first.shape[0])
+    return np.where(first, (first.shape[0] - d) / d, 1.0)
 
 
 def _forward_selection(
-    scales: Sequence[_Scale], *, alpha: float, max_selected: int, weights: FloatArray
+    scales: Sequence[_Scale],
+    *,
+    alpha: float,
+    max_selected: int,
+    weights: FloatArray,
+    first: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[list[int], list[float], list[FloatArray]]:
     """Holm-guarded forward selection; (selected rows, their levels, the final design per scale).
+
+    Gatekeeping order: while a candidate of the first family (``first``) passes, only those
+    can enter; the others are tested on what the first family's selected effects leave. A
+    temperature that follows a heater then explains only what the heater's power does not.
 
     A candidate is tested at every scale and passes when its smallest p-value, times the number
     of scales (Bonferroni), is under its weighted Holm level α·w_j / Σ w of the candidates not
@@ -1046,6 +1102,10 @@ def _forward_selection(
             axis=0,
         ) * len(scales)
         passed = p <= levels[chosen_rows]
+        if first is not None:
+            leading = first[chosen_rows]
+            if np.any(passed & leading):
+                passed &= leading
         if not np.any(passed):
             break
         pick = int(material[int(np.argmax(np.where(passed, gain_r2[material], -np.inf)))])
@@ -1232,60 +1292,95 @@ def _is_minor(e: Effect) -> bool:
 
 def _split_responses(
     ref: FloatArray,
-    residual: FloatArray,
+    sim: FloatArray,
     dt: float,
     user: _UserSeries,
     declared_responses: Collection[str],
     declared_causes: Collection[str],
+    exogenous: Collection[str] = (),
 ) -> tuple[_UserSeries, tuple[Response, ...]]:
-    """The user's candidates that may be causes, and those that echo the scored signal.
+    """The user's candidates that may be causes, and those set apart as responses.
 
-    A channel x is a response when the spec says so, or when (1) the measured signal and its
-    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds
-    less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the
-    measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
-    A missing cause enters the residual and the measured signal alike, so the residual tells
-    about it what the measured signal cannot; an echo of the measured signal (the bus voltage
-    sagging with the power, the state of charge falling with it) is explained by the measured
-    signal and the residual adds nothing.
+    A channel x is set apart when the spec says so (``declared``), or when it is
+
+    * an **echo** of the scored signal: on block means of :data:`SLOW_SCALE_S`, the measured
+      signal explains at least :data:`ECHO_MIN_R2` of x's variance (an instrument of it, its
+      derivative: the bus voltage, the state of charge's rate for a battery power) or
+      :data:`ECHO_INCREMENT_MIN_R2` of the variance of x's increments (its integral: the
+      state of charge), and the simulated signal at least :data:`ECHO_SIMULATED_RATIO` of
+      that. Echoes are never causes, whatever moves them;
+    * a **consequence** of what the model reproduces (``follows``), unless it is exogenous:
+      (1) the simulated signal explains at least :data:`RESPONSE_MIN_R2` of its variance,
+      (2) the residual adds less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3)
+      x does not lead the measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
+
+    The consequence test asks the simulated signal, not the measured one: a missing load is
+    part of the measured signal, so the measured signal always "explains" it, while a response
+    to what the model reproduces moves with the simulation and a missing load moves with the
+    residual only. No running sum enters either test: two slowly trending series correlate
+    whatever their causes. The spec's causes are never set apart.
     """
     kept: _UserSeries = []
     echoes: list[Response] = []
+    residual = ref - sim
     lead_window = max(1, round(RESPONSE_LEAD_WINDOW_S / dt))
-    ref_varies = _varies(ref)
-    # What the measured signal drives: its value (a voltage sagging under load) and its
-    # running sum (a state of charge, a temperature that rises with the energy drawn).
-    running = np.cumsum(ref - float(np.mean(ref))) * dt
+    sim_varies = _varies(sim)
+    slow = max(1, round(SLOW_SCALE_S / dt))
+    if ref.shape[0] // slow < MIN_SLOW_BLOCKS:
+        slow = 1
+    ref_s, sim_s = block_means(ref, slow), block_means(sim, slow)
     for name, kind, values in user:
         if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
             kept.append((name, kind, values))
             continue
-        measured = _full_rate_r2(values, [ref, running])
-        added = _full_rate_r2(values, [ref, running, residual]) - measured
-        # The direction of the peak |correlation|: a voltage falls as the power rises.
-        sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
-        lead = search_lag(ref, sign * values, lead_window).lag if ref_varies else 0
-        declared = name in declared_responses
-        follows = (
-            measured >= RESPONSE_MIN_R2
-            and added < RESPONSE_RESIDUAL_RATIO * measured
-            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
+        explains = _full_rate_r2(residual, [values])
+        if name in declared_responses:
+            echoes.append(Response(name, kind, "declared", 0.0, 0.0, 0.0, explains))
+            continue
+        x_s = block_means(values, slow)
+        echo = max(
+            _echo_share(x_s, ref_s, sim_s),
+            _echo_share(np.diff(x_s), ref_s[1:], sim_s[1:], ECHO_INCREMENT_MIN_R2),
         )
-        if declared or follows:
+        if echo > 0.0:
+            echoes.append(Response(name, kind, "echo", echo, 0.0, 0.0, explains))
+            continue
+        if name in exogenous or not sim_varies:
+            kept.append((name, kind, values))
+            continue
+        by_sim = _full_rate_r2(values, [sim])
+        added = _full_rate_r2(values, [sim, residual]) - by_sim
+        # The direction of the peak |correlation|: a voltage falls as the power rises. The
+        # lead is taken against the measured signal: the simulation is driven by logged
+        # inputs (a speed) that themselves follow the driver, so its timing says nothing of
+        # which way a channel acts.
+        sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
+        lead = search_lag(ref, sign * values, lead_window).lag if _varies(ref) else 0
+        if (
+            by_sim >= RESPONSE_MIN_R2
+            and added < RESPONSE_RESIDUAL_RATIO * by_sim
+            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
+        ):
             echoes.append(
-                Response(
-                    name=name,
-                    kind=kind,
-                    reason="declared" if declared else "follows",
-                    measured_r2=measured,
-                    residual_r2=max(added, 0.0),
-                    lead_s=lead * dt,
-                    explains=_full_rate_r2(residual, [values]),
-                )
+                Response(name, kind, "follows", by_sim, max(added, 0.0), lead * dt, explains)
             )
         else:
             kept.append((name, kind, values))
     return kept, tuple(echoes)
+
+
+def _echo_share(
+    x: FloatArray, ref: FloatArray, sim: FloatArray, floor: float = ECHO_MIN_R2
+) -> float:
+    """The share of x's variance the measured signal explains when x is an echo of it (at
+    least ``floor``, and the simulated signal explains at least :data:`ECHO_SIMULATED_RATIO`
+    of that), else 0."""
+    if x.shape[0] < 3 or not _varies(x):
+        return 0.0
+    by_ref = _full_rate_r2(x, [ref])
+    if by_ref < floor or _full_rate_r2(x, [sim]) < ECHO_SIMULATED_RATIO * by_ref:
+        return 0.0
+    return by_ref
 
 
 def _lambdas(ref: FloatArray, sim: FloatArray, reference_range: float) -> dict[str, float]:
@@ -1383,6 +1478,8 @@ class _Term(NamedTuple):
     mean_shift: float
     time_scale_s: float
     members: tuple[str, ...] = ()
+    # The term's value where its candidate is zero (rescaled units): -coefficient × centre.
+    at_zero: float = 0.0
 
 
 def _effects(
@@ -1451,6 +1548,7 @@ def _effects(
                 mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
                 time_scale_s=scales[at].factor * dt,
                 members=s.members,
+                at_zero=-coef * centre,
             )
         )
     joint, se = fits[0], errors[0]
@@ -1473,6 +1571,7 @@ def _effects(
             term=np.full(n, intercept),
             mean_shift=intercept / scale,
             time_scale_s=fine.factor * dt,
+            at_zero=intercept,
         )
     )
     where = _localise(ref, sim, dt, start_s, window_s)
@@ -1511,16 +1610,14 @@ def _effects(
                 if raw[j].kind not in GENERIC_KINDS and not in_dimension[j]:
                     rank[i] = max(rank[i], shares[j])
     findings: set[int] = set()
-    alone_shares = [0.0] * len(raw)
+    fixes = [_own_fix(r, t) for t in raw]
+    alone_shares = [fix.alone for fix in fixes]
     for i in sorted(range(len(raw)), key=lambda i: (-rank[i], not in_dimension[i], -shares[i])):
         t = raw[i]
-        # A term that only helps together with one that compensates it (a throttle term and a
-        # gain error of opposite sign, the throttle being nearly proportional to the power)
-        # makes the fit worse on its own, and is not an effect to add. Over one record, the
-        # mean shift of a gain error and an offset are the same thing, so the gain is taken
-        # about its mean here.
-        alone = _removed_share(r, t.term - float(np.mean(t.term)) if t.kind == "gain" else t.term)
-        alone_shares[i] = alone
+        # Relevance asks what the effect does on its own, with its own fit: a joint
+        # coefficient that a collinear term (a gain error against a load that follows the
+        # driving) distorted says little of what adding the effect alone would remove.
+        alone = alone_shares[i]
         if (
             t.significant
             and shares[i] >= min_share
@@ -1539,8 +1636,8 @@ def _effects(
             offset_explained=t.mean_shift,
             significant=t.significant,
             relevant=i in findings,
-            predicted=_lambdas(ref, sim + t.term, reference_range),
-            hot_share=None if hot is None else _removed_share(r[hot], t.term[hot]),
+            predicted=_lambdas(ref, sim + fixes[i].series, reference_range),
+            hot_share=None if hot is None else _removed_share(r[hot], fixes[i].series[hot]),
             members=t.members,
             interchangeable=tuple(raw[j].name for j in swaps[i]),
             stands_in_for=()
@@ -1548,13 +1645,18 @@ def _effects(
             else tuple(raw[j].name for j in swaps[i] if j in findings),
             time_scale_s=t.time_scale_s,
             alone_share=alone_shares[i],
+            fix_coefficient=fixes[i].coefficient,
+            fix_constant=fixes[i].constant / scale,
         )
         for i, t in enumerate(raw)
     ]
     # The joint coefficients share the residual between correlated terms; fixing only the
-    # relevant ones is predicted with their own least-squares fit, so that a minor term that
-    # compensated one of them in the joint model does not spoil the prediction.
+    # relevant ones is predicted with their own least-squares fit and a constant, so that a
+    # minor term that compensated one of them in the joint model does not spoil the
+    # prediction, and the model's constant is moved as the fix says.
     relevant_terms = [raw[i].term for i in sorted(findings)]
+    if relevant_terms:
+        relevant_terms.append(np.ones(n))
     predicted = (
         _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
         if relevant_terms
@@ -1562,6 +1664,48 @@ def _effects(
     )
     effects.sort(key=lambda e: (not e.relevant, not e.significant, -e.share))
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
+
+
+class _Fix(NamedTuple):
+    """An effect's own fit to the residual, as the user adds it to the model."""
+
+    series: FloatArray
+    # Per unit of the effect's joint term's candidate, relative to the joint coefficient.
+    coefficient: float
+    # Rescaled signal units: the fix's value where the candidate is zero.
+    constant: float
+    alone: float
+
+
+def _own_fix(r: FloatArray, t: _Term) -> _Fix:
+    """The term on its own: what it removes, and the fix a user adds to the model.
+
+    ``alone`` is what the term's own least-squares fit removes of Σr², r ≈ k · term, with the
+    term as credited (a load with the mean shift it carries; the gain and the lag about their
+    means: over one record a gain's mean shift is an offset's): an effect is judged by what
+    it does on its own, not by a joint coefficient that a collinear term distorted.
+
+    The fix is its own fit with a constant, r ≈ c · term + b: the constant makes the mean
+    error zero with the term, so a model whose constant already covers part of the term's
+    mean is told to lower it.
+    """
+    total = dot(r, r)
+    mean_r = float(np.mean(r))
+    n = r.shape[0]
+    if t.kind == "offset":
+        alone = n * mean_r**2 / total if total > 0.0 else 0.0
+        return _Fix(np.full(n, mean_r), 0.0, mean_r, alone)
+    mean_t = float(np.mean(t.term))
+    judged = t.term - mean_t if t.kind in ("gain", "lag") else t.term
+    size = dot(judged, judged)
+    alone = dot(judged, r) ** 2 / size / total if size > 0.0 and total > 0.0 else 0.0
+    centred = t.term - mean_t
+    spread = dot(centred, centred)
+    if spread <= 0.0:
+        return _Fix(np.full(n, mean_r), 0.0, mean_r, alone)
+    c = dot(centred, r - mean_r) / spread
+    b = mean_r - c * mean_t
+    return _Fix(c * t.term + b, c * t.coefficient, c * t.at_zero + b, alone)
 
 
 def _interchangeable(together: FloatArray, floor: float) -> list[list[int]]:

@@ -22,7 +22,15 @@ from ..core.registry import get_characteristic
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 
-__all__ = ["SUMMARY_NAMES", "describe", "effect_text", "payload", "summary", "target_payload"]
+__all__ = [
+    "SUMMARY_NAMES",
+    "describe",
+    "effect_text",
+    "fix_text",
+    "payload",
+    "summary",
+    "target_payload",
+]
 
 EXACT_MATCH = "the model matches the reference exactly: the residual is zero"
 
@@ -131,11 +139,39 @@ def _summary(
         parts.append(f"{e.name} could stand in for {_names_text(e.stands_in_for)} on this record")
     if minor:
         parts.append("minor: " + _names_text(minor))
-    # Only the echoes that would have been offered as an effect are worth a word here.
-    loud = [e.name for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
-    if loud:
-        parts.append(f"moves with the measured signal, probably a consequence: {_names_text(loud)}")
+    # Only the responses that would have been offered as an effect are worth a word here.
+    loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    echoed = [e.name for e in loud if e.reason == "echo"]
+    follows = [e.name for e in loud if e.reason != "echo"]
+    if echoed:
+        parts.append(f"echoes the measured signal, never a cause: {_names_text(echoed)}")
+    if follows:
+        parts.append(
+            f"moves with the simulated signal, probably a consequence: {_names_text(follows)}"
+        )
     return "; ".join(parts)
+
+
+def fix_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
+    """The fix as the user applies it to the model, mean included: ``add 1.2 × heating_kw and
+    lower the model's constant by 2.9 kW``."""
+    coef = float(effect.get("fix_coefficient") or 0.0)
+    constant = float(effect.get("fix_constant") or 0.0)
+    unit_text = f" {unit}" if unit else ""
+    kind = str(effect["kind"])
+    if kind == "gain":
+        action = f"multiply the model's {signal} by {1.0 + coef:.4g}"
+    elif kind == "lag":
+        action = f"make the model's {signal} {abs(coef):.3g} s {'earlier' if coef > 0 else 'later'}"
+    elif kind == "offset":
+        action = ""
+    else:
+        action = f"add {coef:.3g} × {_label(str(effect['name']))}"
+    direction = "raise" if constant > 0 else "lower"
+    shift = f"{direction} the model's constant by {abs(constant):.3g}{unit_text}"
+    if not action:
+        return shift
+    return f"{action} and {shift}" if constant != 0.0 else action
 
 
 def effect_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
@@ -217,8 +253,13 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
             lines.append(
                 "      on this record, interchangeable with: " + ", ".join(e["interchangeable"])
             )
-        if e.get("predicted") and before:
-            lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
+        fix = fix_text(e, found["signal"].rsplit("/", 1)[-1], found.get("unit"))
+        after = (
+            f" (then {_lambda_change(before, e['predicted'])})"
+            if e.get("predicted") and before
+            else ""
+        )
+        lines.append(f"      fix: {fix}{after}")
     for e in stand_ins:
         instead = ", ".join(e["stands_in_for"])
         lines.append(
@@ -234,17 +275,27 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
         lines.append(
             f"  after adding all {len(relevant)}: {_lambda_change(before, found['predicted'])}"
         )
+    signal = found["signal"].rsplit("/", 1)[-1]
     for r in found.get("responses") or []:
-        how = (
-            "declared a response in the spec"
-            if r["reason"] == "declared"
-            else f"the measured signal explains {100 * r['measured_r2']:.0f} % of it, the "
-            f"residual adds {100 * r['residual_r2']:.1f} %"
-        )
-        lines.append(
-            f"  response: {r['name']} moves with {found['signal'].rsplit('/', 1)[-1]}, "
-            f"probably a consequence ({how}); not offered as a cause"
-        )
+        name = _label(r["name"])
+        # Never set a candidate aside without saying how to test it as a cause.
+        declare = f"to test it as a cause, declare it: diagnosis: {{causes: [{name!r}]}}"
+        if r["reason"] == "declared":
+            lines.append(f"  response: {name} is declared a response in the spec")
+        elif r["reason"] == "echo":
+            lines.append(
+                f"  echo: {name} echoes the measured {signal} (it explains "
+                f"{100 * r['measured_r2']:.0f} % of it, or of its increments, on "
+                f"{SLOW_SCALE_S:g} s means): an instrument, derivative or integral of it, not "
+                f"offered as a cause; {declare}"
+            )
+        else:
+            lines.append(
+                f"  response: {name} moves with the simulated {signal}, probably a consequence "
+                f"(the simulated signal explains {100 * r['measured_r2']:.0f} % of it, the "
+                f"residual adds {100 * r['residual_r2']:.1f} %); not offered as a cause; "
+                f"{declare}"
+            )
     where = found.get("localisation")
     if where and where.get("windows"):
         spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in where["spans_s"][:3])
