@@ -76,11 +76,11 @@ MIN_SHARE = 0.05
 #: A channel is a response (a consequence of what the model reproduces) when the simulated
 #: signal explains at least this share of its variance ...
 RESPONSE_MIN_R2 = 0.1
-#: ... and the residual adds less than this fraction of that share on top of it. A response
-#: to the measured signal moves with its simulated part and its residual alike, so the
-#: residual adds about as much as the simulation explains times the residual's share of the
-#: measured signal's variance; a missing load moves with the residual only.
-RESPONSE_RESIDUAL_RATIO = 1.0
+#: ... and the residual adds less than this fraction of that share on top of it, plus the
+#: fraction a response to the measured signal gets from the residual anyway: one that moves
+#: with the simulated part and the residual alike gains about var(r) / var(sim) of what the
+#: simulation explains. A missing load moves with the residual only.
+RESPONSE_RESIDUAL_RATIO = 0.25
 #: A channel is an echo of the scored signal (an instrument of it, its derivative or its
 #: integral) when, on block means of :data:`SLOW_SCALE_S`, the measured signal explains at least
 #: this share of its variance (instrument, derivative) ...
@@ -288,10 +288,12 @@ class Response:
         As in the :class:`Candidate`.
     reason:
         ``"declared"`` (the spec lists it under ``responses:``), ``"echo"`` (an instrument,
-        derivative or integral of the measured signal) or ``"follows"`` (it moves with the
-        simulated signal, and the residual adds little).
+        derivative or integral of the measured signal), ``"follows"`` (it moves with the
+        simulated signal, and the residual adds little) or ``"reproduced"`` (as ``"follows"``,
+        but it leads the measured signal: a cause the model reproduces through its inputs).
     measured_r2:
-        ``"follows"``: share of the channel's variance the simulated signal explains.
+        ``"follows"``, ``"reproduced"``: share of the channel's variance the simulated signal
+        explains.
         ``"echo"``: share of the variance of the channel (or of its increments) the measured
         signal explains on block means of :data:`SLOW_SCALE_S`.
     residual_r2:
@@ -672,6 +674,7 @@ def diagnose_residual(
         scale=s_sig,
         offset_name=_free_name("offset", names),
         in_units=set(in_dimension),
+        leading=leading if gatekeeping else set(),
     )
     # A selected candidate is an effect: the table shows the effect's numbers, so that one
     # effect reads the same everywhere.
@@ -1311,8 +1314,11 @@ def _split_responses(
       that. Echoes are never causes, whatever moves them;
     * a **consequence** of what the model reproduces (``follows``), unless it is exogenous:
       (1) the simulated signal explains at least :data:`RESPONSE_MIN_R2` of its variance,
-      (2) the residual adds less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3)
-      x does not lead the measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
+      (2) the residual adds less than :data:`RESPONSE_RESIDUAL_RATIO` + var(r) / var(sim) of
+      that on top (what a response to the whole measured signal gets from r), and (3)
+      x does not lead the measured signal by :data:`RESPONSE_MIN_LEAD_S` or more; a channel
+      that meets (1) and (2) but leads (a pedal position) is a cause the model already
+      reproduces through its inputs (``reproduced``), no effect it lacks.
 
     The consequence test asks the simulated signal, not the measured one: a missing load is
     part of the measured signal, so the measured signal always "explains" it, while a response
@@ -1329,6 +1335,7 @@ def _split_responses(
     if ref.shape[0] // slow < MIN_SLOW_BLOCKS:
         slow = 1
     ref_s, sim_s = block_means(ref, slow), block_means(sim, slow)
+    residual_ratio = float(np.var(residual)) / max(float(np.var(sim)), 1e-300)
     for name, kind, values in user:
         if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
             kept.append((name, kind, values))
@@ -1350,19 +1357,19 @@ def _split_responses(
             continue
         by_sim = _full_rate_r2(values, [sim])
         added = _full_rate_r2(values, [sim, residual]) - by_sim
+        allowed = RESPONSE_RESIDUAL_RATIO + residual_ratio
         # The direction of the peak |correlation|: a voltage falls as the power rises. The
         # lead is taken against the measured signal: the simulation is driven by logged
         # inputs (a speed) that themselves follow the driver, so its timing says nothing of
         # which way a channel acts.
         sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
         lead = search_lag(ref, sign * values, lead_window).lag if _varies(ref) else 0
-        if (
-            by_sim >= RESPONSE_MIN_R2
-            and added < RESPONSE_RESIDUAL_RATIO * by_sim
-            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
-        ):
+        if by_sim >= RESPONSE_MIN_R2 and added < allowed * by_sim:
+            # Ahead of the measured signal it acts on it (a pedal); the simulation reproduces
+            # it through the model's inputs all the same, so it is no effect the model lacks.
+            reason = "follows" if lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt else "reproduced"
             echoes.append(
-                Response(name, kind, "follows", by_sim, max(added, 0.0), lead * dt, explains)
+                Response(name, kind, reason, by_sim, max(added, 0.0), lead * dt, explains)
             )
         else:
             kept.append((name, kind, values))
@@ -1498,6 +1505,7 @@ def _effects(
     scale: float,
     offset_name: str,
     in_units: set[str],
+    leading: Collection[str] = (),
 ) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
     """The selected candidates and the intercept, fitted jointly, as effects one can act on.
 
@@ -1514,44 +1522,9 @@ def _effects(
     chosen = [kept[i] for i in selected]
     fine = scales[0]
     centres = _credited_centres(fine.r, chosen)
-    fits: list[HacFit] = []
-    for sc in scales:
-        columns = [
-            (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
-            for s, c in zip(chosen, centres, strict=True)
-        ]
-        design = np.column_stack(
-            [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
-        )
-        fits.append(hac_fit(sc.r, design, sc.order))
-    errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
-    raw: list[_Term] = []
-    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
-        tests = [
-            _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
-            for fit, se in zip(fits, errors, strict=True)
-        ]
-        at = int(np.argmin(tests))
-        fit, se = fits[at], errors[at]
-        b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
-        coef = b_std / s.std
-        p = min(1.0, tests[at] * len(scales))
-        raw.append(
-            _Term(
-                name=s.name,
-                kind=s.kind,
-                coefficient=coef * s.unit,
-                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
-                p_value=p,
-                significant=p <= holm_levels[pos - 1],
-                term=coef * (s.full - centre),
-                mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
-                time_scale_s=scales[at].factor * dt,
-                members=s.members,
-                at_zero=-coef * centre,
-            )
-        )
-    joint, se = fits[0], errors[0]
+    fits, raw = _fitted_terms(scales, chosen, centres, holm_levels, alpha=alpha, dt=dt, scale=scale)
+    joint = fits[0]
+    se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
     intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
     interval0 = _interval(intercept, se0, df0, alpha)
     p0 = _p_value(intercept, se0, df0)
@@ -1625,6 +1598,23 @@ def _effects(
             and not findings.intersection(swaps[i])
         ):
             findings.add(i)
+    # A finding's size is fitted with the other findings and the intercept only: a minor term
+    # that is nearly a combination of others (a gain against the road loads the model
+    # computes) would otherwise distort it, and the fix a user applies is the finding alone.
+    named = [i for i in sorted(findings) if i < len(chosen)]
+    if named and len(named) < len(chosen):
+        _, refitted = _fitted_terms(
+            scales,
+            [chosen[i] for i in named],
+            [centres[i] for i in named],
+            [holm_levels[i] for i in named],
+            alpha=alpha,
+            dt=dt,
+            scale=scale,
+        )
+        for i, t in zip(named, refitted, strict=True):
+            raw[i] = t._replace(significant=raw[i].significant)
+    fixes = [_own_fix(r, t, refit=i in named) for i, t in enumerate(raw)]
     effects = [
         Effect(
             name=t.name,
@@ -1654,7 +1644,7 @@ def _effects(
     # relevant ones is predicted with their own least-squares fit and a constant, so that a
     # minor term that compensated one of them in the joint model does not spoil the
     # prediction, and the model's constant is moved as the fix says.
-    relevant_terms = [raw[i].term for i in sorted(findings)]
+    relevant_terms = [fixes[i].series for i in sorted(findings)]
     if relevant_terms:
         relevant_terms.append(np.ones(n))
     predicted = (
@@ -1662,7 +1652,21 @@ def _effects(
         if relevant_terms
         else {}
     )
-    effects.sort(key=lambda e: (not e.relevant, not e.significant, -e.share))
+    # Findings are listed in the gatekeeping order they were tested in: the loads and the
+    # spec's suspects, then the simulated signal's own gain, offset and lag, then any other
+    # channel; by share within each. A generic term's joint share leans on the very terms the
+    # model is built from (a gain against the road loads it computes), and describes the
+    # simulation rather than naming what it lacks.
+    first_names = set(leading)
+
+    def tier(e: Effect) -> int:
+        if not first_names:
+            return 0
+        if e.kind in GENERIC_KINDS:
+            return 1
+        return 0 if first_names & {e.name, *e.members} else 2
+
+    effects.sort(key=lambda e: (not e.relevant, not e.significant, tier(e), -e.share))
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
 
 
@@ -1677,7 +1681,7 @@ class _Fix(NamedTuple):
     alone: float
 
 
-def _own_fix(r: FloatArray, t: _Term) -> _Fix:
+def _own_fix(r: FloatArray, t: _Term, *, refit: bool = False) -> _Fix:
     """The term on its own: what it removes, and the fix a user adds to the model.
 
     ``alone`` is what the term's own least-squares fit removes of Σr², r ≈ k · term, with the
@@ -1685,9 +1689,10 @@ def _own_fix(r: FloatArray, t: _Term) -> _Fix:
     means: over one record a gain's mean shift is an offset's): an effect is judged by what
     it does on its own, not by a joint coefficient that a collinear term distorted.
 
-    The fix is its own fit with a constant, r ≈ c · term + b: the constant makes the mean
-    error zero with the term, so a model whose constant already covers part of the term's
-    mean is told to lower it.
+    The fix adds c · term + b: c = 1 for a finding (``refit``: its coefficient as reported,
+    fitted with the other findings), else its own fit with a constant; the constant b makes
+    the mean error zero with the term, so a model whose constant already covers part of the
+    term's mean is told to lower it.
     """
     total = dot(r, r)
     mean_r = float(np.mean(r))
@@ -1703,9 +1708,63 @@ def _own_fix(r: FloatArray, t: _Term) -> _Fix:
     spread = dot(centred, centred)
     if spread <= 0.0:
         return _Fix(np.full(n, mean_r), 0.0, mean_r, alone)
-    c = dot(centred, r - mean_r) / spread
+    c = 1.0 if refit else dot(centred, r - mean_r) / spread
     b = mean_r - c * mean_t
     return _Fix(c * t.term + b, c * t.coefficient, c * t.at_zero + b, alone)
+
+
+def _fitted_terms(
+    scales: Sequence[_Scale],
+    chosen: Sequence[_Series],
+    centres: Sequence[float],
+    holm_levels: Sequence[float],
+    *,
+    alpha: float,
+    dt: float,
+    scale: float,
+) -> tuple[list[HacFit], list[_Term]]:
+    """The chosen candidates and an intercept fitted jointly at every scale; each term's
+    coefficient, interval and test from the scale where it is tested most sharply (its p-value
+    times the number of scales)."""
+    fine = scales[0]
+    fits: list[HacFit] = []
+    for sc in scales:
+        columns = [
+            (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
+            for s, c in zip(chosen, centres, strict=True)
+        ]
+        design = np.column_stack(
+            [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
+        )
+        fits.append(hac_fit(sc.r, design, sc.order))
+    errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
+    terms: list[_Term] = []
+    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
+        tests = [
+            _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
+            for fit, se in zip(fits, errors, strict=True)
+        ]
+        at = int(np.argmin(tests))
+        fit, se = fits[at], errors[at]
+        b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
+        coef = b_std / s.std
+        p = min(1.0, tests[at] * len(scales))
+        terms.append(
+            _Term(
+                name=s.name,
+                kind=s.kind,
+                coefficient=coef * s.unit,
+                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                p_value=p,
+                significant=p <= holm_levels[pos - 1],
+                term=coef * (s.full - centre),
+                mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
+                time_scale_s=scales[at].factor * dt,
+                members=s.members,
+                at_zero=-coef * centre,
+            )
+        )
+    return fits, terms
 
 
 def _interchangeable(together: FloatArray, floor: float) -> list[list[int]]:

@@ -142,9 +142,12 @@ def _summary(
     # Only the responses that would have been offered as an effect are worth a word here.
     loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
     echoed = [e.name for e in loud if e.reason == "echo"]
-    follows = [e.name for e in loud if e.reason != "echo"]
+    reproduced = [e.name for e in loud if e.reason == "reproduced"]
+    follows = [e.name for e in loud if e.reason not in ("echo", "reproduced")]
     if echoed:
         parts.append(f"echoes the measured signal, never a cause: {_names_text(echoed)}")
+    if reproduced:
+        parts.append(f"reproduced by the model through its inputs: {_names_text(reproduced)}")
     if follows:
         parts.append(
             f"moves with the simulated signal, probably a consequence: {_names_text(follows)}"
@@ -279,7 +282,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     for r in found.get("responses") or []:
         name = _label(r["name"])
         # Never set a candidate aside without saying how to test it as a cause.
-        declare = f"to test it as a cause, declare it: diagnosis: {{causes: [{name!r}]}}"
+        declare = f"to test it as a cause, declare it: diagnosis: {{causes: [{r['name']!r}]}}"
         if r["reason"] == "declared":
             lines.append(f"  response: {name} is declared a response in the spec")
         elif r["reason"] == "echo":
@@ -288,6 +291,13 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
                 f"{100 * r['measured_r2']:.0f} % of it, or of its increments, on "
                 f"{SLOW_SCALE_S:g} s means): an instrument, derivative or integral of it, not "
                 f"offered as a cause; {declare}"
+            )
+        elif r["reason"] == "reproduced":
+            lines.append(
+                f"  reproduced: {name} leads the measured {signal} by {r['lead_s']:.2g} s and "
+                f"moves with the simulated one (it explains {100 * r['measured_r2']:.0f} % of "
+                f"it, the residual adds {100 * r['residual_r2']:.1f} %): a cause the model "
+                f"already reproduces through its inputs, not offered as a cause; {declare}"
             )
         else:
             lines.append(

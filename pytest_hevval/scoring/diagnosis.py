@@ -237,9 +237,11 @@ def diagnose_pair(
         and _same_dimension(found, signal_unit)
     ]
     # The gatekeeping order's first family, besides the loads in the signal's dimension: the
-    # spec's declared suspects and causes. Every other channel is tested on what those leave.
+    # spec's declared suspects whose unit is unknown (an expression such as a road load) and
+    # the spec's causes. A declared candidate in another dimension (a temperature) is tested on
+    # what those leave, as any channel is.
     first = [
-        *(c.name for c in candidates if c.kind == "declared"),
+        *(c.name for c in candidates if c.kind == "declared" and units[c.name] is None),
         *_with_derivatives(settings.causes),
     ]
     inputs = set(spec.model.inputs)
