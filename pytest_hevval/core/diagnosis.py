@@ -90,6 +90,14 @@ ECHO_INCREMENT_MIN_R2 = 0.5
 #: ... and the simulated signal explains at least this fraction of that: a missing load that
 #: makes most of the measured signal is explained by it too, but not by the simulation.
 ECHO_SIMULATED_RATIO = 0.5
+#: A channel is an echo, too, when the measured signal as a whole explains at least this share
+#: of its variance on those block means ...
+ECHO_WHOLE_MIN_R2 = 0.25
+#: ... and at least this fraction of what its two parts (the simulated signal and the residual,
+#: with coefficients of their own) explain: a response to the measured power (a battery that
+#: warms with the current, a state of charge's rate) weighs both parts alike, while a missing
+#: load moves with the residual only.
+ECHO_WHOLE_RATIO = 0.7
 #: A channel whose cross-correlation with the measured signal peaks with the channel ahead by
 #: at least RESPONSE_MIN_LEAD_S, within ±RESPONSE_LEAD_WINDOW_S, is treated as an input (the
 #: driver acts, then the power follows), however well the measured signal explains it. A
@@ -364,6 +372,10 @@ class Diagnosis:
     localisation: Localisation | None = None
     #: The residual is zero: nothing to diagnose.
     exact_match: bool = False
+    #: Half-width of the lag search, in seconds.
+    max_lag_s: float = 0.0
+    #: The lag found lies on the edge of the search: the true lag may be larger.
+    lag_at_bound: bool = False
 
     @property
     def relevant(self) -> tuple[Effect, ...]:
@@ -587,7 +599,7 @@ def diagnose_residual(
     notes: list[str] = []
     sim_varies = _varies(sim)
 
-    lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
+    lag, max_lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
     lag_s = lag * dt
     # The candidates are analysed where sim(t − lag) exists, so that the lag candidate is exact
     # on every sample it is fitted to.
@@ -713,6 +725,8 @@ def diagnose_residual(
         lambdas=lambdas,
         predicted=predicted,
         localisation=where,
+        max_lag_s=max_lag * dt,
+        lag_at_bound=max_lag > 0 and abs(lag) >= max_lag,
     )
 
 
@@ -789,14 +803,15 @@ def _rescaled_candidates(user: _UserSeries, s_sig: float) -> tuple[_UserSeries, 
 
 def _timing(
     ref: FloatArray, sim: FloatArray, dt: float, max_lag_s: float | None, sim_varies: bool
-) -> int:
-    """The lag (samples) of the peak mean-removed cross-correlation."""
+) -> tuple[int, int]:
+    """The lag (samples) of the peak mean-removed cross-correlation, and the half-width of
+    the search (samples)."""
     n = ref.shape[0]
     window_s = _DEFAULT_MAX_LAG_S if max_lag_s is None else float(max_lag_s)
     # At least 10 samples must remain where both records overlap at the searched lag.
     max_lag = int(min(max(window_s, 0.0) / dt, (n - 10) if max_lag_s is not None else n // 4))
     # A constant signal correlates equally with every shift: there is no lag to find.
-    return search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0
+    return (search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0), max_lag
 
 
 @dataclass(frozen=True)
@@ -1311,14 +1326,19 @@ def _split_responses(
       derivative: the bus voltage, the state of charge's rate for a battery power) or
       :data:`ECHO_INCREMENT_MIN_R2` of the variance of x's increments (its integral: the
       state of charge), and the simulated signal at least :data:`ECHO_SIMULATED_RATIO` of
-      that. Echoes are never causes, whatever moves them;
+      that; or the measured signal explains at least :data:`ECHO_WHOLE_MIN_R2` of x and at
+      least :data:`ECHO_WHOLE_RATIO` of what its simulated part and the residual explain
+      with coefficients of their own, and the simulated signal at least
+      :data:`RESPONSE_MIN_R2` (x responds to the measured signal as a whole; one that leads it
+      acts on it and is ``reproduced``). Echoes are never causes, whatever moves them;
     * a **consequence** of what the model reproduces (``follows``), unless it is exogenous:
-      (1) the simulated signal explains at least :data:`RESPONSE_MIN_R2` of its variance,
-      (2) the residual adds less than :data:`RESPONSE_RESIDUAL_RATIO` + var(r) / var(sim) of
-      that on top (what a response to the whole measured signal gets from r), and (3)
-      x does not lead the measured signal by :data:`RESPONSE_MIN_LEAD_S` or more; a channel
-      that meets (1) and (2) but leads (a pedal position) is a cause the model already
-      reproduces through its inputs (``reproduced``), no effect it lacks.
+      on the same block means, (1) the simulated signal explains at least
+      :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
+      :data:`RESPONSE_RESIDUAL_RATIO` + var(r) / var(sim) of that on top (what a response to
+      the whole measured signal gets from r), and (3) x does not lead the measured signal by
+      :data:`RESPONSE_MIN_LEAD_S` or more; a channel that meets (1) and (2) but leads (a
+      pedal position) is a cause the model already reproduces through its inputs
+      (``reproduced``), no effect it lacks.
 
     The consequence test asks the simulated signal, not the measured one: a missing load is
     part of the measured signal, so the measured signal always "explains" it, while a response
@@ -1335,7 +1355,8 @@ def _split_responses(
     if ref.shape[0] // slow < MIN_SLOW_BLOCKS:
         slow = 1
     ref_s, sim_s = block_means(ref, slow), block_means(sim, slow)
-    residual_ratio = float(np.var(residual)) / max(float(np.var(sim)), 1e-300)
+    r_s = ref_s - sim_s
+    residual_ratio = float(np.var(r_s)) / max(float(np.var(sim_s)), 1e-300)
     for name, kind, values in user:
         if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
             kept.append((name, kind, values))
@@ -1345,25 +1366,40 @@ def _split_responses(
             echoes.append(Response(name, kind, "declared", 0.0, 0.0, 0.0, explains))
             continue
         x_s = block_means(values, slow)
-        echo = max(
+        whole = _full_rate_r2(x_s, [ref_s])
+        instrument = max(
             _echo_share(x_s, ref_s, sim_s),
             _echo_share(np.diff(x_s), ref_s[1:], sim_s[1:], ECHO_INCREMENT_MIN_R2),
         )
-        if echo > 0.0:
-            echoes.append(Response(name, kind, "echo", echo, 0.0, 0.0, explains))
+        # A response moves with the simulated part too; a missing load that makes most of
+        # the measured signal's slow variation does not.
+        parts = _full_rate_r2(x_s, [sim_s, r_s])
+        responds = (
+            whole >= ECHO_WHOLE_MIN_R2
+            and whole >= ECHO_WHOLE_RATIO * parts
+            and _full_rate_r2(x_s, [sim_s]) >= RESPONSE_MIN_R2
+        )
+        if instrument > 0.0 or responds:
+            # One that leads the measured signal acts on it (a pedal): it is no echo, but
+            # what it does the measured signal holds whole, and the model reproduces through
+            # its inputs.
+            # A derivative's lead is its smoothing window's, not the channel's.
+            acts = instrument == 0.0 and kind != "derivative"
+            lead = _lead(ref, values, lead_window) if acts else 0
+            reason = "reproduced" if lead * dt >= RESPONSE_MIN_LEAD_S - 0.5 * dt else "echo"
+            echoes.append(
+                Response(name, kind, reason, max(instrument, whole), 0.0, lead * dt, explains)
+            )
             continue
         if name in exogenous or not sim_varies:
             kept.append((name, kind, values))
             continue
-        by_sim = _full_rate_r2(values, [sim])
-        added = _full_rate_r2(values, [sim, residual]) - by_sim
+        # On the slow scale, as the echo test: a quantised channel (a state of charge shown in
+        # whole percent) or its rate is resolved only there.
+        by_sim = _full_rate_r2(x_s, [sim_s])
+        added = _full_rate_r2(x_s, [sim_s, r_s]) - by_sim
         allowed = RESPONSE_RESIDUAL_RATIO + residual_ratio
-        # The direction of the peak |correlation|: a voltage falls as the power rises. The
-        # lead is taken against the measured signal: the simulation is driven by logged
-        # inputs (a speed) that themselves follow the driver, so its timing says nothing of
-        # which way a channel acts.
-        sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
-        lead = search_lag(ref, sign * values, lead_window).lag if _varies(ref) else 0
+        lead = _lead(ref, values, lead_window)
         if by_sim >= RESPONSE_MIN_R2 and added < allowed * by_sim:
             # Ahead of the measured signal it acts on it (a pedal); the simulation reproduces
             # it through the model's inputs all the same, so it is no effect the model lacks.
@@ -1374,6 +1410,18 @@ def _split_responses(
         else:
             kept.append((name, kind, values))
     return kept, tuple(echoes)
+
+
+def _lead(ref: FloatArray, values: FloatArray, window: int) -> int:
+    """Samples by which ``values`` leads the measured signal at the peak of their
+    |cross-correlation| within ±``window``. Taken against the measured signal: the simulation
+    is driven by logged inputs (a speed) that themselves follow the driver, so its timing says
+    nothing of which way a channel acts."""
+    if not _varies(ref):
+        return 0
+    # The direction of the peak |correlation|: a voltage falls as the power rises.
+    sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
+    return search_lag(ref, sign * values, window).lag
 
 
 def _echo_share(

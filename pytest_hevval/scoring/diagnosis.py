@@ -12,11 +12,12 @@ import ast
 import contextlib
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 
+from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.diagnosis import (
     GENERIC_KINDS,
     MIN_SHARE,
@@ -26,14 +27,15 @@ from ..core.diagnosis import (
 )
 from ..core.registry import FUSED_CHARACTERISTICS
 from ..data.record import Record
-from ..errors import DataError, HevvalError
+from ..errors import DataError, ExpressionError, HevvalError, SpecError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 from ..results.spec_result import SignalResult
-from ..spec.expressions import Expression
+from ..spec.expressions import Expression, parse_signal
 from .engine import Evaluation, per_item, scoring_threads
 
 __all__ = [
     "DIAGNOSE_MODES",
+    "TriedTerm",
     "candidates_for",
     "derivative_name",
     "diagnose_failures",
@@ -41,6 +43,7 @@ __all__ = [
     "diagnose_pair",
     "diagnose_signal",
     "diagnosis_target",
+    "try_term",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -134,17 +137,26 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
         if n not in used and n != time_name and n in record.channels
     ][:MAX_CHANNELS]
     for name in names:
-        channel = record.channels[name]
-        values = np.asarray(channel.values, dtype=np.float64)
-        ok = np.isfinite(values)
-        if ok.sum() < 3:
+        found_on_grid = _on_grid(record, name, time)
+        if found_on_grid is None:
             continue
-        on_grid = np.interp(time, channel.time[ok], values[ok])
+        on_grid, values = found_on_grid
         add(name, "channel", on_grid)
-        window = derivative_window(values[ok], smoothing, on_grid.shape[0])
+        window = derivative_window(values, smoothing, on_grid.shape[0])
         if window is not None:
             add(derivative_name(name), "derivative", np.gradient(_smoothed(on_grid, window), time))
     return found
+
+
+def _on_grid(record: Record, name: str, time: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """A logged channel linearly on the grid, and its finite logged values; None when it
+    holds fewer than three finite values."""
+    channel = record.channels[name]
+    values = np.asarray(channel.values, dtype=np.float64)
+    ok = np.isfinite(values)
+    if ok.sum() < 3:
+        return None
+    return np.interp(time, channel.time[ok], values[ok]), values[ok]
 
 
 def derivative_window(values: FloatArray, smoothing: int, samples: int) -> int | None:
@@ -457,3 +469,87 @@ def diagnose_failures(
             else next(r for r in results if isinstance(r, HevvalError))
         )
     return found
+
+
+@dataclass(frozen=True)
+class TriedTerm:
+    """A term added to a signal's simulated output and the signal scored again through the
+    spec (``hevval diagnose --try``): what a fix would do before the model is touched."""
+
+    signal: str
+    term: str
+    unit: str | None
+    before: SignalCharacteristics
+    after: SignalCharacteristics
+
+
+def try_term(evaluation: Evaluation, path: str, term: str) -> TriedTerm:
+    """Score ``path`` with ``term`` added to its simulated output, as the spec scores it (its
+    lag search, correlation form and declared range).
+
+    ``term`` is an expression over the reference's columns and the spec's declared candidates
+    (by name), e.g. ``1.12 * heating_aircon_kw - 1.47``: the fix the diagnosis prints. The
+    signals above and below ``path`` are not changed: a model whose energy is the running sum
+    of this power changes there too once the fix is in the model."""
+    spec = evaluation.spec
+    aligned = evaluation.aligned
+    if aligned is None or path not in evaluation.arrays:
+        known = ", ".join(repr(p) for p in evaluation.arrays) or "none kept"
+        raise DataError(
+            f"no signal {path!r} in this spec (signals: {known})",
+            file=str(spec.path),
+            hint="pass --signal with a path such as E_batt/P_batt",
+        )
+    node = next(n for _, names, n in spec.walk() if "/".join(names) == path)
+    try:
+        expression = parse_signal(term)
+        if expression.is_column and expression.columns[0] not in spec.candidates:
+            # A bare number or name: a number is a constant, a name a column or candidate.
+            expression = parse_signal(f"({term})")
+        record = _full_reference(evaluation)
+        columns: dict[str, FloatArray] = {}
+        for name in expression.columns:
+            if name in spec.candidates:
+                declared = spec.candidates[name]
+                columns[name] = declared.evaluate(
+                    aligned.columns("reference", declared.columns, "linear"), aligned.time
+                )
+            elif name in record.channels and (logged := _on_grid(record, name, aligned.time)):
+                columns[name] = logged[0]
+        values = np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
+    except (ExpressionError, DataError) as exc:
+        raise SpecError(
+            f"--try {term!r}: {exc}",
+            file=str(spec.path),
+            hint="write the term over the reference's columns (`Heating Power CAN [kW]`) and "
+            f"the spec's candidates ({', '.join(spec.candidates) or 'none declared'}), e.g. "
+            "--try '1.2 * heating_kw - 2.9'",
+        ) from exc
+    if aligned.gap_mask is not None:
+        values = values[~aligned.gap_mask]
+    reference, simulated = evaluation.arrays[path]
+    if not np.all(np.isfinite(values)):
+        raise SpecError(
+            f"--try {term!r} is not finite at {int(np.count_nonzero(~np.isfinite(values)))} "
+            "scored samples",
+            file=str(spec.path),
+            hint="check the columns it reads for gaps, or guard them in the expression",
+        )
+
+    def scored(sim: FloatArray) -> SignalCharacteristics:
+        return signal_characteristics(
+            reference,
+            sim,
+            dt=aligned.grid.dt,
+            max_lag_s=spec.alignment.max_lag_s,
+            correlation=spec.correlation,
+            reference_range=node.reference_range,
+        )
+
+    return TriedTerm(
+        signal=path,
+        term=term,
+        unit=node.unit,
+        before=scored(np.asarray(simulated, dtype=np.float64)),
+        after=scored(np.asarray(simulated, dtype=np.float64) + values),
+    )
