@@ -335,7 +335,7 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
             lines.append(f"  response: {name} is declared a response in the spec")
         elif r["reason"] == "echo":
             lines.append(
-                f"  echo: {name} echoes the measured {signal} (it explains "
+                f"  echo: {name} echoes the measured {signal} (which explains "
                 f"{100 * r['measured_r2']:.0f} % of it, or of its increments, on "
                 f"{SLOW_SCALE_S:g} s means): an instrument, derivative or integral of it, not "
                 f"offered as a cause; {declare}"
