@@ -26,6 +26,12 @@ conditioning) and the road-load terms the spec declares (``climb_rate_m_s``, ``a
 real missing effect); gain, offset, lag and those count apart. B02's heater
 σ comes from a 160-s gap filled by linear interpolation (example_project/data/i3/README.md).
 
+On each heater trip the first finding's printed fix (``hevval diagnose --try``: the term over the
+spec's candidates and the log's columns, constant included) is added to P_batt's simulated
+output and scored again through the spec; the table says whether λ3 and λ4 improve and whether
+the λ the diagnosis predicted are within 0.01 of the re-scored ones. Only P_batt is scored
+again: E_batt changes once the term is in the model, which this does not measure.
+
 The Camry cold bag (FTP bag 1, started cold, model fitted warm) lacks the cold start: extra fuel
 early in the bag, fading as the engine warms; its size is the fuel-rate residual over the FTP's
 cold transient phase (0–505 s) above the rest. The file holds only time, fuel and dyno speed, so
@@ -50,8 +56,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pytest_hevval.report.diagnosis import payload
-from pytest_hevval.scoring.diagnosis import candidates_for, diagnose_origin, diagnose_signal
+from pytest_hevval.report.diagnosis import fix_expression, payload
+from pytest_hevval.scoring.diagnosis import (
+    candidates_for,
+    diagnose_origin,
+    diagnose_signal,
+    try_term,
+)
 from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import parse_spec_text
 
@@ -138,10 +149,51 @@ def trip_row(path: Path, channel_set: str) -> Row:
         group = [first["name"], *row["members"]] if first else []
         hit = first is not None and first["coefficient"] > 0 and any(map(is_heater, group))
         row["verdict"] = "right" if hit else "wrong"
+        row["fix"] = tried_fix(evaluation, found)
     else:
         row["verdict"] = "false" if row["false"] else "ok"
     row["seconds"] = time.perf_counter() - started
     return row
+
+
+def tried_fix(evaluation: Any, found: dict[str, Any]) -> Row | None:
+    """The first finding's printed fix, added to P_batt's simulated output and scored again
+    through the spec (``hevval diagnose --try``): λ3 and λ4 before, after, and as predicted."""
+    first = next((e for e in found["effects"] if e["relevant"]), None)
+    term = None if first is None else fix_expression(first)
+    if first is None or term is None:
+        return None
+    tried = try_term(evaluation, SIGNAL, term)
+    return {
+        "term": term,
+        "before": [tried.before.lambdas[2], tried.before.lambdas[3]],
+        "after": [tried.after.lambdas[2], tried.after.lambdas[3]],
+        "predicted": [first["predicted"]["mae"], first["predicted"]["rms"]],
+    }
+
+
+def fix_table(rows: list[Row]) -> str:
+    lines = [
+        "| trip | set | printed fix (--try) | λ3 before → after (predicted) "
+        "| λ4 before → after (predicted) | improves | predicted within 0.01 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        fix = r.get("fix")
+        if r.get("truth") != "heater" or r.get("verdict") == "unscored":
+            continue
+        if not fix:
+            lines.append(f"| {r['trip']} | {r['set']} | no fix printed | | | no | |")
+            continue
+        (b3, b4), (a3, a4), (p3, p4) = fix["before"], fix["after"], fix["predicted"]
+        better = a3 > b3 and a4 > b4
+        close = abs(a3 - p3) <= 0.01 and abs(a4 - p4) <= 0.01
+        lines.append(
+            f"| {r['trip']} | {r['set']} | `{fix['term']}` | {b3:.4f} → {a3:.4f} ({p3:.4f}) "
+            f"| {b4:.4f} → {a4:.4f} ({p4:.4f}) | {'yes' if better else 'no'} "
+            f"| {'yes' if close else 'no'} |"
+        )
+    return "\n".join(lines)
 
 
 def camry_rows() -> list[Row]:
@@ -291,7 +343,7 @@ def main() -> None:
     scratch.cleanup()
     camry = camry_rows()
     elapsed = time.perf_counter() - started
-    print(trips_table(rows), summary_table(rows), camry_table(camry), sep="\n\n")
+    print(trips_table(rows), summary_table(rows), fix_table(rows), camry_table(camry), sep="\n\n")
     print("", *(f"{CAMRY.name} {r['signal']}: {r['summary']}" for r in camry), sep="\n")
     print("", *notes, sep="\n")
     if args.misses:
