@@ -211,10 +211,17 @@ def _arg(args: argparse.Namespace, name: str) -> Any:
 def _diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .errors import SpecError
-    from .report.diagnosis import describe, payload
-    from .scoring.diagnosis import candidates_for, diagnose_signal
+    from .report.diagnosis import describe, payload, tried_lines
+    from .scoring.diagnosis import candidates_for, diagnose_signal, try_term
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
+
+    if args.try_term is not None and len(args.signal or []) != 1:
+        raise SpecError(
+            "--try adds a term to one signal's simulated output",
+            file=args.spec,
+            hint="name the signal: hevval diagnose SPEC --signal E_batt/P_batt --try '…'",
+        )
 
     specs = load_specs(args.spec)
     if len(specs) > 1:
@@ -236,8 +243,19 @@ def _diagnose(args: argparse.Namespace) -> int:
     for found in findings:
         for line in describe(found):
             print(line)
+    tried = None if args.try_term is None else try_term(evaluation, paths[0], args.try_term)
+    if tried is not None:
+        for line in tried_lines(tried):
+            print(line)
     if args.json:
         document: dict[str, Any] = {"spec": spec.name, "signals": findings}
+        if tried is not None:
+            document["tried"] = {
+                "signal": tried.signal,
+                "term": tried.term,
+                "before": tried.before.as_dict(),
+                "after": tried.after.as_dict(),
+            }
         if len(findings) == 1:
             # One signal: its fields also sit at the top level, as documented.
             document.update(findings[0])
@@ -531,6 +549,13 @@ def _parser() -> argparse.ArgumentParser:
         "--no-channels",
         action="store_true",
         help="only the spec's declared candidates, not every unused measured channel",
+    )
+    diagnose.add_argument(
+        "--try",
+        dest="try_term",
+        metavar="TERM",
+        help="score the signal again with TERM (over the reference's columns and the spec's "
+        "candidates, e.g. '1.2 * heating_kw - 2.9') added to the model's output",
     )
 
     compare = commands.add_parser(

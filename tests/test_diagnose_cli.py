@@ -153,3 +153,57 @@ def test_a_failing_running_sum_points_at_the_level_that_names_the_load(
             "  next: hevval diagnose energy.hevval.yaml --signal E/P *",
         ]
     )
+
+
+def make_base_load(root: Path, seed: int = 8) -> None:
+    """The model's constant base load (1 kW) already covers part of a heater's mean (1.5 kW)
+    that it otherwise lacks: the fix must add the heater and lower the constant."""
+    make_energy(root, seed)
+    sim = pd.read_csv(root / "sim.csv")
+    sim["P"] = sim["P"] + 1.0
+    sim.to_csv(root / "sim.csv", index=False)
+
+
+def test_the_printed_fix_tried_through_the_spec_scores_as_predicted(
+    pytester: pytest.Pytester,
+) -> None:
+    make_base_load(pytester.path)
+    result = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "diagnose", "energy.hevval.yaml",
+        "--signal", "E/P", "--json", "d.json",
+    )  # fmt: skip
+    assert result.ret == 0, result.stderr.str()
+    found = json.loads((pytester.path / "d.json").read_text())
+    first = next(e for e in found["effects"] if e["relevant"])
+    assert "Heater" in first["name"]
+    # The heater's mean (1.5 kW) less what the base load already covers (1 kW) is what the
+    # model lacks on average: the fix lowers the constant by about the 1 kW it double counts.
+    assert 0.9 < first["fix_coefficient"] < 1.1
+    assert -1.3 < first["fix_constant"] < -0.7
+    assert "lower the model's constant by" in first["fix"]
+    try_line = next(line for line in result.stdout.lines if "try it:" in line)
+    term = try_line.split("--try ", 1)[1].strip("'")
+    tried = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "diagnose", "energy.hevval.yaml",
+        "--signal", "E/P", "--try", term, "--json", "t.json",
+    )  # fmt: skip
+    assert tried.ret == 0, tried.stderr.str()
+    assert "added to the model's output, scored through the spec:" in tried.stdout.str()
+    after = json.loads((pytester.path / "t.json").read_text())["tried"]["after"]
+    # λ3 and λ4 in paper order; what the diagnosis predicted is what the spec scores.
+    assert after["lambdas"][2] == pytest.approx(first["predicted"]["mae"], abs=0.01)
+    assert after["lambdas"][3] == pytest.approx(first["predicted"]["rms"], abs=0.01)
+    assert abs(after["mean_error"]) < 0.01
+
+
+def test_a_bad_try_term_is_a_clear_error(pytester: pytest.Pytester) -> None:
+    make_energy(pytester.path)
+    result = pytester.run(
+        sys.executable, "-m", "pytest_hevval", "diagnose", "energy.hevval.yaml",
+        "--signal", "E/P", "--try", "2 * `Heater [MW]`",
+    )  # fmt: skip
+    assert result.ret == 2
+    err = result.stderr.str()
+    assert "--try '2 * `Heater [MW]`'" in err
+    assert "Heater [MW]" in err
+    assert "Traceback" not in err

@@ -117,7 +117,8 @@ def test_an_echo_is_a_response_and_declaring_it_a_cause_brings_it_back() -> None
     candidates = [Candidate("load", "channel", load), Candidate("bus_v", "channel", echo)]
     found = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
     assert [r.name for r in found.responses] == ["bus_v"]
-    assert found.responses[0].reason == "follows"
+    # The bus voltage is an instrument of the measured signal: an echo, never a cause.
+    assert found.responses[0].reason == "echo"
     assert found.relevant[0].name == "load"
     assert all(e.name != "bus_v" for e in found.effects)
     declared = diagnose_residual(
@@ -224,3 +225,79 @@ def test_a_load_in_the_signals_own_unit_names_the_effect_before_a_temperature_th
     assert (first.name, first.members) == ("Heater [kW]", ("Vent [°C]",))
     # Sensor noise on the regressor pulls the coefficient towards 0; its sign stays.
     assert 0.0 < first.interval[0] < first.coefficient < 1.0
+
+
+# -- third round: physical types, echoes, the lag's edge ---------------------------------------
+
+
+def test_a_temperature_that_follows_the_load_is_tested_on_what_the_load_leaves() -> None:
+    """A temperature that follows a missing load through a first-order lag, with a slow drift of
+    its own, competes with the load; the load is in the residual's dimension, so it is tested
+    first, and the temperature only on what the load leaves."""
+    ref, sim, load, _ = _case(21)
+    rng = np.random.default_rng(22)
+    n = load.shape[0]
+    warming = sps.lfilter([0.01], [1, -0.99], load - load.mean()) * 4.0
+    temperature = 20 + warming + np.linspace(0, 3, n) + 0.05 * rng.standard_normal(n)
+    candidates = [
+        Candidate("Cabin Temperature [°C]", "channel", temperature),
+        Candidate("Heater [kW]", "channel", load + 0.3 * rng.standard_normal(n)),
+    ]
+    found = diagnose_residual(ref, sim, dt=DT, candidates=candidates, in_dimension=["Heater [kW]"])
+    assert found.relevant[0].name == "Heater [kW]"
+    assert found.relevant[0].coefficient > 0
+    assert all(e.name != "Cabin Temperature [°C]" for e in found.relevant)
+
+
+def test_a_state_of_charge_and_its_rate_are_echoes_never_causes() -> None:
+    """The state of charge is the running sum of the measured power (logged in 0.1 % steps),
+    and its rate follows the measured power: both echo the scored signal, whatever else moves
+    them, while the missing load stays a cause."""
+    ref, sim, load, _ = _case(5)
+    soc = np.round(80 - np.cumsum(ref) * DT / 3600 / 20 * 100, 1)
+    from pytest_hevval.scoring.diagnosis import _smoothed, derivative_window
+
+    window = derivative_window(soc, 10, soc.shape[0])
+    # Quantised: averaged over several of its steps, more than the default window.
+    assert window is not None
+    assert window > 10
+    rate = np.gradient(_smoothed(soc, window), DT)
+    candidates = [
+        Candidate("SoC [%]", "channel", soc),
+        Candidate("d/dt SoC [%]", "derivative", rate),
+        Candidate("load", "channel", load),
+    ]
+    found = diagnose_residual(ref, sim, dt=DT, candidates=candidates)
+    reasons = {r.name: r.reason for r in found.responses}
+    assert reasons == {"SoC [%]": "echo", "d/dt SoC [%]": "echo"}, found.responses
+    assert found.relevant[0].name == "load"
+
+
+def test_a_channel_with_few_steps_has_no_derivative() -> None:
+    from pytest_hevval.scoring.diagnosis import derivative_window
+
+    n = 6000
+    few = np.repeat(np.arange(10.0), n // 10)
+    assert derivative_window(few, 10, n) is None
+    smooth = np.sin(np.arange(n) / 50)
+    assert derivative_window(smooth, 10, n) == 10
+
+
+def test_a_lag_on_the_edge_of_the_search_says_so() -> None:
+    from pytest_hevval.report.diagnosis import describe, payload
+    from pytest_hevval.results.diagnosis import SignalDiagnosis
+
+    rng = np.random.default_rng(9)
+    n = 4000
+    t = np.arange(n) * DT
+    ref = np.sin(t / 9) * 10 + sps.lfilter([1.0], [1.0, -0.95], rng.standard_normal(n))
+    sim = np.roll(ref, 80)  # 8 s late; the search looks at ±3 s only
+    found = diagnose_residual(ref, sim, dt=DT, max_lag_s=3.0)
+    assert found.lag_at_bound
+    assert found.max_lag_s == pytest.approx(3.0)
+    signal = SignalDiagnosis("s", "P", "kW", False, ("P", 1), (("P", 1),), found)
+    timing = next(line for line in describe(payload(signal)) if "timing:" in line)
+    assert "on the edge of the ±3 s search" in timing
+    assert "alignment.max_lag_s" in timing
+    within = diagnose_residual(ref, sim, dt=DT, max_lag_s=10.0)
+    assert not within.lag_at_bound

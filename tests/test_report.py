@@ -514,6 +514,7 @@ def test_html_shows_diagnosis_and_history_when_present(
             "members": ["Heater Current [A]", "Heating Power LIN [W]"],
             "interchangeable": ["Battery Temperature [°C]"],
             "stands_in_for": [],
+            "fix": "add 0.987 × heater_kw and lower the model's constant by 1.2 kW",
         },
         {
             "name": "Battery Temperature [°C]",
@@ -547,6 +548,8 @@ def test_html_shows_diagnosis_and_history_when_present(
     assert "11.1 %" in html
     assert "also measured by Heater Current [A], Heating Power LIN [W]" in html
     assert ">finding<" in html
+    # A finding shows the fix as the user applies it, as the terminal does.
+    assert "fix: add 0.987 × heater_kw and lower the model&#39;s constant by 1.2 kW" in html
     assert "could stand in for heater_kw" in html
     assert ">noise<" not in html
     assert html.count('<svg class="hv-plot hv-small"') == 1

@@ -74,11 +74,31 @@ MIN_EXPLAINED_INCREASE = 0.005
 #: mean square. 5 % lowers the RMS error by 2.5 % (√0.95): anything smaller cannot move λ4 by
 #: more than a fortieth of its distance to 1, so it is listed as minor rather than as a cause.
 MIN_SHARE = 0.05
-#: A channel is a response (an echo of the scored signal) when the measured signal and its
-#: running sum explain at least this share of its variance ...
+#: A channel is a response (a consequence of what the model reproduces) when the simulated
+#: signal explains at least this share of its variance ...
 RESPONSE_MIN_R2 = 0.1
-#: ... and the residual adds less than this fraction of that share on top of it.
+#: ... and the residual adds less than this fraction of that share on top of it, plus the
+#: fraction a response to the measured signal gets from the residual anyway: one that moves
+#: with the simulated part and the residual alike gains about var(r) / var(sim) of what the
+#: simulation explains. A missing load moves with the residual only.
 RESPONSE_RESIDUAL_RATIO = 0.25
+#: A channel is an echo of the scored signal (an instrument of it, its derivative or its
+#: integral) when, on block means of :data:`SLOW_SCALE_S`, the measured signal explains at least
+#: this share of its variance (instrument, derivative) ...
+ECHO_MIN_R2 = 0.8
+#: ... or this share of the variance of its increments (integral: a state of charge) ...
+ECHO_INCREMENT_MIN_R2 = 0.5
+#: ... and the simulated signal explains at least this fraction of that: a missing load that
+#: makes most of the measured signal is explained by it too, but not by the simulation.
+ECHO_SIMULATED_RATIO = 0.5
+#: A channel is an echo, too, when the measured signal as a whole explains at least this share
+#: of its variance on those block means ...
+ECHO_WHOLE_MIN_R2 = 0.25
+#: ... and at least this fraction of what its two parts (the simulated signal and the residual,
+#: with coefficients of their own) explain: a response to the measured power (a battery that
+#: warms with the current, a state of charge's rate) weighs both parts alike, while a missing
+#: load moves with the residual only.
+ECHO_WHOLE_RATIO = 0.7
 #: A channel whose cross-correlation with the measured signal peaks with the channel ahead by
 #: at least RESPONSE_MIN_LEAD_S, within ±RESPONSE_LEAD_WINDOW_S, is treated as an input (the
 #: driver acts, then the power follows), however well the measured signal explains it. A
@@ -234,8 +254,17 @@ class Effect:
     time_scale_s:
         The block length its coefficient was estimated on.
     alone_share:
-        What adding it alone removes of the residual's sum of squares; negative for a term
-        that only helps together with another.
+        What its own least-squares fit removes of the residual's sum of squares about its
+        mean: what the effect does on its own, whatever a correlated term did to its joint
+        coefficient.
+    fix_coefficient, fix_constant:
+        The fix as a user applies it: add ``fix_coefficient`` × the candidate and
+        ``fix_constant`` (in the signal's units) to the model's output. The coefficient is the
+        effect's own least-squares fit to the residual; the constant makes the mean error
+        zero with it, so a model whose constant term already covers part of the effect's
+        mean is told to lower that term. ``predicted`` are the λ of exactly that fix. For the
+        gain: the model's output times 1 + ``fix_coefficient``, plus the constant; for the
+        offset and the lag, the constant and the delay.
     """
 
     name: str
@@ -254,6 +283,8 @@ class Effect:
     stands_in_for: tuple[str, ...] = ()
     time_scale_s: float = 0.0
     alone_share: float = 0.0
+    fix_coefficient: float = 0.0
+    fix_constant: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -265,11 +296,17 @@ class Response:
     name, kind:
         As in the :class:`Candidate`.
     reason:
-        ``"declared"`` (the spec lists it under ``responses:``) or ``"follows"`` (the rule).
+        ``"declared"`` (the spec lists it under ``responses:``), ``"echo"`` (an instrument,
+        derivative or integral of the measured signal), ``"follows"`` (it moves with the
+        simulated signal, and the residual adds little) or ``"reproduced"`` (as ``"follows"``,
+        but it leads the measured signal: a cause the model reproduces through its inputs).
     measured_r2:
-        Share of the channel's variance the measured signal and its running sum explain.
+        ``"follows"``, ``"reproduced"``: share of the channel's variance the simulated signal
+        explains.
+        ``"echo"``: share of the variance of the channel (or of its increments) the measured
+        signal explains on block means of :data:`SLOW_SCALE_S`.
     residual_r2:
-        What the residual adds to that share.
+        What the residual adds to that share (``"follows"``).
     lead_s:
         Lead of the channel over the measured signal at the peak of their |cross-correlation|
         within ±2 s (negative: the channel follows).
@@ -336,6 +373,10 @@ class Diagnosis:
     localisation: Localisation | None = None
     #: The residual is zero: nothing to diagnose.
     exact_match: bool = False
+    #: Half-width of the lag search, in seconds.
+    max_lag_s: float = 0.0
+    #: The lag found lies on the edge of the search: the true lag may be larger.
+    lag_at_bound: bool = False
 
     @property
     def relevant(self) -> tuple[Effect, ...]:
@@ -451,6 +492,8 @@ def diagnose_residual(
     window_s: float = LOCAL_WINDOW_S,
     groups: Sequence[Collection[str]] = (),
     in_dimension: Collection[str] = (),
+    first: Collection[str] = (),
+    exogenous: Collection[str] = (),
 ) -> Diagnosis:
     """Explain the residual r = reference − simulated by timing, gain, offset and candidates.
 
@@ -476,7 +519,7 @@ def diagnose_residual(
         regressions and tests (explained fractions are computed at the original rate).
     responses, causes:
         Candidate names declared as responses of the scored signal (never offered as the
-        missing effect) or as causes (never classified as responses).
+        missing effect) or as causes (never classified as responses or echoes).
     min_share:
         A significant effect is relevant when fixing it alone removes at least this share of
         the residual's mean square; smaller ones are minor.
@@ -486,8 +529,16 @@ def diagnose_residual(
         Sets of candidate names that measure one effect, whatever their correlation; each is
         reported as one effect (strongly correlated candidates are grouped anyway).
     in_dimension:
-        Candidate names measured in the scored signal's own physical dimension. Of two effects
-        the record cannot tell apart, one of these is named before one that is not.
+        Candidate names measured in the scored signal's own physical dimension. They are
+        tested first (with ``first``), and of two effects the record cannot tell apart, one of
+        these is named before one that is not.
+    first:
+        Further candidate names tested first: the spec's declared suspects. The automatic lag
+        and gain, ``in_dimension`` and these form the first family of the gatekeeping order;
+        every other candidate is tested only on what the first family's effects leave.
+    exogenous:
+        Candidate names the vehicle cannot move (ambient temperature, elevation, time, the
+        model's inputs): never classified as consequences of the scored signal.
 
     Returns
     -------
@@ -550,7 +601,7 @@ def diagnose_residual(
     notes: list[str] = []
     sim_varies = _varies(sim)
 
-    lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
+    lag, max_lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
     lag_s = lag * dt
     # The candidates are analysed where sim(t − lag) exists, so that the lag candidate is exact
     # on every sample it is fitted to.
@@ -565,7 +616,7 @@ def diagnose_residual(
     if not sim_varies:
         notes.append("the simulated signal is constant: gain and lag cannot be estimated")
 
-    user, echoes = _split_responses(ref, ref - sim, dt, user, responses, causes)
+    user, echoes = _split_responses(ref, sim, dt, user, responses, causes, exogenous)
     series = _grouped(
         _candidate_series(sim, lag, dt, window, factor, user, units, names),
         r_g,
@@ -581,9 +632,19 @@ def diagnose_residual(
     slow = _slow_scale(r, kept, dt, factor) if m else None
     if slow is not None:
         scales.append(slow)
-    weights = _holm_weights([s.kind for s in kept])
+    leading = set(in_dimension) | set(first)
+    named = np.array([bool(leading & {s.name, *s.members}) for s in kept], dtype=bool)
+    # The automatic lag and gain are in the signal's dimension: with a first family, they
+    # belong to it. Without one (no unit or suspect given), there is no order to keep.
+    family = named | np.array([s.kind in ("lag", "gain") for s in kept], dtype=bool)
+    gatekeeping = bool(np.any(named))
+    weights = _holm_weights(family if gatekeeping else np.zeros(len(kept), dtype=bool))
     selected, holm_levels, bases = _forward_selection(
-        scales, alpha=alpha, max_selected=max_selected, weights=weights
+        scales,
+        alpha=alpha,
+        max_selected=max_selected,
+        weights=weights,
+        first=family if gatekeeping else None,
     )
     base = bases[0]
 
@@ -627,6 +688,7 @@ def diagnose_residual(
         scale=s_sig,
         offset_name=_free_name("offset", names),
         in_units=set(in_dimension),
+        leading=leading if gatekeeping else set(),
     )
     # A selected candidate is an effect: the table shows the effect's numbers, so that one
     # effect reads the same everywhere.
@@ -665,6 +727,8 @@ def diagnose_residual(
         lambdas=lambdas,
         predicted=predicted,
         localisation=where,
+        max_lag_s=max_lag * dt,
+        lag_at_bound=max_lag > 0 and abs(lag) >= max_lag,
     )
 
 
@@ -741,14 +805,15 @@ def _rescaled_candidates(user: _UserSeries, s_sig: float) -> tuple[_UserSeries, 
 
 def _timing(
     ref: FloatArray, sim: FloatArray, dt: float, max_lag_s: float | None, sim_varies: bool
-) -> int:
-    """The lag (samples) of the peak mean-removed cross-correlation."""
+) -> tuple[int, int]:
+    """The lag (samples) of the peak mean-removed cross-correlation, and the half-width of
+    the search (samples)."""
     n = ref.shape[0]
     window_s = _DEFAULT_MAX_LAG_S if max_lag_s is None else float(max_lag_s)
     # At least 10 samples must remain where both records overlap at the searched lag.
     max_lag = int(min(max(window_s, 0.0) / dt, (n - 10) if max_lag_s is not None else n // 4))
     # A constant signal correlates equally with every shift: there is no lag to find.
-    return search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0
+    return (search_lag(ref, sim, max_lag).lag if sim_varies and _varies(ref) else 0), max_lag
 
 
 @dataclass(frozen=True)
@@ -992,21 +1057,30 @@ def _slow_scale(r: FloatArray, kept: Sequence[_Series], dt: float, factor: int) 
     return _Scale(slow, r_s, rows, ar_order(r_s - float(np.mean(r_s))))
 
 
-def _holm_weights(kinds: Sequence[str]) -> FloatArray:
-    """Weights of the weighted Holm procedure: the spec's declared candidates (the user's own
-    suspects) share half of the level, every other candidate the other half; equal weights when
-    there are only one or the other."""
-    declared = np.array([k == "declared" for k in kinds])
-    d = int(np.count_nonzero(declared))
-    if d == 0 or d == len(kinds):
-        return np.ones(len(kinds))
-    return np.where(declared, (len(kinds) - d) / d, 1.0)
+def _holm_weights(first: npt.NDArray[np.bool_]) -> FloatArray:
+    """Weights of the weighted Holm procedure: the first family of the gatekeeping order (the
+    automatic terms, the loads in the signal's dimension and the spec's declared suspects)
+    shares half of the level, every other candidate the other half; equal weights when there
+    are only one or the other."""
+    d = int(np.count_nonzero(first))
+    if d == 0 or d == first.shape[0]:
+        return np.ones(first.shape[0])
+    return np.where(first, (first.shape[0] - d) / d, 1.0)
 
 
 def _forward_selection(
-    scales: Sequence[_Scale], *, alpha: float, max_selected: int, weights: FloatArray
+    scales: Sequence[_Scale],
+    *,
+    alpha: float,
+    max_selected: int,
+    weights: FloatArray,
+    first: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[list[int], list[float], list[FloatArray]]:
     """Holm-guarded forward selection; (selected rows, their levels, the final design per scale).
+
+    Gatekeeping order: while a candidate of the first family (``first``) passes, only those
+    can enter; the others are tested on what the first family's selected effects leave. A
+    temperature that follows a heater then explains only what the heater's power does not.
 
     A candidate is tested at every scale and passes when its smallest p-value, times the number
     of scales (Bonferroni), is under its weighted Holm level α·w_j / Σ w of the candidates not
@@ -1048,6 +1122,10 @@ def _forward_selection(
             axis=0,
         ) * len(scales)
         passed = p <= levels[chosen_rows]
+        if first is not None:
+            leading = first[chosen_rows]
+            if np.any(passed & leading):
+                passed &= leading
         if not np.any(passed):
             break
         pick = int(material[int(np.argmax(np.where(passed, gain_r2[material], -np.inf)))])
@@ -1234,60 +1312,132 @@ def _is_minor(e: Effect) -> bool:
 
 def _split_responses(
     ref: FloatArray,
-    residual: FloatArray,
+    sim: FloatArray,
     dt: float,
     user: _UserSeries,
     declared_responses: Collection[str],
     declared_causes: Collection[str],
+    exogenous: Collection[str] = (),
 ) -> tuple[_UserSeries, tuple[Response, ...]]:
-    """The user's candidates that may be causes, and those that echo the scored signal.
+    """The user's candidates that may be causes, and those set apart as responses.
 
-    A channel x is a response when the spec says so, or when (1) the measured signal and its
-    running sum explain at least :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds
-    less than :data:`RESPONSE_RESIDUAL_RATIO` of that on top, and (3) x does not lead the
-    measured signal by :data:`RESPONSE_MIN_LEAD_S` or more.
-    A missing cause enters the residual and the measured signal alike, so the residual tells
-    about it what the measured signal cannot; an echo of the measured signal (the bus voltage
-    sagging with the power, the state of charge falling with it) is explained by the measured
-    signal and the residual adds nothing.
+    A channel x is set apart when the spec says so (``declared``), or when it is
+
+    * an **echo** of the scored signal: on block means of :data:`SLOW_SCALE_S`, the measured
+      signal explains at least :data:`ECHO_MIN_R2` of x's variance (an instrument of it, its
+      derivative: the bus voltage, the state of charge's rate for a battery power) or
+      :data:`ECHO_INCREMENT_MIN_R2` of the variance of x's increments (its integral: the
+      state of charge), and the simulated signal at least :data:`ECHO_SIMULATED_RATIO` of
+      that; or the measured signal explains at least :data:`ECHO_WHOLE_MIN_R2` of x and at
+      least :data:`ECHO_WHOLE_RATIO` of what its simulated part and the residual explain
+      with coefficients of their own, and the simulated signal at least
+      :data:`RESPONSE_MIN_R2` (x responds to the measured signal as a whole; one that leads it
+      acts on it and is ``reproduced``). Echoes are never causes, whatever moves them;
+    * a **consequence** of what the model reproduces (``follows``), unless it is exogenous:
+      on the same block means, (1) the simulated signal explains at least
+      :data:`RESPONSE_MIN_R2` of its variance, (2) the residual adds less than
+      :data:`RESPONSE_RESIDUAL_RATIO` + var(r) / var(sim) of that on top (what a response to
+      the whole measured signal gets from r), and (3) x does not lead the measured signal by
+      :data:`RESPONSE_MIN_LEAD_S` or more; a channel that meets (1) and (2) but leads (a
+      pedal position) is a cause the model already reproduces through its inputs
+      (``reproduced``), no effect it lacks.
+
+    The consequence test asks the simulated signal, not the measured one: a missing load is
+    part of the measured signal, so the measured signal always "explains" it, while a response
+    to what the model reproduces moves with the simulation and a missing load moves with the
+    residual only. No running sum enters either test: two slowly trending series correlate
+    whatever their causes. The spec's causes are never set apart.
     """
     kept: _UserSeries = []
     echoes: list[Response] = []
+    residual = ref - sim
     lead_window = max(1, round(RESPONSE_LEAD_WINDOW_S / dt))
-    ref_varies = _varies(ref)
-    # What the measured signal drives: its value (a voltage sagging under load) and its
-    # running sum (a state of charge, a temperature that rises with the energy drawn).
-    running = np.cumsum(ref - float(np.mean(ref))) * dt
+    sim_varies = _varies(sim)
+    slow = max(1, round(SLOW_SCALE_S / dt))
+    if ref.shape[0] // slow < MIN_SLOW_BLOCKS:
+        slow = 1
+    ref_s, sim_s = block_means(ref, slow), block_means(sim, slow)
+    r_s = ref_s - sim_s
+    residual_ratio = float(np.var(r_s)) / max(float(np.var(sim_s)), 1e-300)
     for name, kind, values in user:
         if kind in ("lag", "gain") or name in declared_causes or not _varies(values):
             kept.append((name, kind, values))
             continue
-        measured = _full_rate_r2(values, [ref, running])
-        added = _full_rate_r2(values, [ref, running, residual]) - measured
-        # The direction of the peak |correlation|: a voltage falls as the power rises.
-        sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
-        lead = search_lag(ref, sign * values, lead_window).lag if ref_varies else 0
-        declared = name in declared_responses
-        follows = (
-            measured >= RESPONSE_MIN_R2
-            and added < RESPONSE_RESIDUAL_RATIO * measured
-            and lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt
+        explains = _full_rate_r2(residual, [values])
+        if name in declared_responses:
+            echoes.append(Response(name, kind, "declared", 0.0, 0.0, 0.0, explains))
+            continue
+        x_s = block_means(values, slow)
+        whole = _full_rate_r2(x_s, [ref_s])
+        instrument = max(
+            _echo_share(x_s, ref_s, sim_s),
+            _echo_share(np.diff(x_s), ref_s[1:], sim_s[1:], ECHO_INCREMENT_MIN_R2),
         )
-        if declared or follows:
+        # A response moves with the simulated part too; a missing load that makes most of
+        # the measured signal's slow variation does not.
+        parts = _full_rate_r2(x_s, [sim_s, r_s])
+        responds = (
+            whole >= ECHO_WHOLE_MIN_R2
+            and whole >= ECHO_WHOLE_RATIO * parts
+            and _full_rate_r2(x_s, [sim_s]) >= RESPONSE_MIN_R2
+        )
+        if instrument > 0.0 or responds:
+            # One that leads the measured signal acts on it (a pedal): it is no echo, but
+            # what it does the measured signal holds whole, and the model reproduces through
+            # its inputs.
+            # A derivative's lead is its smoothing window's, not the channel's.
+            acts = instrument == 0.0 and kind != "derivative"
+            lead = _lead(ref, values, lead_window) if acts else 0
+            reason = "reproduced" if lead * dt >= RESPONSE_MIN_LEAD_S - 0.5 * dt else "echo"
             echoes.append(
-                Response(
-                    name=name,
-                    kind=kind,
-                    reason="declared" if declared else "follows",
-                    measured_r2=measured,
-                    residual_r2=max(added, 0.0),
-                    lead_s=lead * dt,
-                    explains=_full_rate_r2(residual, [values]),
-                )
+                Response(name, kind, reason, max(instrument, whole), 0.0, lead * dt, explains)
+            )
+            continue
+        if name in exogenous or not sim_varies:
+            kept.append((name, kind, values))
+            continue
+        # On the slow scale, as the echo test: a quantised channel (a state of charge shown in
+        # whole percent) or its rate is resolved only there.
+        by_sim = _full_rate_r2(x_s, [sim_s])
+        added = _full_rate_r2(x_s, [sim_s, r_s]) - by_sim
+        allowed = RESPONSE_RESIDUAL_RATIO + residual_ratio
+        lead = _lead(ref, values, lead_window)
+        if by_sim >= RESPONSE_MIN_R2 and added < allowed * by_sim:
+            # Ahead of the measured signal it acts on it (a pedal); the simulation reproduces
+            # it through the model's inputs all the same, so it is no effect the model lacks.
+            reason = "follows" if lead * dt < RESPONSE_MIN_LEAD_S - 0.5 * dt else "reproduced"
+            echoes.append(
+                Response(name, kind, reason, by_sim, max(added, 0.0), lead * dt, explains)
             )
         else:
             kept.append((name, kind, values))
     return kept, tuple(echoes)
+
+
+def _lead(ref: FloatArray, values: FloatArray, window: int) -> int:
+    """Samples by which ``values`` leads the measured signal at the peak of their
+    |cross-correlation| within ±``window``. Taken against the measured signal: the simulation
+    is driven by logged inputs (a speed) that themselves follow the driver, so its timing says
+    nothing of which way a channel acts."""
+    if not _varies(ref):
+        return 0
+    # The direction of the peak |correlation|: a voltage falls as the power rises.
+    sign = 1.0 if dot(values - float(np.mean(values)), ref - float(np.mean(ref))) >= 0 else -1.0
+    return search_lag(ref, sign * values, window).lag
+
+
+def _echo_share(
+    x: FloatArray, ref: FloatArray, sim: FloatArray, floor: float = ECHO_MIN_R2
+) -> float:
+    """The share of x's variance the measured signal explains when x is an echo of it (at
+    least ``floor``, and the simulated signal explains at least :data:`ECHO_SIMULATED_RATIO`
+    of that), else 0."""
+    if x.shape[0] < 3 or not _varies(x):
+        return 0.0
+    by_ref = _full_rate_r2(x, [ref])
+    if by_ref < floor or _full_rate_r2(x, [sim]) < ECHO_SIMULATED_RATIO * by_ref:
+        return 0.0
+    return by_ref
 
 
 def _lambdas(ref: FloatArray, sim: FloatArray, reference_range: float) -> dict[str, float]:
@@ -1385,6 +1535,8 @@ class _Term(NamedTuple):
     mean_shift: float
     time_scale_s: float
     members: tuple[str, ...] = ()
+    # The term's value where its candidate is zero (rescaled units): -coefficient × centre.
+    at_zero: float = 0.0
 
 
 def _effects(
@@ -1403,6 +1555,7 @@ def _effects(
     scale: float,
     offset_name: str,
     in_units: set[str],
+    leading: Collection[str] = (),
 ) -> tuple[tuple[Effect, ...], dict[str, float], dict[str, float], Localisation | None]:
     """The selected candidates and the intercept, fitted jointly, as effects one can act on.
 
@@ -1419,43 +1572,9 @@ def _effects(
     chosen = [kept[i] for i in selected]
     fine = scales[0]
     centres = _credited_centres(fine.r, chosen)
-    fits: list[HacFit] = []
-    for sc in scales:
-        columns = [
-            (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
-            for s, c in zip(chosen, centres, strict=True)
-        ]
-        design = np.column_stack(
-            [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
-        )
-        fits.append(hac_fit(sc.r, design, sc.order))
-    errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
-    raw: list[_Term] = []
-    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
-        tests = [
-            _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
-            for fit, se in zip(fits, errors, strict=True)
-        ]
-        at = int(np.argmin(tests))
-        fit, se = fits[at], errors[at]
-        b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
-        coef = b_std / s.std
-        p = min(1.0, tests[at] * len(scales))
-        raw.append(
-            _Term(
-                name=s.name,
-                kind=s.kind,
-                coefficient=coef * s.unit,
-                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
-                p_value=p,
-                significant=p <= holm_levels[pos - 1],
-                term=coef * (s.full - centre),
-                mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
-                time_scale_s=scales[at].factor * dt,
-                members=s.members,
-            )
-        )
-    joint, se = fits[0], errors[0]
+    fits, raw = _fitted_terms(scales, chosen, centres, holm_levels, alpha=alpha, dt=dt, scale=scale)
+    joint = fits[0]
+    se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
     intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
     interval0 = _interval(intercept, se0, df0, alpha)
     p0 = _p_value(intercept, se0, df0)
@@ -1475,6 +1594,7 @@ def _effects(
             term=np.full(n, intercept),
             mean_shift=intercept / scale,
             time_scale_s=fine.factor * dt,
+            at_zero=intercept,
         )
     )
     where = _localise(ref, sim, dt, start_s, window_s)
@@ -1513,16 +1633,14 @@ def _effects(
                 if raw[j].kind not in GENERIC_KINDS and not in_dimension[j]:
                     rank[i] = max(rank[i], shares[j])
     findings: set[int] = set()
-    alone_shares = [0.0] * len(raw)
+    fixes = [_own_fix(r, t) for t in raw]
+    alone_shares = [fix.alone for fix in fixes]
     for i in sorted(range(len(raw)), key=lambda i: (-rank[i], not in_dimension[i], -shares[i])):
         t = raw[i]
-        # A term that only helps together with one that compensates it (a throttle term and a
-        # gain error of opposite sign, the throttle being nearly proportional to the power)
-        # makes the fit worse on its own, and is not an effect to add. Over one record, the
-        # mean shift of a gain error and an offset are the same thing, so the gain is taken
-        # about its mean here.
-        alone = _removed_share(r, t.term - float(np.mean(t.term)) if t.kind == "gain" else t.term)
-        alone_shares[i] = alone
+        # Relevance asks what the effect does on its own, with its own fit: a joint
+        # coefficient that a collinear term (a gain error against a load that follows the
+        # driving) distorted says little of what adding the effect alone would remove.
+        alone = alone_shares[i]
         if (
             t.significant
             and shares[i] >= min_share
@@ -1530,6 +1648,23 @@ def _effects(
             and not findings.intersection(swaps[i])
         ):
             findings.add(i)
+    # A finding's size is fitted with the other findings and the intercept only: a minor term
+    # that is nearly a combination of others (a gain against the road loads the model
+    # computes) would otherwise distort it, and the fix a user applies is the finding alone.
+    named = [i for i in sorted(findings) if i < len(chosen)]
+    if named and len(named) < len(chosen):
+        _, refitted = _fitted_terms(
+            scales,
+            [chosen[i] for i in named],
+            [centres[i] for i in named],
+            [holm_levels[i] for i in named],
+            alpha=alpha,
+            dt=dt,
+            scale=scale,
+        )
+        for i, t in zip(named, refitted, strict=True):
+            raw[i] = t._replace(significant=raw[i].significant)
+    fixes = [_own_fix(r, t, refit=i in named) for i, t in enumerate(raw)]
     effects = [
         Effect(
             name=t.name,
@@ -1541,8 +1676,8 @@ def _effects(
             offset_explained=t.mean_shift,
             significant=t.significant,
             relevant=i in findings,
-            predicted=_lambdas(ref, sim + t.term, reference_range),
-            hot_share=None if hot is None else _removed_share(r[hot], t.term[hot]),
+            predicted=_lambdas(ref, sim + fixes[i].series, reference_range),
+            hot_share=None if hot is None else _removed_share(r[hot], fixes[i].series[hot]),
             members=t.members,
             interchangeable=tuple(raw[j].name for j in swaps[i]),
             stands_in_for=()
@@ -1550,20 +1685,136 @@ def _effects(
             else tuple(raw[j].name for j in swaps[i] if j in findings),
             time_scale_s=t.time_scale_s,
             alone_share=alone_shares[i],
+            fix_coefficient=fixes[i].coefficient,
+            fix_constant=fixes[i].constant / scale,
         )
         for i, t in enumerate(raw)
     ]
     # The joint coefficients share the residual between correlated terms; fixing only the
-    # relevant ones is predicted with their own least-squares fit, so that a minor term that
-    # compensated one of them in the joint model does not spoil the prediction.
-    relevant_terms = [raw[i].term for i in sorted(findings)]
+    # relevant ones is predicted with their own least-squares fit and a constant, so that a
+    # minor term that compensated one of them in the joint model does not spoil the
+    # prediction, and the model's constant is moved as the fix says.
+    relevant_terms = [fixes[i].series for i in sorted(findings)]
+    if relevant_terms:
+        relevant_terms.append(np.ones(n))
     predicted = (
         _lambdas(ref, sim + _least_squares_fit(r, relevant_terms), reference_range)
         if relevant_terms
         else {}
     )
-    effects.sort(key=lambda e: (not e.relevant, not e.significant, -e.share))
+    # Findings are listed in the gatekeeping order they were tested in: the loads and the
+    # spec's suspects, then the simulated signal's own gain, offset and lag, then any other
+    # channel; by share within each. A generic term's joint share leans on the very terms the
+    # model is built from (a gain against the road loads it computes), and describes the
+    # simulation rather than naming what it lacks.
+    first_names = set(leading)
+
+    def tier(e: Effect) -> int:
+        if not first_names:
+            return 0
+        if e.kind in GENERIC_KINDS:
+            return 1
+        return 0 if first_names & {e.name, *e.members} else 2
+
+    effects.sort(key=lambda e: (not e.relevant, not e.significant, tier(e), -e.share))
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
+
+
+class _Fix(NamedTuple):
+    """An effect's own fit to the residual, as the user adds it to the model."""
+
+    series: FloatArray
+    # Per unit of the effect's joint term's candidate, relative to the joint coefficient.
+    coefficient: float
+    # Rescaled signal units: the fix's value where the candidate is zero.
+    constant: float
+    alone: float
+
+
+def _own_fix(r: FloatArray, t: _Term, *, refit: bool = False) -> _Fix:
+    """The term on its own: what it removes, and the fix a user adds to the model.
+
+    ``alone`` is what the term's own least-squares fit removes of Σr², r ≈ k · term, with the
+    term as credited (a load with the mean shift it carries; the gain and the lag about their
+    means: over one record a gain's mean shift is an offset's): an effect is judged by what
+    it does on its own, not by a joint coefficient that a collinear term distorted.
+
+    The fix adds c · term + b: c = 1 for a finding (``refit``: its coefficient as reported,
+    fitted with the other findings), else its own fit with a constant; the constant b makes
+    the mean error zero with the term, so a model whose constant already covers part of the
+    term's mean is told to lower it.
+    """
+    total = dot(r, r)
+    mean_r = float(np.mean(r))
+    n = r.shape[0]
+    if t.kind == "offset":
+        alone = n * mean_r**2 / total if total > 0.0 else 0.0
+        return _Fix(np.full(n, mean_r), 0.0, mean_r, alone)
+    mean_t = float(np.mean(t.term))
+    judged = t.term - mean_t if t.kind in ("gain", "lag") else t.term
+    size = dot(judged, judged)
+    alone = dot(judged, r) ** 2 / size / total if size > 0.0 and total > 0.0 else 0.0
+    centred = t.term - mean_t
+    spread = dot(centred, centred)
+    if spread <= 0.0:
+        return _Fix(np.full(n, mean_r), 0.0, mean_r, alone)
+    c = 1.0 if refit else dot(centred, r - mean_r) / spread
+    b = mean_r - c * mean_t
+    return _Fix(c * t.term + b, c * t.coefficient, c * t.at_zero + b, alone)
+
+
+def _fitted_terms(
+    scales: Sequence[_Scale],
+    chosen: Sequence[_Series],
+    centres: Sequence[float],
+    holm_levels: Sequence[float],
+    *,
+    alpha: float,
+    dt: float,
+    scale: float,
+) -> tuple[list[HacFit], list[_Term]]:
+    """The chosen candidates and an intercept fitted jointly at every scale; each term's
+    coefficient, interval and test from the scale where it is tested most sharply (its p-value
+    times the number of scales)."""
+    fine = scales[0]
+    fits: list[HacFit] = []
+    for sc in scales:
+        columns = [
+            (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
+            for s, c in zip(chosen, centres, strict=True)
+        ]
+        design = np.column_stack(
+            [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
+        )
+        fits.append(hac_fit(sc.r, design, sc.order))
+    errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
+    terms: list[_Term] = []
+    for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
+        tests = [
+            _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
+            for fit, se in zip(fits, errors, strict=True)
+        ]
+        at = int(np.argmin(tests))
+        fit, se = fits[at], errors[at]
+        b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
+        coef = b_std / s.std
+        p = min(1.0, tests[at] * len(scales))
+        terms.append(
+            _Term(
+                name=s.name,
+                kind=s.kind,
+                coefficient=coef * s.unit,
+                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                p_value=p,
+                significant=p <= holm_levels[pos - 1],
+                term=coef * (s.full - centre),
+                mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
+                time_scale_s=scales[at].factor * dt,
+                members=s.members,
+                at_zero=-coef * centre,
+            )
+        )
+    return fits, terms
 
 
 def _interchangeable(together: FloatArray, floor: float) -> list[list[int]]:

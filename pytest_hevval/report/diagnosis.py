@@ -18,11 +18,21 @@ from ..core.diagnosis import (
     Effect,
     Response,
 )
-from ..core.registry import get_characteristic
+from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 
-__all__ = ["SUMMARY_NAMES", "describe", "effect_text", "payload", "summary", "target_payload"]
+__all__ = [
+    "SUMMARY_NAMES",
+    "describe",
+    "effect_text",
+    "fix_expression",
+    "fix_text",
+    "payload",
+    "summary",
+    "target_payload",
+    "tried_lines",
+]
 
 EXACT_MATCH = "the model matches the reference exactly: the residual is zero"
 
@@ -34,6 +44,7 @@ def payload(found: SignalDiagnosis) -> dict[str, Any]:
     name = found.signal.rsplit("/", 1)[-1]
     for effect in out["effects"]:
         effect["text"] = effect_text(effect, name, found.unit)
+        effect["fix"] = fix_text(effect, name, found.unit)
     return out
 
 
@@ -57,6 +68,7 @@ def summary(found: SignalDiagnosis | Diagnosis) -> str:
         found.effects,
         found.responses,
         lag_s=found.lag_s,
+        lag_at_bound=found.lag_at_bound,
         timing_significant=found.timing_significant,
         remaining=found.remaining,
     )
@@ -109,13 +121,15 @@ def _summary(
     echoes: Sequence[Response],
     *,
     lag_s: float,
+    lag_at_bound: bool,
     timing_significant: bool,
     remaining: Any,
 ) -> str:
     parts = [_effect_phrase(e) for e in effects if e.relevant]
     if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
         direction = "lags" if lag_s < 0 else "leads"
-        parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s")
+        edge = " or more (the edge of the lag search)" if lag_at_bound else ""
+        parts.append(f"the simulation {direction} the reference by {abs(lag_s):.3g} s{edge}")
     stand_ins = [e for e in effects if e.stands_in_for]
     minor = [e.name for e in effects if e.significant and not e.relevant and not e.stands_in_for]
     if not parts:
@@ -131,11 +145,79 @@ def _summary(
         parts.append(f"{e.name} could stand in for {_names_text(e.stands_in_for)} on this record")
     if minor:
         parts.append("minor: " + _names_text(minor))
-    # Only the echoes that would have been offered as an effect are worth a word here.
-    loud = [e.name for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
-    if loud:
-        parts.append(f"moves with the measured signal, probably a consequence: {_names_text(loud)}")
+    # Only the responses that would have been offered as an effect are worth a word here.
+    loud = [e for e in echoes if e.explains >= MIN_EXPLAINED_INCREASE]
+    echoed = [e.name for e in loud if e.reason == "echo"]
+    reproduced = [e.name for e in loud if e.reason == "reproduced"]
+    follows = [e.name for e in loud if e.reason not in ("echo", "reproduced")]
+    if echoed:
+        parts.append(f"echoes the measured signal, never a cause: {_names_text(echoed)}")
+    if reproduced:
+        parts.append(f"reproduced by the model through its inputs: {_names_text(reproduced)}")
+    if follows:
+        parts.append(
+            f"moves with the simulated signal, probably a consequence: {_names_text(follows)}"
+        )
     return "; ".join(parts)
+
+
+def fix_expression(effect: Mapping[str, Any]) -> str | None:
+    """The fix as a term ``hevval diagnose --try`` reads, to full precision; None for a gain,
+    a lag or a derivative, which no expression over the reference's columns writes exactly."""
+    kind = str(effect["kind"])
+    constant = float(effect.get("fix_constant") or 0.0)
+    if kind == "offset":
+        return f"{constant:.6g}"
+    if kind not in ("channel", "declared"):
+        return None
+    name = str(effect["name"])
+    quoted = name if name.isidentifier() else f"`{name}`"
+    sign = "-" if constant < 0 else "+"
+    return (
+        f"{float(effect.get('fix_coefficient') or 0.0):.6g} * {quoted} {sign} {abs(constant):.6g}"
+    )
+
+
+def tried_lines(tried: Any) -> list[str]:
+    """The before/after of ``hevval diagnose --try``: each λ and the physical errors of the
+    signal as the spec scores it, before and after the term is added to the model's output."""
+    unit = f" {tried.unit}" if tried.unit else ""
+    before, after = tried.before, tried.after
+    lambdas = ", ".join(
+        f"{get_characteristic(name).symbol} {b:.4f} → {a:.4f}"
+        for name, b, a in zip(FUSED_CHARACTERISTICS, before.lambdas, after.lambdas, strict=True)
+    )
+    return [
+        f"{tried.signal} with {tried.term} added to the model's output, scored through the spec:",
+        f"  {lambdas}",
+        f"  mean error {before.mean_error:+.4g} → {after.mean_error:+.4g}{unit}, "
+        f"MAE {before.mae:.4g} → {after.mae:.4g}{unit}, "
+        f"RMS {before.rms:.4g} → {after.rms:.4g}{unit}",
+        "  (only this signal is scored again; the signals above it change too once the term is "
+        "in the model)",
+    ]
+
+
+def fix_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
+    """The fix as the user applies it to the model, mean included: ``add 1.2 × heating_kw and
+    lower the model's constant by 2.9 kW``."""
+    coef = float(effect.get("fix_coefficient") or 0.0)
+    constant = float(effect.get("fix_constant") or 0.0)
+    unit_text = f" {unit}" if unit else ""
+    kind = str(effect["kind"])
+    if kind == "gain":
+        action = f"multiply the model's {signal} by {1.0 + coef:.4g}"
+    elif kind == "lag":
+        action = f"make the model's {signal} {abs(coef):.3g} s {'earlier' if coef > 0 else 'later'}"
+    elif kind == "offset":
+        action = ""
+    else:
+        action = f"add {coef:.3g} × {_label(str(effect['name']))}"
+    direction = "raise" if constant > 0 else "lower"
+    shift = f"{direction} the model's constant by {abs(constant):.3g}{unit_text}"
+    if not action:
+        return shift
+    return f"{action} and {shift}" if constant != 0.0 else action
 
 
 def effect_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
@@ -217,8 +299,18 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
             lines.append(
                 "      on this record, interchangeable with: " + ", ".join(e["interchangeable"])
             )
-        if e.get("predicted") and before:
-            lines.append(f"      after adding it: {_lambda_change(before, e['predicted'])}")
+        fix = fix_text(e, found["signal"].rsplit("/", 1)[-1], found.get("unit"))
+        after = (
+            f" (then {_lambda_change(before, e['predicted'])})"
+            if e.get("predicted") and before
+            else ""
+        )
+        lines.append(f"      fix: {fix}{after}")
+        term = fix_expression(e)
+        if term is not None:
+            lines.append(
+                f"      try it: hevval diagnose SPEC --signal {found['signal']} --try '{term}'"
+            )
     for e in stand_ins:
         instead = ", ".join(e["stands_in_for"])
         lines.append(
@@ -234,17 +326,34 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
         lines.append(
             f"  after adding all {len(relevant)}: {_lambda_change(before, found['predicted'])}"
         )
+    signal = found["signal"].rsplit("/", 1)[-1]
     for r in found.get("responses") or []:
-        how = (
-            "declared a response in the spec"
-            if r["reason"] == "declared"
-            else f"the measured signal explains {100 * r['measured_r2']:.0f} % of it, the "
-            f"residual adds {100 * r['residual_r2']:.1f} %"
-        )
-        lines.append(
-            f"  response: {r['name']} moves with {found['signal'].rsplit('/', 1)[-1]}, "
-            f"probably a consequence ({how}); not offered as a cause"
-        )
+        name = _label(r["name"])
+        # Never set a candidate aside without saying how to test it as a cause.
+        declare = f"to test it as a cause, declare it: diagnosis: {{causes: [{r['name']!r}]}}"
+        if r["reason"] == "declared":
+            lines.append(f"  response: {name} is declared a response in the spec")
+        elif r["reason"] == "echo":
+            lines.append(
+                f"  echo: {name} echoes the measured {signal} (which explains "
+                f"{100 * r['measured_r2']:.0f} % of it, or of its increments, on "
+                f"{SLOW_SCALE_S:g} s means): an instrument, derivative or integral of it, not "
+                f"offered as a cause; {declare}"
+            )
+        elif r["reason"] == "reproduced":
+            lines.append(
+                f"  reproduced: {name} leads the measured {signal} by {r['lead_s']:.2g} s and "
+                f"moves with the simulated one (it explains {100 * r['measured_r2']:.0f} % of "
+                f"it, the residual adds {100 * r['residual_r2']:.1f} %): a cause the model "
+                f"already reproduces through its inputs, not offered as a cause; {declare}"
+            )
+        else:
+            lines.append(
+                f"  response: {name} moves with the simulated {signal}, probably a consequence "
+                f"(the simulated signal explains {100 * r['measured_r2']:.0f} % of it, the "
+                f"residual adds {100 * r['residual_r2']:.1f} %); not offered as a cause; "
+                f"{declare}"
+            )
     where = found.get("localisation")
     if where and where.get("windows"):
         spans = ", ".join(f"{a:.0f}–{b:.0f} s" for a, b in where["spans_s"][:3])
@@ -266,6 +375,17 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def _bound_text(found: Mapping[str, Any]) -> str:
+    """A lag on the edge of the search says so: the peak may lie beyond it."""
+    if not found.get("lag_at_bound"):
+        return ""
+    width = float(found.get("max_lag_s") or 0.0)
+    return (
+        f", on the edge of the ±{width:g} s search: the true lag may be larger; widen "
+        f"alignment.max_lag_s (e.g. to {2 * width:g} s) to find it"
+    )
+
+
 def describe(found: Mapping[str, Any]) -> list[str]:
     """The lines ``hevval diagnose`` prints for one diagnosis, from its :func:`payload`."""
     unit = f" {found['unit']}" if found.get("unit") else ""
@@ -274,7 +394,8 @@ def describe(found: Mapping[str, Any]) -> list[str]:
         f"{found['signal']}: the error appears at {origin['path']} (level {origin['level']})",
         f"  {found['summary']}",
         f"  timing: lag {found['lag_s']:+.3g} s"
-        + (" (significant)" if found.get("timing_significant") else ""),
+        + (" (significant)" if found.get("timing_significant") else "")
+        + _bound_text(found),
         # The headline fit is the simulated signal alone against the reference; the effects
         # below are fitted together, so their gain and offset can differ.
         "  before any effect, reference ≈ gain · simulated + offset:",

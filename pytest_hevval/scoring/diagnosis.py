@@ -8,13 +8,16 @@ does not use, and the time derivative of each — on the aligned grid, and diagn
 
 from __future__ import annotations
 
+import ast
 import contextlib
-from collections.abc import Sequence
-from dataclasses import replace
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
 
+from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.diagnosis import (
     GENERIC_KINDS,
     MIN_SHARE,
@@ -24,13 +27,15 @@ from ..core.diagnosis import (
 )
 from ..core.registry import FUSED_CHARACTERISTICS
 from ..data.record import Record
-from ..errors import DataError, HevvalError
+from ..errors import DataError, ExpressionError, HevvalError, SpecError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 from ..results.spec_result import SignalResult
+from ..spec.expressions import Expression, parse_signal
 from .engine import Evaluation, per_item, scoring_threads
 
 __all__ = [
     "DIAGNOSE_MODES",
+    "TriedTerm",
     "candidates_for",
     "derivative_name",
     "diagnose_failures",
@@ -38,6 +43,7 @@ __all__ = [
     "diagnose_pair",
     "diagnose_signal",
     "diagnosis_target",
+    "try_term",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -46,6 +52,20 @@ FloatArray = npt.NDArray[np.float64]
 MAX_CHANNELS = 50
 #: Window of the centred mean applied to a channel before its derivative is taken.
 DERIVATIVE_SMOOTHING_S = 1.0
+#: A channel that changes less often than once per smoothing window is quantised (a state of
+#: charge in 0.1 % steps, a limit that moves a few times a trip): its mean is taken over this
+#: many of its steps before it is differentiated, so that its rate is a slope, not a row of
+#: spikes ...
+QUANTISED_SMOOTHING_STEPS = 5
+#: ... and one that changes fewer times than this over the record has no derivative candidate:
+#: a handful of steps says nothing of a rate.
+MIN_DERIVATIVE_STEPS = 20
+#: Quantities the vehicle cannot move, by the words of a channel's name: never called a
+#: consequence of the scored signal (two slowly trending series correlate whatever their
+#: causes). The model's inputs are treated alike; the spec can name more under ``causes:``.
+EXOGENOUS = re.compile(
+    r"(?i)\b(ambient|outside|outdoor|elevation|altitude|latitude|longitude|gps|time|date)\b"
+)
 
 
 def _smoothed(values: FloatArray, window: int) -> FloatArray:
@@ -107,7 +127,8 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
     record = _full_reference(evaluation)
     # Logged channels are quantised (GPS elevation in centimetre steps) or held between CAN
     # frames; differentiated sample by sample they are mostly steps. A centred 1 s mean first
-    # keeps the slow slope the model may lack.
+    # keeps the slow slope the model may lack; a coarser channel is averaged over several of
+    # its steps (derivative_window).
     smoothing = max(1, round(DERIVATIVE_SMOOTHING_S / aligned.grid.dt))
     time_name = spec.reference.options.time
     names = [
@@ -116,15 +137,76 @@ def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Can
         if n not in used and n != time_name and n in record.channels
     ][:MAX_CHANNELS]
     for name in names:
-        channel = record.channels[name]
-        values = np.asarray(channel.values, dtype=np.float64)
-        ok = np.isfinite(values)
-        if ok.sum() < 3:
+        found_on_grid = _on_grid(record, name, time)
+        if found_on_grid is None:
             continue
-        on_grid = np.interp(time, channel.time[ok], values[ok])
+        on_grid, values = found_on_grid
         add(name, "channel", on_grid)
-        add(derivative_name(name), "derivative", np.gradient(_smoothed(on_grid, smoothing), time))
+        window = derivative_window(values, smoothing, on_grid.shape[0])
+        if window is not None:
+            add(derivative_name(name), "derivative", np.gradient(_smoothed(on_grid, window), time))
     return found
+
+
+def _on_grid(record: Record, name: str, time: FloatArray) -> tuple[FloatArray, FloatArray] | None:
+    """A logged channel linearly on the grid, and its finite logged values; None when it
+    holds fewer than three finite values."""
+    channel = record.channels[name]
+    values = np.asarray(channel.values, dtype=np.float64)
+    ok = np.isfinite(values)
+    if ok.sum() < 3:
+        return None
+    return np.interp(time, channel.time[ok], values[ok]), values[ok]
+
+
+def derivative_window(values: FloatArray, smoothing: int, samples: int) -> int | None:
+    """The centred mean's window (grid samples) before a channel is differentiated: the
+    default ``smoothing``, or :data:`QUANTISED_SMOOTHING_STEPS` of its steps for a channel
+    that changes less often than once per window; None (no derivative) for one that changes
+    fewer than :data:`MIN_DERIVATIVE_STEPS` times."""
+    steps = int(np.count_nonzero(np.diff(values)))
+    if steps < MIN_DERIVATIVE_STEPS:
+        return None
+    spacing = samples / steps
+    if spacing <= smoothing:
+        return smoothing
+    return min(samples, round(QUANTISED_SMOOTHING_STEPS * spacing))
+
+
+def declared_unit(expression: Expression) -> str | None:
+    """The unit of a declared candidate, read from the columns it uses: one column's, a sum or
+    difference of columns in one unit, scaled by a number, or the derivative (``per s``) of
+    one; None when the expression combines units otherwise (its unit is then unknown)."""
+    if expression.is_column:
+        return candidate_unit(expression.columns[0], "channel")
+    # The parsed form the expression keeps: its tree and the columns behind its names.
+    tree = expression._tree
+    names = expression._names
+    return None if tree is None else _unit_of(tree, names)
+
+
+def _unit_of(node: ast.expr, names: Mapping[str, str]) -> str | None:
+    if isinstance(node, ast.Name):
+        column = names.get(node.id)
+        return None if column is None else candidate_unit(column, "channel")
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.UAdd, ast.USub)):
+        return _unit_of(node.operand, names)
+    if isinstance(node, ast.BinOp):
+        if isinstance(node.op, (ast.Add, ast.Sub)):
+            left, right = _unit_of(node.left, names), _unit_of(node.right, names)
+            return left if left is not None and left == right else None
+        if isinstance(node.op, (ast.Mult, ast.Div)) and isinstance(node.right, ast.Constant):
+            return _unit_of(node.left, names)
+        if isinstance(node.op, ast.Mult) and isinstance(node.left, ast.Constant):
+            return _unit_of(node.right, names)
+        return None
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args:
+        inner = _unit_of(node.args[0], names)
+        if node.func.id == "smooth":
+            return inner
+        if node.func.id == "derivative" and inner is not None:
+            return f"{inner}/s"
+    return None
 
 
 def _with_derivatives(names: Sequence[str]) -> tuple[str, ...]:
@@ -150,14 +232,48 @@ def diagnose_pair(
     load in kW for a power in kW) are named first among effects the record cannot tell apart.
     """
     assert evaluation.aligned is not None
-    settings = evaluation.spec.diagnosis
+    spec = evaluation.spec
+    settings = spec.diagnosis
     signal_unit = unit or ""
+    units = {
+        c.name: declared_unit(spec.candidates[c.name])
+        if c.kind == "declared" and c.name in spec.candidates
+        else candidate_unit(c.name, c.kind)
+        for c in candidates
+    }
     in_dimension = [
         c.name
         for c in candidates
         if signal_unit
-        and (found := candidate_unit(c.name, c.kind)) is not None
+        and (found := units[c.name]) is not None
         and _same_dimension(found, signal_unit)
+    ]
+    # The gatekeeping order's first family, besides the loads in the signal's dimension: the
+    # spec's declared suspects whose unit is unknown (an expression such as a road load) and
+    # the spec's causes. A declared candidate in another dimension (a temperature) is tested on
+    # what those leave, as any channel is.
+    first = [
+        *(c.name for c in candidates if c.kind == "declared" and units[c.name] is None),
+        *_with_derivatives(settings.causes),
+    ]
+    inputs = set(spec.model.inputs)
+    over_inputs = [
+        c.name
+        for c in candidates
+        if c.kind == "declared"
+        and c.name in spec.candidates
+        and all(col in inputs for col in spec.candidates[c.name].columns)
+    ]
+    exogenous = [
+        c.name
+        for c in candidates
+        if c.name in _with_derivatives(spec.model.inputs)
+        or EXOGENOUS.search(c.name)
+        or (
+            c.kind == "declared"
+            and c.name in spec.candidates
+            and all(EXOGENOUS.search(col) for col in spec.candidates[c.name].columns)
+        )
     ]
     return diagnose_residual(
         reference,
@@ -166,11 +282,15 @@ def diagnose_pair(
         candidates=candidates,
         max_lag_s=evaluation.spec.alignment.max_lag_s,
         responses=_with_derivatives(settings.responses),
-        # A channel the model reads is an input; the spec can name more causes.
-        causes=_with_derivatives((*settings.causes, *evaluation.spec.model.inputs)),
+        # An expression over the model's inputs (a road load from the speed) is a cause.
+        causes=[*_with_derivatives(settings.causes), *over_inputs],
         min_share=MIN_SHARE if settings.min_share is None else settings.min_share,
         groups=[members for _, members in settings.groups],
         in_dimension=in_dimension,
+        first=first,
+        # A channel the model reads is an input: never a consequence (its rate may still be
+        # an echo: the state of charge's rate is the battery current).
+        exogenous=exogenous,
     )
 
 
@@ -349,3 +469,87 @@ def diagnose_failures(
             else next(r for r in results if isinstance(r, HevvalError))
         )
     return found
+
+
+@dataclass(frozen=True)
+class TriedTerm:
+    """A term added to a signal's simulated output and the signal scored again through the
+    spec (``hevval diagnose --try``): what a fix would do before the model is touched."""
+
+    signal: str
+    term: str
+    unit: str | None
+    before: SignalCharacteristics
+    after: SignalCharacteristics
+
+
+def try_term(evaluation: Evaluation, path: str, term: str) -> TriedTerm:
+    """Score ``path`` with ``term`` added to its simulated output, as the spec scores it (its
+    lag search, correlation form and declared range).
+
+    ``term`` is an expression over the reference's columns and the spec's declared candidates
+    (by name), e.g. ``1.12 * heating_aircon_kw - 1.47``: the fix the diagnosis prints. The
+    signals above and below ``path`` are not changed: a model whose energy is the running sum
+    of this power changes there too once the fix is in the model."""
+    spec = evaluation.spec
+    aligned = evaluation.aligned
+    if aligned is None or path not in evaluation.arrays:
+        known = ", ".join(repr(p) for p in evaluation.arrays) or "none kept"
+        raise DataError(
+            f"no signal {path!r} in this spec (signals: {known})",
+            file=str(spec.path),
+            hint="pass --signal with a path such as E_batt/P_batt",
+        )
+    node = next(n for _, names, n in spec.walk() if "/".join(names) == path)
+    try:
+        expression = parse_signal(term)
+        if expression.is_column and expression.columns[0] not in spec.candidates:
+            # A bare number or name: a number is a constant, a name a column or candidate.
+            expression = parse_signal(f"({term})")
+        record = _full_reference(evaluation)
+        columns: dict[str, FloatArray] = {}
+        for name in expression.columns:
+            if name in spec.candidates:
+                declared = spec.candidates[name]
+                columns[name] = declared.evaluate(
+                    aligned.columns("reference", declared.columns, "linear"), aligned.time
+                )
+            elif name in record.channels and (logged := _on_grid(record, name, aligned.time)):
+                columns[name] = logged[0]
+        values = np.asarray(expression.evaluate(columns, aligned.time), dtype=np.float64)
+    except (ExpressionError, DataError) as exc:
+        raise SpecError(
+            f"--try {term!r}: {exc}",
+            file=str(spec.path),
+            hint="write the term over the reference's columns (`Heating Power CAN [kW]`) and "
+            f"the spec's candidates ({', '.join(spec.candidates) or 'none declared'}), e.g. "
+            "--try '1.2 * heating_kw - 2.9'",
+        ) from exc
+    if aligned.gap_mask is not None:
+        values = values[~aligned.gap_mask]
+    reference, simulated = evaluation.arrays[path]
+    if not np.all(np.isfinite(values)):
+        raise SpecError(
+            f"--try {term!r} is not finite at {int(np.count_nonzero(~np.isfinite(values)))} "
+            "scored samples",
+            file=str(spec.path),
+            hint="check the columns it reads for gaps, or guard them in the expression",
+        )
+
+    def scored(sim: FloatArray) -> SignalCharacteristics:
+        return signal_characteristics(
+            reference,
+            sim,
+            dt=aligned.grid.dt,
+            max_lag_s=spec.alignment.max_lag_s,
+            correlation=spec.correlation,
+            reference_range=node.reference_range,
+        )
+
+    return TriedTerm(
+        signal=path,
+        term=term,
+        unit=node.unit,
+        before=scored(np.asarray(simulated, dtype=np.float64)),
+        after=scored(np.asarray(simulated, dtype=np.float64) + values),
+    )
