@@ -827,7 +827,7 @@ def test_forbidden_patterns_do_match_what_they_forbid() -> None:
 
 CALLABLE_SPEC = """\
 reference: ref.parquet
-model: {callable: "side_effect_model:run", params: {gain: 1.0}}
+model: {callable: "side_effect_model:run", params: {gain: 1.0}, driven_by: [v]}
 sets:
   - {signal: v}
 """
@@ -886,6 +886,7 @@ def test_spec_parsing_imports_no_model(tmp_path: Path) -> None:
     assert "module_that_does_not_exist" not in sys.modules
     assert spec.model.kind == "callable"
     fmu_text = CALLABLE_SPEC.replace(
-        '{callable: "side_effect_model:run", params: {gain: 1.0}}', "{fmu: missing.fmu}"
+        '{callable: "side_effect_model:run", params: {gain: 1.0}, driven_by: [v]}',
+        "{fmu: missing.fmu}",
     )
     assert parse_spec_text(fmu_text, tmp_path / "fmu.hevval.yaml").model.kind == "fmu"

@@ -40,7 +40,7 @@ reference: {path: data/ref.csv, time: t}
 model:
   callable: "slow_model:simulate"
   params: {seconds: SECONDS}
-  inputs: [V, I, speed]
+  driven_by: [V, I, speed]
 thresholds: {mae: 0.9}
 RUNTIME
 sets:
@@ -73,7 +73,7 @@ def test_runtime_keys_are_read_and_checked() -> None:
     with pytest.raises(SpecError, match=r"t.hevval.yaml:8: runtime.max_s: must be greater than 0"):
         parse_spec_text(_spec(0, "runtime: {max_s: 0}"), Path("t.hevval.yaml"))
     exported = _spec(0, "runtime: {max_s: 1}").replace(
-        'callable: "slow_model:simulate"\n  params: {seconds: 0}\n  inputs: [V, I, speed]',
+        'callable: "slow_model:simulate"\n  params: {seconds: 0}\n  driven_by: [V, I, speed]',
         "path: data/sim.csv",
     )
     with pytest.raises(SpecError) as raised:
