@@ -1367,7 +1367,8 @@ def test_missing_baseline_decisions(tmp_path: Path) -> None:
     ci = h.missing_baseline(ci=True, create_baseline=False, directory=tmp_path)
     assert ci.fails
     assert str(tmp_path) in ci.message
-    assert "--hevval-create-baseline" in ci.message
+    assert "--hevval-accept" in ci.message
+    assert "hevval-history" in ci.message
     assert "commit the history folder" in ci.message
     local = h.missing_baseline(ci=False, create_baseline=False, directory=tmp_path)
     assert local.action == "note"

@@ -941,8 +941,10 @@ def missing_baseline(
     if ci:
         return BaselineDecision(
             "fail",
-            f"{where}; comparison needs one. Run once with --hevval-create-baseline to record "
-            f"one, or commit the history folder ({directory}) or restore it from the CI cache",
+            f"{where}; comparison needs one. Record one on purpose: run once with "
+            "--hevval-accept (with the shipped GitHub workflow: run it by hand on main with "
+            "'accept'), or bring the history folder to the job (the workflow's branch "
+            f"hevval-history, or commit the history folder {directory})",
         )
     if not recorded:
         return BaselineDecision(
