@@ -193,6 +193,12 @@ def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_pat
     assert again.passed, again.log
     assert len(hub.history()) == 2
     assert hub.records()[-1]["accepted"] is True
+    # The model beats its thresholds: the ratchet's sidecar is offered for review, not pushed
+    # to main.
+    ratchet = hub.origin.files_at("refs/heads/hevval-ratchet")
+    assert "specs/trip.hevval.thresholds.yaml" in ratchet
+    assert "specs/trip.hevval.thresholds.yaml" not in hub.origin.files_at("refs/heads/main")
+    assert any(call["args"][:2] == ["pr", "create"] for call in again.gh_calls)
 
     # 4. a pull request that lowers the capacity to 95 % of the fitted one: fails, naming the
     #    signal, in the summary and the comment.
