@@ -16,6 +16,7 @@ passing over a step it did not run.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -232,15 +233,7 @@ class Event:
         )
 
     def rerun(self) -> Event:
-        return Event(
-            self.name,
-            self.ref,
-            self.sha,
-            self.run_id,
-            self.attempt + 1,
-            self.inputs,
-            self.pull_request,
-        )
+        return dataclasses.replace(self, attempt=self.attempt + 1)
 
 
 @dataclass
@@ -488,7 +481,7 @@ def run_workflow(
         payload["pull_request"] = dict(event.pull_request)
         payload["number"] = event.pull_request["number"]
     if event.inputs:
-        payload["inputs"] = {k: v for k, v in event.inputs.items()}
+        payload["inputs"] = dict(event.inputs)
     event_file.write_text(json.dumps(payload))
 
     ref_name = event.ref.removeprefix("refs/heads/")
@@ -541,8 +534,7 @@ def run_workflow(
         base_env["EMULATED_GH_HAS_COMMENT"] = "1"
     workflow_env = {str(k): str(v) for k, v in (document.get("env") or {}).items()}
     workflow_env.update(env_overrides or {})
-    contexts: dict[str, Any] = {"github": github, "inputs": dict(event.inputs), "env": {}}
-    contexts["env"] = dict(workflow_env)
+    contexts: dict[str, Any] = {"github": github, "inputs": dict(event.inputs)}
     job_env = {str(k): str(v) for k, v in (spec.get("env") or {}).items()}
 
     steps: list[Step] = []

@@ -15,9 +15,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core.registry import describe
+from ..escape import markdown, markdown_code
 from ..results.codec import json_number
 from ..results.verdict import RunVerdict
-from .text import _code, _md, regression_lines
+from .text import regression_lines
 
 __all__ = ["COMPARISON_ROWS", "Change", "changes", "comparison_markdown"]
 
@@ -113,7 +114,9 @@ def _bounds(interval: tuple[float, float] | None) -> str:
 
 def _row(change: Change) -> str:
     mark = "❌" if change.regression else ("🔻" if change.delta < 0 else "🔺")
-    where = _code(change.spec if change.signal is None else f"{change.spec}::{change.signal}")
+    where = markdown_code(
+        change.spec if change.signal is None else f"{change.spec}::{change.signal}"
+    )
     intervals = (
         ""
         if change.before_interval is None and change.after_interval is None
@@ -121,7 +124,7 @@ def _row(change: Change) -> str:
         + (" (disjoint)" if change.beyond_noise else "")
     )
     return (
-        f"| {mark} | {where} | {_md(change.label)} | {_number(change.before)} "
+        f"| {mark} | {where} | {markdown(change.label)} | {_number(change.before)} "
         f"| {_number(change.after)} | {change.delta:+.4f} | {intervals} |"
     )
 
@@ -143,7 +146,7 @@ def comparison_markdown(
     worse = [c for c in found if c.regression or c.delta < 0]
     better = [c for c in found if not c.regression and c.delta > 0]
     baseline = verdict.baseline
-    against = _md(baseline if baseline is not None else comparison.get("before", "baseline"))
+    against = markdown(baseline if baseline is not None else comparison.get("before", "baseline"))
     accepted = verdict.regressions_accepted
     count = len(verdict.regressions)
     said = (
@@ -160,14 +163,18 @@ def comparison_markdown(
     ]
     if count:
         lines += ["", *regression_lines(verdict)]
-    notes = [_md(note) for note in comparison.get("pairings", [])]
+    notes = [markdown(note) for note in comparison.get("pairings", [])]
     notes += [
-        f"{_code(spec['spec'])}: data changed ({_md(', '.join(spec['data_changed']))})"
+        f"{markdown_code(spec['spec'])}: data changed ({markdown(', '.join(spec['data_changed']))})"
         for spec in comparison.get("specs", [])
         if spec.get("data_changed")
     ]
-    notes += [f"{_code(key)}: new spec (no baseline)" for key in comparison.get("added_specs", [])]
-    notes += [f"{_code(key)}: not in this run" for key in comparison.get("removed_specs", [])]
+    notes += [
+        f"{markdown_code(key)}: new spec (no baseline)" for key in comparison.get("added_specs", [])
+    ]
+    notes += [
+        f"{markdown_code(key)}: not in this run" for key in comparison.get("removed_specs", [])
+    ]
     if notes:
         lines += ["", *(f"- {note}" for note in notes)]
     if worse:
