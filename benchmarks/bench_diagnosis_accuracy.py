@@ -229,9 +229,15 @@ FOLLOWER_TAU_S = 120.0
 
 
 def _condition(
-    condition: str, trip: Trip, load: str, noise: FloatArray, rng: np.random.Generator
+    condition: str,
+    trip: Trip,
+    load: str,
+    effect: FloatArray,
+    noise: FloatArray,
+    rng: np.random.Generator,
 ) -> tuple[FloatArray, FloatArray, list[Any]]:
-    """(reference, simulated, candidates) of one draw under ``condition``."""
+    """(reference, simulated, candidates) of one draw under ``condition``; ``effect`` is the
+    injected load series (zeros for a control)."""
     from pytest_hevval.core.diagnosis import Candidate
 
     values = trip.series[load]
@@ -245,7 +251,7 @@ def _condition(
         wander = np.convolve(wander - wander.mean(), np.ones(50) / 50, "same")
         delay = JITTER_S * wander / max(float(np.std(wander)), 1e-12)
         driving = np.interp(t - delay, t, sim)
-    reference = driving + values + noise
+    reference = driving + effect + noise
     if condition == "noisy":
         spread = float(np.std(values)) / 3.0
         candidates = [
@@ -262,13 +268,15 @@ def _condition(
         temperature = 20.0 + 4.0 * follower / max(float(np.std(follower)), 1e-12)
         candidates.append(Candidate("Follower Temperature [°C]", "channel", temperature))
     if condition == "constant":
-        sim = sim + 0.5 * float(np.mean(values))
+        sim = sim + 0.5 * float(np.mean(effect))
     return reference, sim, candidates
 
 
-def coverage(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
-    """Under each condition, how often the load added with coefficient 1 is the first finding
-    with a positive coefficient, and how often its 95 % interval holds 1."""
+def coverage(draws: int, controls: int, seed: int, log: Callable[[str], None]) -> dict[str, Any]:
+    """Under each condition: how often a logged load, added with a known coefficient, is the
+    first finding with a positive coefficient; how often its 95 % interval holds that
+    coefficient; and how often a control (the same condition, no load added) gets a false
+    finding (a relevant channel, derivative or declared effect)."""
     from pytest_hevval.scoring.diagnosis import diagnose_pair
 
     rng = np.random.default_rng(seed)
@@ -280,24 +288,45 @@ def coverage(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any
         if float(np.std(trip.series[load])) < 0.1:
             log(f"{trip.name}: no load varies; skipped")
             continue
+        values = trip.series[load]
         for condition in CONDITIONS:
-            found = first = covered = 0
+            found = first = covered = false = 0
             widths: list[float] = []
-            for _ in range(draws):
+            coefficients: list[float] = []
+            for case in [*(["load"] * draws), *(["control"] * controls)]:
                 n = len(trip.residual)
                 noise = np.roll(trip.residual, int(rng.integers(int(0.2 * n), int(0.8 * n))))
-                reference, simulated, candidates = _condition(condition, trip, load, noise, rng)
+                noise_ms = float(np.mean(noise**2))
+                # The load as logged (its zero is "off"), scaled to make 20–60 % of the
+                # residual's mean square: the scale is the coefficient to recover.
+                if case == "load":
+                    effect = _scaled(values, rng.uniform(*SHARE_ONE), noise_ms)
+                    truth = float(np.mean(effect * values) / np.mean(values * values))
+                else:
+                    effect, truth = np.zeros_like(values), 0.0
+                reference, simulated, candidates = _condition(
+                    condition, trip, load, effect, noise, rng
+                )
                 d = diagnose_pair(trip.evaluation, reference, simulated, candidates)
+                if case == "control":
+                    false += int(any(e.kind not in ("gain", "offset", "lag") for e in d.relevant))
+                    continue
                 top = _first(d)
                 first += int(_matches(top, load) and d.relevant[0].coefficient > 0)
-                effect = next((e for e in d.effects if load == e.name or load in e.members), None)
-                if effect is None or not effect.significant:
+                effect_found = next(
+                    (e for e in d.effects if load == e.name or load in e.members), None
+                )
+                if effect_found is None or not effect_found.significant:
                     continue
                 found += 1
-                low, high = effect.interval
-                covered += int(low <= 1.0 <= high)
-                widths.append(high - low)
-            log(f"{trip.name} {condition}: {first}/{draws} first, {covered}/{found} covered")
+                low, high = effect_found.interval
+                covered += int(low <= truth <= high)
+                widths.append((high - low) / truth)
+                coefficients.append(effect_found.coefficient / truth)
+            log(
+                f"{trip.name} {condition}: {first}/{draws} first, {covered}/{found} covered, "
+                f"{false}/{controls} controls false"
+            )
             rows.append(
                 {
                     "trip": trip.name,
@@ -307,7 +336,10 @@ def coverage(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any
                     "first": first,
                     "found": found,
                     "covered": covered,
+                    "controls": controls,
+                    "false": false,
                     "median_width": float(np.median(widths)) if widths else None,
+                    "median_ratio": float(np.median(coefficients)) if coefficients else None,
                 }
             )
     return {"rows": rows, "seconds": time.perf_counter() - started}
@@ -315,16 +347,21 @@ def coverage(draws: int, seed: int, log: Callable[[str], None]) -> dict[str, Any
 
 def coverage_table(result: dict[str, Any]) -> str:
     lines = [
-        "| trip | condition | load (coefficient 1) | draws | first finding, positive "
-        "| found significant | interval holds 1 | median width |",
-        "|---|---|---|---:|---:|---:|---:|---:|",
+        "| trip | condition | load | draws | first finding, positive | found significant "
+        "| interval holds the coefficient | median found / true | median width / true "
+        "| controls with a false finding |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
+
+    def ratio(value: float | None) -> str:
+        return f"{value:.2f}" if value is not None else "–"
+
     for r in result["rows"]:
         share = f"{100 * r['covered'] / r['found']:.0f} %" if r["found"] else "–"
-        width = f"{r['median_width']:.2f}" if r["median_width"] is not None else "–"
         lines.append(
             f"| {r['trip']} | {r['condition']} | {r['load']} | {r['draws']} | {r['first']} "
-            f"| {r['found']} | {share} | {width} |"
+            f"| {r['found']} | {share} | {ratio(r['median_ratio'])} "
+            f"| {ratio(r['median_width'])} | {r['false']}/{r['controls']} |"
         )
     for condition in CONDITIONS:
         rows = [r for r in result["rows"] if r["condition"] == condition]
@@ -332,9 +369,12 @@ def coverage_table(result: dict[str, Any]) -> str:
         first = sum(r["first"] for r in rows)
         found = sum(r["found"] for r in rows)
         covered = sum(r["covered"] for r in rows)
+        controls = sum(r["controls"] for r in rows)
+        false = sum(r["false"] for r in rows)
         lines.append(
             f"| **all** | **{condition}** | | {draws} | **{100 * first / max(draws, 1):.0f} %** "
-            f"| {found} | **{100 * covered / max(found, 1):.0f} %** | |"
+            f"| {found} | **{100 * covered / max(found, 1):.0f} %** | | "
+            f"| **{100 * false / max(controls, 1):.0f} %** ({false}/{controls}) |"
         )
     return "\n".join(lines)
 
@@ -377,7 +417,7 @@ def main() -> None:
         print(text, file=sys.stderr, flush=True)
 
     if args.coverage:
-        checked = coverage(args.draws, args.seed, log)
+        checked = coverage(args.draws, args.controls, args.seed, log)
         print(coverage_table(checked))
         print(f"\n{args.draws} draws per trip in {checked['seconds']:.0f} s (seed {args.seed})")
         if args.json:

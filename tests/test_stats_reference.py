@@ -14,14 +14,19 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 from scipy import signal as sps
+from scipy import stats as scipy_stats
 
+from pytest_hevval.core import stats as stats_module
 from pytest_hevval.core.stats import (
     andrews_bandwidth,
     ar_fit,
+    ar_model_fit,
+    ar_model_screen,
     ar_order,
+    ar_spectrum,
     effective_samples,
     hac_fit,
     ljung_box,
@@ -245,3 +250,93 @@ def test_a_drift_or_a_slow_wave_is_worth_few_samples(kind: str, most: float) -> 
                 if kind == "trending":
                     u = u + 20.0 * np.linspace(0.0, 1.0, n)
             assert effective_samples(u, ar_order(u - float(np.mean(u)))) <= most, (n, seed)
+
+
+def _ar_model_reference(y: np.ndarray, x: np.ndarray, order: int):  # type: ignore[no-untyped-def]
+    """statsmodels' OLS, AutoReg on its residual (with the documented bias correction) and
+    ``arma_acovf`` for that AR model's autocovariances, put together densely: the exact
+    covariance (XᵀX)⁻¹ XᵀΣX (XᵀX)⁻¹ of OLS when the residual is that AR process."""
+    n, k = x.shape
+    plain = statsmodels_api.OLS(y, x).fit()
+    u = plain.resid
+    if order:
+        params = ar_model.AutoReg(u, order, trend="n").fit().params
+        phi = _kendall_corrected(params, n - order)
+    else:
+        phi = np.zeros(0)
+    innovations = _whitened(u, phi)
+    sigma2 = float(innovations @ innovations) / max(innovations.shape[0] - k, 1)
+    gamma = arima_process.arma_acovf(np.concatenate(([1.0], -phi)), [1.0], nobs=n, sigma2=sigma2)
+    lags = np.abs(np.subtract.outer(np.arange(n), np.arange(n)))
+    bread = np.linalg.inv(x.T @ x)
+    return plain.params, bread @ (x.T @ gamma[lags] @ x) @ bread, phi
+
+
+@reference
+@given(residual=time_series(max_size=1200), regressor=time_series(max_size=1200))
+def test_ar_model_fit_is_ols_with_its_ar_models_exact_covariance(
+    residual: np.ndarray, regressor: np.ndarray
+) -> None:
+    """The sizes of the diagnosis: OLS, and its covariance under the AR model fitted to its
+    residual, computed in the frequency domain; here against the dense n × n product. Where
+    the residual's lowest frequencies hold more than the AR model allows (a drift), the
+    spectrum is raised there, and the covariance can only grow."""
+    n = min(residual.shape[0], regressor.shape[0])
+    x = np.column_stack([np.ones(n), regressor[:n]])
+    y = 0.3 * x[:, 1] + residual[:n]
+    order = ar_order(residual[:n] - float(np.mean(residual[:n])))
+    fit = ar_model_fit(y, x, order)
+    # A residual that the regressor reproduces leaves only rounding to model.
+    assume(float(np.std(y - x @ fit.beta)) > 1e-6 * float(np.std(y)))
+    params, cov, phi = _ar_model_reference(y, x, order)
+    np.testing.assert_allclose(fit.beta, params, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(fit.phi, phi, rtol=1e-7, atol=1e-9)
+    u = y - x @ fit.beta
+    size = stats_module._fft_size(n, fit.phi)
+    raised = not np.array_equal(
+        stats_module.residual_spectrum(u, fit.phi, 2, size),
+        ar_spectrum(fit.phi, stats_module._innovations(u, fit.phi, 2), size),
+    )
+    if raised:
+        assert np.all(np.diag(fit.cov) >= np.diag(cov) * (1.0 - 1e-9))
+    else:
+        np.testing.assert_allclose(fit.cov, cov, rtol=1e-6, atol=1e-12)
+
+
+@reference
+@given(residual=time_series(max_size=1500), seed=st.integers(0, 2**32 - 1))
+def test_ar_model_screen_is_ar_model_fit_one_candidate_at_a_time(
+    residual: np.ndarray, seed: int
+) -> None:
+    """Frisch–Waugh–Lovell: each candidate's coefficient and standard error in the screen are
+    those of the full fit with the base and that candidate."""
+    n = residual.shape[0]
+    rng = np.random.default_rng(seed)
+    base = np.column_stack([np.ones(n), np.cumsum(rng.standard_normal(n))])
+    z_rows = np.stack([sps.lfilter([1.0], [1.0, -0.9], rng.standard_normal(n)) for _ in range(3)])
+    y = base @ np.array([0.5, 0.1]) + 0.2 * z_rows[0] + residual
+    order = ar_order(residual - float(np.mean(residual)))
+    screened = ar_model_screen(y, base, z_rows, order)
+    for j in range(3):
+        x = np.column_stack([base, z_rows[j]])
+        fit = ar_model_fit(y, x, order)
+        # A residual that the design reproduces leaves only rounding to model.
+        assume(float(np.std(y - x @ fit.beta)) > 1e-6 * float(np.std(y)))
+        assert screened.beta[j] == pytest.approx(fit.beta[-1], rel=1e-6, abs=1e-9)
+        assert screened.se[j] == pytest.approx(math.sqrt(fit.cov[-1, -1]), rel=1e-6)
+        # The degrees of freedom count the residual's variance, whose lowest frequencies are
+        # raised by a χ² check; rounding can tip a check that sits on its limit either way.
+        if not _low_frequency_check_on_its_limit(y - x @ fit.beta, fit.phi):
+            assert screened.df[j] == fit.df[-1]
+
+
+def _low_frequency_check_on_its_limit(u: np.ndarray, phi: np.ndarray) -> bool:
+    n = u.shape[0]
+    size = stats_module._fft_size(n, phi)
+    spectrum = ar_spectrum(phi, stats_module._innovations(u, phi, 3), size)
+    lowest = min(stats_module.LOW_FREQUENCIES, (n - 1) // 2)
+    periodogram = np.abs(np.fft.rfft(u - float(np.mean(u)))[1 : lowest + 1]) ** 2 / n
+    at = np.rint(np.arange(1, lowest + 1) * size / n).astype(np.int64)
+    statistic = float(np.sum(2.0 * periodogram / spectrum[at]))
+    limit = float(scipy_stats.chi2.ppf(1.0 - stats_module.LOW_FREQUENCY_LEVEL, 2 * lowest))
+    return abs(statistic - limit) <= 1e-3 * limit

@@ -37,6 +37,8 @@ from .stats import (
     HacFit,
     Screen,
     Whiteness,
+    ar_model_fit,
+    ar_model_screen,
     ar_order,
     block_means,
     dominant_frequencies,
@@ -628,6 +630,7 @@ def diagnose_residual(
     # Alone: every candidate with an intercept.
     ones = np.ones((r_g.shape[0], 1))
     alone = screen(r_g, ones, z_rows, order) if m else None
+    alone_sizes = ar_model_screen(r_g, ones, z_rows, order) if m else None
     scales = [_Scale(factor, r_g, z_rows, order)]
     slow = _slow_scale(r, kept, dt, factor) if m else None
     if slow is not None:
@@ -651,7 +654,7 @@ def diagnose_residual(
     findings, explained, remaining_full, remaining_grid = _joint_model(
         r, r_g, kept, selected, holm_levels, base, order, alpha
     )
-    findings.extend(_alone_findings(r, kept, selected, alone, alpha, weights))
+    findings.extend(_alone_findings(r, kept, selected, alone, alone_sizes, alpha, weights))
     mean_sq = dot(r, r) / n_w
     offset_finding = CandidateFinding(
         name=_free_name("offset", names),
@@ -852,11 +855,15 @@ def _gain_and_offset(
         if sim_varies
         else np.ones((sim_g.shape[0], 1))
     )
-    head = hac_fit(ref_g if sim_varies else ref_g - sim_g, design, order)
+    response = ref_g if sim_varies else ref_g - sim_g
+    # Tested on the filtered regression, sized by least squares (see _fitted_terms).
+    test = hac_fit(response, design, order)
+    test_se = np.sqrt(np.maximum(np.diag(test.cov), 0.0))
+    head = ar_model_fit(response, design, order)
     head_se = np.sqrt(np.maximum(np.diag(head.cov), 0.0))
     offset = float(head.beta[0])
     offset_interval = _interval(offset, float(head_se[0]), int(head.df[0]), alpha)
-    offset_p = _p_value(offset, float(head_se[0]), int(head.df[0]))
+    offset_p = _p_value(float(test.beta[0]), float(test_se[0]), int(test.df[0]))
     # Gain and offset are two tests of one question ("is the simulated signal itself off?"):
     # Bonferroni over the pair keeps the chance of a false headline at most alpha.
     headline_level = alpha / 2.0
@@ -873,7 +880,7 @@ def _gain_and_offset(
     gain_se = float(head_se[1])
     gain_interval = _interval(gain, gain_se, int(head.df[1]), alpha)
     gain_significant = (
-        _p_value(gain - 1.0, gain_se, int(head.df[1])) <= headline_level
+        _p_value(float(test.beta[1]) - 1.0, float(test_se[1]), int(test.df[1])) <= headline_level
         and not (gain_interval[0] <= 1.0 <= gain_interval[1])
         and abs(gain - 1.0) > GAIN_MATERIALITY
     )
@@ -1162,7 +1169,9 @@ def _joint_model(
     if not selected:
         return findings, explained, remaining_full, remaining_grid
     # Intervals of selected candidates use the noise model of the final joint model.
-    joint = hac_fit(r_g, base, order)
+    test = hac_fit(r_g, base, order)
+    test_se = np.sqrt(np.maximum(np.diag(test.cov), 0.0))
+    joint = ar_model_fit(r_g, base, order)
     se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
     for pos, idx in enumerate(selected):
         s = kept[idx]
@@ -1170,7 +1179,7 @@ def _joint_model(
         se_std = float(se[pos + 1])
         coef = b_std / s.std
         df = int(joint.df[pos + 1])
-        p = _p_value(b_std, se_std, df)
+        p = _p_value(float(test.beta[pos + 1]), float(test_se[pos + 1]), int(test.df[pos + 1]))
         remaining_full -= coef * (s.full - s.mean)
         remaining_grid -= coef * (s.grid - s.mean)
         findings.append(
@@ -1195,18 +1204,19 @@ def _alone_findings(
     kept: list[_Series],
     selected: list[int],
     alone: Screen | None,
+    sizes: Screen | None,
     alpha: float,
     weights: FloatArray,
 ) -> list[CandidateFinding]:
     """Each candidate not selected, tested alone with an intercept (weighted Bonferroni over
-    all, with the weights of the selection)."""
-    if alone is None:
+    all, with the weights of the selection) and sized by least squares."""
+    if alone is None or sizes is None:
         return []
     findings = []
     for j, s in enumerate(kept):
         if j in selected:
             continue
-        coef = float(alone.beta[j]) / s.std
+        coef = float(sizes.beta[j]) / s.std
         p = float(alone.p[j])
         findings.append(
             CandidateFinding(
@@ -1216,7 +1226,7 @@ def _alone_findings(
                 joint_explained_fraction=None,
                 coefficient=coef * s.unit,
                 interval=_scaled(
-                    _interval(coef, float(alone.se[j]) / s.std, int(alone.df[j]), alpha), s.unit
+                    _interval(coef, float(sizes.se[j]) / s.std, int(sizes.df[j]), alpha), s.unit
                 ),
                 p_value=p,
                 significant=p <= alpha * float(weights[j]) / float(np.sum(weights)),
@@ -1572,12 +1582,36 @@ def _effects(
     chosen = [kept[i] for i in selected]
     fine = scales[0]
     centres = _credited_centres(fine.r, chosen)
-    fits, raw = _fitted_terms(scales, chosen, centres, holm_levels, alpha=alpha, dt=dt, scale=scale)
-    joint = fits[0]
+    fits, sizes, raw = _fitted_terms(
+        scales, chosen, centres, holm_levels, alpha=alpha, dt=dt, scale=scale
+    )
+    # Gatekeeping, carried through to the sizes: the first family (the simulated signal's own
+    # gain and lag, the loads in its dimension, the declared suspects) is judged on a model of
+    # its own members, and the other channels only on what it leaves; a temperature that
+    # follows the heater, entering later, then cannot dilute the heater's coefficient.
+    family = [
+        bool(leading) and (s.kind in GENERIC_KINDS or bool(set(leading) & {s.name, *s.members}))
+        for s in chosen
+    ]
+    if any(family) and not all(family):
+        members = [i for i, f in enumerate(family) if f]
+        _, _, own = _fitted_terms(
+            scales,
+            [chosen[i] for i in members],
+            [centres[i] for i in members],
+            [holm_levels[i] for i in members],
+            alpha=alpha,
+            dt=dt,
+            scale=scale,
+        )
+        for i, t in zip(members, own, strict=True):
+            raw[i] = t
+    joint, test = sizes[0], fits[0]
     se = np.sqrt(np.maximum(np.diag(joint.cov), 0.0))
+    test_se = float(np.sqrt(max(float(test.cov[0, 0]), 0.0)))
     intercept, se0, df0 = float(joint.beta[0]), float(se[0]), int(joint.df[0])
     interval0 = _interval(intercept, se0, df0, alpha)
-    p0 = _p_value(intercept, se0, df0)
+    p0 = _p_value(float(test.beta[0]), test_se, int(test.df[0]))
     offset_significant = (
         p0 <= alpha / 2.0
         and not (interval0[0] <= 0.0 <= interval0[1])
@@ -1616,7 +1650,9 @@ def _effects(
     cross[-1] = float(np.sum(r))
     total = dot(r, r)
     together = explained_sums(gram, cross)
-    shares = [float(x) for x in shapley_from_sums(together, total)]
+    # The intercept (last) belongs to the first family, with the generic terms.
+    first_bits = [*family, True] if any(family) else [False] * k
+    shares = [float(x) for x in _ordered_shares(together, first_bits, total)]
     swaps = _interchangeable(together, min_share * total)
     # Largest share first, an effect is a finding of its own unless a larger finding can stand
     # in for it: the explanation with the fewest terms is the one named. Where the record cannot
@@ -1653,7 +1689,7 @@ def _effects(
     # computes) would otherwise distort it, and the fix a user applies is the finding alone.
     named = [i for i in sorted(findings) if i < len(chosen)]
     if named and len(named) < len(chosen):
-        _, refitted = _fitted_terms(
+        _, _, refitted = _fitted_terms(
             scales,
             [chosen[i] for i in named],
             [centres[i] for i in named],
@@ -1720,6 +1756,34 @@ def _effects(
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
 
 
+def _ordered_shares(together: FloatArray, first: Sequence[bool], total: float) -> FloatArray:
+    """Shapley shares in the gatekeeping order: the first family's terms share what they
+    explain together, and the others share what they add to it (each family a game of its own,
+    as in Owen's value with two unions in that order). With no first family, or all terms in
+    it, the plain Shapley shares."""
+    k = len(first)
+    inside = [i for i in range(k) if first[i]]
+    outside = [i for i in range(k) if not first[i]]
+    if not inside or not outside:
+        return shapley_from_sums(together, total)
+
+    def game(players: Sequence[int], base: int) -> FloatArray:
+        values = np.empty(1 << len(players))
+        for sub in range(1 << len(players)):
+            mask = base
+            for b, i in enumerate(players):
+                if sub >> b & 1:
+                    mask |= 1 << i
+            values[sub] = float(together[mask]) - float(together[base])
+        return shapley_from_sums(values, total)
+
+    first_mask = sum(1 << i for i in inside)
+    shares = np.zeros(k)
+    shares[inside] = game(inside, 0)
+    shares[outside] = game(outside, first_mask)
+    return shares
+
+
 class _Fix(NamedTuple):
     """An effect's own fit to the residual, as the user adds it to the model."""
 
@@ -1772,12 +1836,15 @@ def _fitted_terms(
     alpha: float,
     dt: float,
     scale: float,
-) -> tuple[list[HacFit], list[_Term]]:
-    """The chosen candidates and an intercept fitted jointly at every scale; each term's
-    coefficient, interval and test from the scale where it is tested most sharply (its p-value
-    times the number of scales)."""
+) -> tuple[list[HacFit], list[HacFit], list[_Term]]:
+    """The chosen candidates and an intercept fitted jointly at every scale: tested on the
+    filtered regression (:func:`.stats.hac_fit`), sized by least squares with the covariance
+    of its residual's AR model (:func:`.stats.ar_model_fit`); each term's test, coefficient and
+    interval from the scale where it is tested most sharply (its p-value times the number of
+    scales). Returns (the tests' fits, the sizes' fits, the terms)."""
     fine = scales[0]
     fits: list[HacFit] = []
+    sizes: list[HacFit] = []
     for sc in scales:
         columns = [
             (s.grid if sc is fine else block_means(s.full, sc.factor)) - c
@@ -1787,7 +1854,9 @@ def _fitted_terms(
             [np.ones_like(sc.r), *(col / s.std for col, s in zip(columns, chosen, strict=True))]
         )
         fits.append(hac_fit(sc.r, design, sc.order))
+        sizes.append(ar_model_fit(sc.r, design, sc.order))
     errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in fits]
+    size_errors = [np.sqrt(np.maximum(np.diag(fit.cov), 0.0)) for fit in sizes]
     terms: list[_Term] = []
     for pos, (s, centre) in enumerate(zip(chosen, centres, strict=True), start=1):
         tests = [
@@ -1795,7 +1864,12 @@ def _fitted_terms(
             for fit, se in zip(fits, errors, strict=True)
         ]
         at = int(np.argmin(tests))
-        fit, se = fits[at], errors[at]
+        # Sized on the coarsest scale where the effect is still shown: block means average
+        # out what a measured channel's own noise and the timing jitter between model and
+        # measurement add at the fine scale, which would dilute the coefficient toward zero.
+        shown = [i for i, p in enumerate(tests) if p * len(scales) <= holm_levels[pos - 1]]
+        at = max(shown) if shown else at
+        fit, se = sizes[at], size_errors[at]
         b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
         coef = b_std / s.std
         p = min(1.0, tests[at] * len(scales))
@@ -1814,7 +1888,7 @@ def _fitted_terms(
                 at_zero=-coef * centre,
             )
         )
-    return fits, terms
+    return fits, sizes, terms
 
 
 def _interchangeable(together: FloatArray, floor: float) -> list[list[int]]:

@@ -429,6 +429,168 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
     return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
 
 
+#: The FFT length of :func:`ar_model_fit` is at least this many times the record: the
+#: autocovariances its AR spectrum stands for are aliased by γ(k ± M), which a persistence of
+#: 1 − 1/n has decayed to e^(−31) of γ(0) at M = 32n.
+SPECTRUM_OVERSAMPLING = 32
+
+
+def ar_spectrum(phi: FloatArray, sigma2: float, size: int) -> FloatArray:
+    """σ² / |1 − Σ_k φ_k e^(−iωk)|² at ω_m = 2πm / size, m = 0 … size // 2: the spectral density
+    (times 2π) of an AR process, whose inverse DFT over ``size`` points is its autocovariances."""
+    omega = 2.0 * np.pi * np.arange(size // 2 + 1) / size
+    lags = np.arange(1, phi.shape[0] + 1)
+    transfer = 1.0 - np.exp(-1j * np.outer(omega, lags)) @ phi
+    return np.asarray(sigma2 / np.maximum(np.abs(transfer) ** 2, 1e-300), dtype=np.float64)
+
+
+def _quadratic_forms(columns: FloatArray, spectrum: FloatArray, size: int) -> FloatArray:
+    """Xᵀ Σ X for the columns of X (samples × k), Σ_ts = γ(t − s) given by its spectrum on
+    ``size`` ≥ 2n points: (1/size) Σ_m f_m X̂_m^H X̂_m, a one-sided sum of the real DFT."""
+    transformed = sfft.rfft(columns, n=size, axis=0)
+    weights = np.full(spectrum.shape[0], 2.0)
+    weights[0] = 1.0
+    if size % 2 == 0:
+        weights[-1] = 1.0
+    weighted = transformed * (weights * spectrum)[:, None]
+    return np.asarray(np.real(transformed.conj().T @ weighted) / size, dtype=np.float64)
+
+
+def _fft_size(n: int, phi: FloatArray) -> int:
+    """2n points for the lags of the record, and room for the AR model's autocovariances to
+    decay to e^(−16) before they alias (at most :data:`SPECTRUM_OVERSAMPLING` · n)."""
+    memory = 0.0
+    if phi.shape[0]:
+        largest = float(np.max(np.abs(np.roots(np.concatenate(([1.0], -phi))))))
+        memory = math.inf if largest >= 1.0 else -1.0 / math.log(max(largest, 1e-300))
+    wanted = min(SPECTRUM_OVERSAMPLING * n, 2 * n + 16.0 * memory)
+    return int(sfft.next_fast_len(max(2 * n, math.ceil(wanted)), real=True))
+
+
+def residual_spectrum(u: FloatArray, phi: FloatArray, k: int, size: int) -> FloatArray:
+    """The spectrum of u's AR(φ) model on ``size`` points (:func:`ar_spectrum`), with the
+    lowest frequencies raised to what u shows there when the model underrates them.
+
+    A drift or a slow wave is no AR process of a few lags, and a model fitted to 10 Hz samples
+    speaks for their fast dependence; a regressor that drifts too (a temperature, the state
+    of charge) then looks far more certain than it is. As in :func:`effective_samples`, the
+    periodogram I_j at the :data:`LOW_FREQUENCIES` lowest Fourier frequencies ω_j = 2πj/n is
+    checked against the model (Σ 2 I_j / f(ω_j) is χ² with 2J degrees of freedom under it);
+    when the check rejects at :data:`LOW_FREQUENCY_LEVEL`, f is at least the mean of those I_j
+    up to ω_J.
+    """
+    n = u.shape[0]
+    spectrum = ar_spectrum(phi, _innovations(u, phi, k), size)
+    lowest = min(LOW_FREQUENCIES, (n - 1) // 2)
+    if lowest <= 0:
+        return spectrum
+    periodogram = np.abs(np.fft.rfft(u - float(np.mean(u)))[1 : lowest + 1]) ** 2 / n
+    at = np.rint(np.arange(1, lowest + 1) * size / n).astype(np.int64)
+    model = spectrum[at]
+    from scipy import stats  # over a second to import; scoring never needs it
+
+    limit = float(stats.chi2.ppf(1.0 - LOW_FREQUENCY_LEVEL, 2 * lowest))
+    if float(np.sum(2.0 * periodogram / np.maximum(model, 1e-300))) > limit:
+        floor = float(np.mean(periodogram))
+        top = int(at[-1])
+        spectrum[: top + 1] = np.maximum(spectrum[: top + 1], floor)
+    return spectrum
+
+
+def _innovations(u: FloatArray, phi: FloatArray, k: int) -> float:
+    """The AR model's innovation variance, with the k regressors' degrees of freedom."""
+    e = whiten(u, phi)
+    m = e.shape[0]
+    return float(dot(e, e)) / max(m - k, 1)
+
+
+def ar_model_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
+    """OLS, with the covariance OLS has when its residual is the AR(order) process fitted to it.
+
+    β = (XᵀX)⁻¹Xᵀy. The residual u = y − Xβ gets AR coefficients φ (:func:`ar_fit`, Kendall's
+    bias added back) and innovation variance σ²; Σ_ts = γ(t − s) are that model's
+    autocovariances, and cov(β) = (XᵀX)⁻¹ XᵀΣX (XᵀX)⁻¹ exactly, computed in the frequency
+    domain. Each coefficient's degrees of freedom are its equivalent independent samples,
+    n γ(0) [(XᵀX)⁻¹]_jj / cov_jj, less k.
+
+    Unlike the filtered (Cochrane–Orcutt) fit, the point estimate weighs each frequency by its
+    power in X rather than by the inverse of the residual's: where the model and the
+    measurement are not coherent (timing jitter, a noisy measured regressor), the fast part of
+    a regressor is noise, and filtering by a persistent residual's AR model, which amplifies
+    exactly the fast part, dilutes its coefficient toward zero.
+    """
+    n, k = x.shape
+    fit = least_squares(x, y)
+    beta = np.asarray(fit.coef, dtype=np.float64)
+    u = y - np.einsum("tk,k->t", x, beta)
+    phi = ar_fit(u, order)
+    size = _fft_size(n, phi)
+    spectrum = residual_spectrum(u, phi, k, size)
+    meat = _quadratic_forms(x, spectrum, size)
+    cov = fit.inverse @ meat @ fit.inverse
+    gamma0 = _variance_of(spectrum, size)
+    return HacFit(
+        beta=beta,
+        cov=np.asarray(cov, dtype=np.float64),
+        df=_equivalent_df(n, k, gamma0 * np.diag(fit.inverse), np.diag(cov)),
+        phi=phi,
+    )
+
+
+def _variance_of(spectrum: FloatArray, size: int) -> float:
+    """γ(0) of the process whose spectrum on ``size`` points is given."""
+    weights = np.full(spectrum.shape[0], 2.0)
+    weights[0] = 1.0
+    if size % 2 == 0:
+        weights[-1] = 1.0
+    return float(np.sum(weights * spectrum)) / size
+
+
+def _equivalent_df(n: int, k: int, white: FloatArray, actual: FloatArray) -> npt.NDArray[np.int64]:
+    """n · (the variance white noise of the same level would give) / (the actual one), less k:
+    the independent samples a coefficient's estimate is worth."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(actual > 0.0, white / actual, 1.0)
+    eff = n * np.clip(np.nan_to_num(ratio, nan=1.0, posinf=1.0), 0.0, 1.0) - k
+    # White noise gives a ratio of 1 up to rounding: n − k, not one fewer.
+    return np.asarray(np.clip(np.floor(eff + 1e-6), 1, max(n - k, 1)), dtype=np.int64)
+
+
+def ar_model_screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> Screen:
+    """:func:`screen` with :func:`ar_model_fit`'s estimator: every row of z_rows added, one at a
+    time, to the base design. By Frisch–Waugh–Lovell β_j = z̃ᵀỹ / z̃ᵀz̃ with z̃, ỹ the
+    candidate and y with the base projected out, and var β_j = z̃ᵀΣ_j z̃ / (z̃ᵀz̃)², Σ_j the
+    AR model of that fit's residual."""
+    m, n = z_rows.shape
+    k = base.shape[1] + 1
+    q0 = orthonormal(base)
+    y_perp = project_out(y[None, :], q0)[0]
+    z_perp = project_out(z_rows, q0)
+    zz = np.einsum("ji,ji->j", z_perp, z_perp)
+    beta = np.zeros(m)
+    se = np.full(m, np.inf)
+    df = np.ones(m, dtype=np.int64)
+    for j in range(m):
+        if zz[j] <= 0.0:
+            continue
+        beta[j] = dot(z_perp[j], y_perp) / zz[j]
+        u = y_perp - beta[j] * z_perp[j]
+        phi = ar_fit(u, order)
+        size = _fft_size(n, phi)
+        spectrum = residual_spectrum(u, phi, k, size)
+        variance = float(_quadratic_forms(z_perp[j][:, None], spectrum, size)[0, 0]) / zz[j] ** 2
+        se[j] = math.sqrt(max(variance, 0.0))
+        white = _variance_of(spectrum, size) / zz[j]
+        df[j] = int(_equivalent_df(n, k, np.array([white]), np.array([variance]))[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.abs(beta) / se
+    from scipy import stats  # over a second to import; scoring never needs it
+
+    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
+    p = np.where(np.isfinite(se), p, 1.0)
+    return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+
+
 def effective_samples(u: FloatArray, order: int) -> float:
     """Samples of white noise that would estimate the mean of u as precisely: n γ₀ / LRV,
     at least 1 and at most n.
