@@ -500,8 +500,8 @@ def residual_spectrum(u: FloatArray, phi: FloatArray, k: int, size: int) -> Floa
 def _innovations(u: FloatArray, phi: FloatArray, k: int) -> float:
     """The AR model's innovation variance, with the k regressors' degrees of freedom."""
     e = whiten(u, phi)
-    m = e.shape[0]
-    return float(dot(e, e)) / max(m - k, 1)
+    m = int(e.shape[0])
+    return dot(e, e) / max(m - k, 1)
 
 
 def ar_model_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
