@@ -221,3 +221,76 @@ def test_html_report_shows_the_predicted_figures_above() -> None:
         "The fixes are not predicted for the signals above: P_batt is not the running "
         "integral of I_batt." in html
     )
+
+
+ENERGY_SPEC = """\
+name: energy
+reference: {path: ref.csv, time: t}
+model: {path: sim.csv, time: t}
+alignment: {max_lag_s: 3, nan: omit}
+sets:
+  - signal: E
+    ref: "integrate(P)"
+    sim: "integrate(P)"
+    children:
+      - {signal: P}
+"""
+
+
+def _energy_files(root: Path, *, gap: bool) -> Path:
+    """A power the model lacks a heater in, and its energy, the running integral of it on both
+    sides; with ``gap``, the measured power drops out for 20 s in the middle."""
+    import pandas as pd
+
+    rng = np.random.default_rng(8)
+    t = np.arange(6000) * 0.1
+    v = 15 + 10 * np.sin(t / 40)
+    heater = 1.5 + np.clip(
+        np.convolve(rng.normal(size=t.size), np.ones(400) / 400, "same") * 40, -1, 2
+    )
+    measured = 2 * v + heater + rng.normal(0, 0.5, t.size)
+    if gap:
+        measured[3000:3200] = np.nan
+    pd.DataFrame({"t": t, "P": measured, "Heater [kW]": heater}).to_csv(
+        root / "ref.csv", index=False
+    )
+    pd.DataFrame({"t": t, "P": 2 * v}).to_csv(root / "sim.csv", index=False)
+    spec = root / "energy.hevval.yaml"
+    spec.write_text(ENERGY_SPEC, encoding="utf-8")
+    return spec
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_try_scores_the_energy_again_unless_a_gap_breaks_the_running_sum(
+    tmp_path: Path, gap: bool
+) -> None:
+    from pytest_hevval.cli import main
+
+    spec = _energy_files(tmp_path, gap=gap)
+    out = tmp_path / "t.json"
+    assert (
+        main(
+            ["diagnose", str(spec), "--signal", "E/P", "--try", "`Heater [kW]`", "--json", str(out)]
+        )
+        == 0
+    )
+    document = json.loads(out.read_text(encoding="utf-8"))
+    tried = document["tried"]
+    if not gap:
+        (energy,) = tried["above"]
+        assert energy["signal"] == "E"
+        assert tried["above_note"] is None
+        # The model's power lacked the heater: the energy, with it integrated, is nearly exact.
+        assert energy["after"]["lambdas"][2] > energy["before"]["lambdas"][2]
+        assert abs(energy["after"]["mean_error"]) < 0.1 * abs(energy["before"]["mean_error"])
+        first = next((e for e in document["effects"] if e["relevant"]), None)
+        assert first is not None
+        (above,) = first["above"]
+        assert above["signal"] == "E"
+    else:
+        assert tried["above"] == []
+        assert tried["above_note"] == (
+            "a gap inside the scored samples interrupts the running integral of P, so E cannot "
+            "be followed through it"
+        )
+        assert document["above"] == []

@@ -386,9 +386,13 @@ def integrals_above(
 ) -> tuple[tuple[tuple[str, float], ...], str | None]:
     """The signals above ``path``, nearest first, as far up as each one's simulated output is
     the running integral of the one below it (:func:`running_integral`), with its factor; and
-    why the walk stopped short of the top, None when it did not."""
+    why the walk stopped short of the top, None when it did not. None is followed across a gap
+    inside the scored samples (``nan: omit``): the model integrates what happens in the gap,
+    which the scored samples do not hold."""
     names = {"/".join(n): n for _, n, _ in evaluation.spec.walk()}
     time = _scored_time(evaluation)
+    mask = evaluation.aligned.gap_mask if evaluation.aligned is not None else None
+    gapped = mask is not None and bool(np.any(np.diff(np.flatnonzero(~mask)) > 1))
     chain: list[tuple[str, float]] = []
     lower = path
     while len(names.get(lower, ())) > 1:
@@ -396,6 +400,12 @@ def integrals_above(
         upper_name, lower_name = names[upper][-1], names[lower][-1]
         if upper not in evaluation.arrays or lower not in evaluation.arrays:
             return tuple(chain), f"{upper_name} or {lower_name} was not kept"
+        if gapped:
+            # The model integrates through a gap; the scored samples cannot follow it there.
+            return tuple(chain), (
+                f"a gap inside the scored samples interrupts the running integral of "
+                f"{lower_name}, so {upper_name} cannot be followed through it"
+            )
         factor = running_integral(evaluation.arrays[upper][1], evaluation.arrays[lower][1], time)
         if factor is None:
             return tuple(chain), (
