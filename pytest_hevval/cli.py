@@ -211,7 +211,7 @@ def _arg(args: argparse.Namespace, name: str) -> Any:
 def _diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .errors import SpecError
-    from .report.diagnosis import describe, payload, tried_lines
+    from .report.diagnosis import describe, payload, tried_lines, tried_payload
     from .scoring.diagnosis import candidates_for, diagnose_signal, try_term
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
@@ -250,12 +250,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     if args.json:
         document: dict[str, Any] = {"spec": spec.name, "signals": findings}
         if tried is not None:
-            document["tried"] = {
-                "signal": tried.signal,
-                "term": tried.term,
-                "before": tried.before.as_dict(),
-                "after": tried.after.as_dict(),
-            }
+            document["tried"] = tried_payload(tried)
         if len(findings) == 1:
             # One signal: its fields also sit at the top level, as documented.
             document.update(findings[0])

@@ -8,8 +8,6 @@ pairs the v1 run with the v2 run. Also the spec pairing of ``compare`` on its ow
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -18,8 +16,8 @@ import pytest
 
 from pytest_hevval.cli import main as cli_main
 from pytest_hevval.history import compare
+from tests.example_cli import EXAMPLE, run_in_example
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "example_project"
 B03_V1 = "specs/i3-B03-winter-v1.hevval.yaml"
 B03_V2 = "specs/i3-B03-winter-v2.hevval.yaml"
 A12_V1 = "specs/i3-A12-hills-v1.hevval.yaml"
@@ -44,18 +42,6 @@ def _without_candidates(spec: Path, target: Path) -> None:
     # The copy lives elsewhere, so its data path must not be relative to the spec's folder.
     text = text.replace("path: ../data/", f"path: {EXAMPLE / 'data'}/")
     target.write_text(text, encoding="utf-8")
-
-
-# One process runs every command: the example's model packages (`models`, `bus`) are then
-# imported away from the test session, and the package is imported once, not seven times.
-_DRIVER = """
-import json, sys
-from pytest_hevval.cli import main
-commands, codes = json.loads(sys.argv[1]), {}
-for name, argv in commands.items():
-    codes[name] = main(argv)
-print(json.dumps(codes))
-"""
 
 
 @pytest.fixture(scope="module")
@@ -86,16 +72,8 @@ def loop(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     for name, argv in commands.items():
         if argv[0] == "diagnose":
             argv += ["--json", str(out / f"{name}.json")]
-    done = subprocess.run(
-        [sys.executable, "-c", _DRIVER, json.dumps(commands)],
-        cwd=EXAMPLE,
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
-    )
-    assert done.returncode == 0, done.stderr
-    codes = json.loads(done.stdout.strip().splitlines()[-1])
+    # One process runs every command (see tests/example_cli.py).
+    codes, _ = run_in_example(commands)
     # `hevval run` exits 1 when a gate fails, which model v1 does on purpose.
     assert codes == {name: 1 if name in ("b03-v1", "b03-v2", "a12") else 0 for name in commands}
     return {name: out / f"{name}.json" for name in commands}

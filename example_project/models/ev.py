@@ -13,6 +13,12 @@ Two versions share the code and differ only in what they declare:
 * ``version=2`` adds the road grade (from the smoothed ``Elevation [m]`` channel) and the
   measured heater and air-conditioning power as an electrical load.
 
+``heater_aircon_gain`` (0 unless set) adds that many kW of battery power per kW of logged
+heater and air-conditioning power, in either version: the fix ``hevval diagnose`` prints for
+v1 ("add 1.15 × heating_aircon_kw and lower the model's constant by 1.75 kW") is
+``params: {version: 1, heater_aircon_gain: 1.15, base_load_w: <fitted − 1750>}`` with both
+channels under ``model.inputs``.
+
 Sign convention (as in the measurement): ``I_batt`` is negative when the battery discharges.
 ``P_batt`` and ``E_batt`` count discharge as positive, in kW and kWh.
 """
@@ -73,6 +79,9 @@ class EVParams:
     copper_loss_w_per_nm2: float = 0.05
     power_loss_fraction: float = 0.05
     base_load_w: float = 500.0
+    # kW of battery power per kW of logged heater + air-con power, on top of what the version
+    # draws (v2 draws it once already); not fitted.
+    heater_aircon_gain: float = 0.0
     ocv_at_0_soc_v: float = 330.0
     ocv_per_soc_v: float = 0.7
     internal_resistance_ohm: float = 0.1
@@ -249,19 +258,32 @@ def _column(reference: pd.DataFrame, name: str, version: int) -> FloatArray:
     return reference[name].to_numpy(dtype=np.float64)
 
 
+def _heater_aircon_w(reference: pd.DataFrame, version: int, *, required: bool) -> FloatArray:
+    """The logged heater and air-conditioning power in W, a gap counting as 0; a channel
+    missing from ``reference`` counts as 0 too unless ``required``."""
+    load = np.zeros(len(reference))
+    for name in (HEATING, AIRCON):
+        if required or name in reference.columns:
+            load += 1e3 * np.nan_to_num(_column(reference, name, version))
+    return load
+
+
 def simulate(
     reference: pd.DataFrame,
     *,
     version: int = 1,
     params_file: str | None = None,
+    auxiliary_w: FloatArray | None = None,
     **overrides: Any,
 ) -> pd.DataFrame:
     """Simulate one trip.
 
     ``reference`` needs ``Time [s]`` and ``Velocity [km/h]``; ``SoC [%]`` (first valid sample
     only, as the initial state) is used when present. Version 2 also needs ``Elevation [m]``;
-    ``Heating Power CAN [kW]`` and ``AirCon Power [kW]`` are added as loads when present.
-    ``overrides`` replace single parameters of the fitted set.
+    ``Heating Power CAN [kW]`` and ``AirCon Power [kW]`` are added as loads when present, and
+    needed when ``heater_aircon_gain`` is set. ``overrides`` replace single parameters of the
+    fitted set; ``auxiliary_w`` is one more electrical load in W on the reference's time base
+    (a caller's own term: a load under test).
     """
     if version not in (1, 2):
         raise ValueError(f"version must be 1 or 2 (got {version!r})")
@@ -283,10 +305,13 @@ def simulate(
     if version == 2:
         elevation = _column(reference, ELEVATION, version)
         grade = road_grade(time_s, speed_kmh / 3.6, elevation, p.grade_window_m)
-        auxiliary = np.zeros_like(time_s)
-        for name in (HEATING, AIRCON):
-            if name in reference.columns:
-                auxiliary += 1e3 * np.nan_to_num(reference[name].to_numpy(dtype=np.float64))
+        auxiliary = _heater_aircon_w(reference, version, required=False)
+    if p.heater_aircon_gain != 0.0:
+        extra = p.heater_aircon_gain * _heater_aircon_w(reference, version, required=True)
+        auxiliary = extra if auxiliary is None else auxiliary + extra
+    if auxiliary_w is not None:
+        added = np.asarray(auxiliary_w, dtype=np.float64)
+        auxiliary = added if auxiliary is None else auxiliary + added
     trace = simulate_arrays(time_s, speed_kmh, p, grade_rad=grade, auxiliary_w=auxiliary)
     frame: pd.DataFrame = pd.DataFrame(
         {

@@ -32,6 +32,7 @@ __all__ = [
     "summary",
     "target_payload",
     "tried_lines",
+    "tried_payload",
 ]
 
 EXACT_MATCH = "the model matches the reference exactly: the residual is zero"
@@ -45,7 +46,30 @@ def payload(found: SignalDiagnosis) -> dict[str, Any]:
     for effect in out["effects"]:
         effect["text"] = effect_text(effect, name, found.unit)
         effect["fix"] = fix_text(effect, name, found.unit)
+        # What the fix, integrated as the model integrates the signal, does to the signals
+        # above it.
+        effect["above"] = [
+            {"signal": a["signal"], "unit": a["unit"], "predicted": a["predicted"][effect["name"]]}
+            for a in out["above"]
+            if effect["name"] in a["predicted"]
+        ]
+        effect["then"] = then_text(effect, out)
     return out
+
+
+def then_text(effect: Mapping[str, Any], found: Mapping[str, Any]) -> str | None:
+    """The λ the diagnosis predicts once an effect's fix is in the model: the signal's, then
+    those of the signals above it that the model integrates from it, e.g. ``λ3 0.9808 →
+    0.9838, λ4 0.9722 → 0.9744; E_batt λ3 0.8012 → 0.9551, λ4 0.7467 → 0.9420``; None when
+    nothing is predicted."""
+    before = found.get("lambdas") or {}
+    parts = [_lambda_change(before, effect["predicted"])] if effect.get("predicted") else []
+    above = {a["signal"]: a for a in found.get("above") or []}
+    for item in effect.get("above") or []:
+        now = above[item["signal"]]["lambdas"]
+        name = item["signal"].rsplit("/", 1)[-1]
+        parts.append(f"{name} {_lambda_change(now, item['predicted'])}")
+    return "; ".join(p for p in parts if p) or None
 
 
 def target_payload(spec: str, target: str, found: SignalDiagnosis | HevvalError) -> dict[str, Any]:
@@ -180,22 +204,57 @@ def fix_expression(effect: Mapping[str, Any]) -> str | None:
 
 def tried_lines(tried: Any) -> list[str]:
     """The before/after of ``hevval diagnose --try``: each λ and the physical errors of the
-    signal as the spec scores it, before and after the term is added to the model's output."""
-    unit = f" {tried.unit}" if tried.unit else ""
-    before, after = tried.before, tried.after
+    signal as the spec scores it, before and after the term is added to the model's output;
+    then the same for each signal above it that the model integrates from it."""
+    lines = [
+        f"{tried.signal} with {tried.term} added to the model's output, scored through the spec:",
+        *_before_after_lines(tried.before, tried.after, tried.unit),
+    ]
+    lower = tried.signal
+    for above in tried.above:
+        lines.append(
+            f"{above.signal}, the model's running integral of {lower.rsplit('/', 1)[-1]}, with "
+            "the term integrated the same way:"
+        )
+        lines.extend(_before_after_lines(above.before, above.after, above.unit))
+        lower = above.signal
+    if tried.above_note:
+        lines.append(
+            f"  (the signals above {lower.rsplit('/', 1)[-1]} are not scored again: "
+            f"{tried.above_note})"
+        )
+    return lines
+
+
+def _before_after_lines(before: Any, after: Any, unit: str | None) -> list[str]:
+    """Each λ and the physical errors of one signal, before → after."""
+    unit_text = f" {unit}" if unit else ""
     lambdas = ", ".join(
         f"{get_characteristic(name).symbol} {b:.4f} → {a:.4f}"
         for name, b, a in zip(FUSED_CHARACTERISTICS, before.lambdas, after.lambdas, strict=True)
     )
     return [
-        f"{tried.signal} with {tried.term} added to the model's output, scored through the spec:",
         f"  {lambdas}",
-        f"  mean error {before.mean_error:+.4g} → {after.mean_error:+.4g}{unit}, "
-        f"MAE {before.mae:.4g} → {after.mae:.4g}{unit}, "
-        f"RMS {before.rms:.4g} → {after.rms:.4g}{unit}",
-        "  (only this signal is scored again; the signals above it change too once the term is "
-        "in the model)",
+        f"  mean error {before.mean_error:+.4g} → {after.mean_error:+.4g}{unit_text}, "
+        f"MAE {before.mae:.4g} → {after.mae:.4g}{unit_text}, "
+        f"RMS {before.rms:.4g} → {after.rms:.4g}{unit_text}",
     ]
+
+
+def tried_payload(tried: Any) -> dict[str, Any]:
+    """The JSON form of ``hevval diagnose --try``: the signal and each signal above it that was
+    scored again, before and after."""
+    return {
+        "signal": tried.signal,
+        "term": tried.term,
+        "before": tried.before.as_dict(),
+        "after": tried.after.as_dict(),
+        "above": [
+            {"signal": a.signal, "before": a.before.as_dict(), "after": a.after.as_dict()}
+            for a in tried.above
+        ],
+        "above_note": tried.above_note,
+    }
 
 
 def fix_text(effect: Mapping[str, Any], signal: str, unit: str | None) -> str:
@@ -300,12 +359,8 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
                 "      on this record, interchangeable with: " + ", ".join(e["interchangeable"])
             )
         fix = fix_text(e, found["signal"].rsplit("/", 1)[-1], found.get("unit"))
-        after = (
-            f" (then {_lambda_change(before, e['predicted'])})"
-            if e.get("predicted") and before
-            else ""
-        )
-        lines.append(f"      fix: {fix}{after}")
+        then = then_text(e, found) if before else None
+        lines.append(f"      fix: {fix}" + (f" (then {then})" if then else ""))
         term = fix_expression(e)
         if term is not None:
             lines.append(
@@ -325,6 +380,12 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     if len(relevant) > 1 and found.get("predicted") and before:
         lines.append(
             f"  after adding all {len(relevant)}: {_lambda_change(before, found['predicted'])}"
+        )
+    if relevant and found.get("above_note"):
+        top = ([found["signal"]] + [a["signal"] for a in found.get("above") or []])[-1]
+        lines.append(
+            f"  the fixes are not predicted for the signals above {top.rsplit('/', 1)[-1]}: "
+            f"{found['above_note']}"
         )
     signal = found["signal"].rsplit("/", 1)[-1]
     for r in found.get("responses") or []:
