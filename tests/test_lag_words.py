@@ -148,6 +148,14 @@ def test_the_long_record_search_reports_the_same_quantity_and_its_edge() -> None
     assert found.correlation == pytest.approx(float(exact[0]), abs=1e-9)
     assert found.zero_lag_correlation == pytest.approx(float(exact[300]), abs=1e-9)
 
+    # Scored, the zero-lag value comes from the main pass's whole-record sums less the ends.
+    chars = signal_characteristics(reference, simulated, dt=DT, max_lag_s=300 * DT)
+    assert chars.lag_search is not None
+    assert chars.lag_search.method == "pyramid"
+    assert (chars.lag_s, chars.lag_at_bound) == (pytest.approx(-300 * DT), True)
+    assert chars.peak_correlation == pytest.approx(float(exact[0]), abs=1e-9)
+    assert chars.correlation_at_zero_lag == pytest.approx(float(exact[300]), abs=1e-9)
+
     inside = search_lag(*_delayed_pair(n, 120, seed=11), 300)
     assert (inside.lag, inside.at_bound) == (-120, False)
     assert inside.correlation > 0.9999
