@@ -197,7 +197,7 @@ def test_error_at_leaf_is_localised(project: pytest.Pytester) -> None:
             "E/P/I missed its thresholds (pack.hevval.yaml:18)",
             "  set 1, level 3, position 2, α = 0.5",
             "  λ3 MAE = * < 0.97 (MAE * A over a * A range)",
-            "  lag *s, peak correlation *",
+            "  lag *s, where the mean-removed correlation peaks: * (* at zero lag)",
             "  where the error appears: here, at level 3 (a leaf)",
         ]
     )

@@ -23,14 +23,12 @@ import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
 from . import kernel
-from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search, dot_overlap
+from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search
 from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
 from .sums import (
     RecordSums,
-    _coefficient,
     lambdas_from_sums,
     normalised_error,
-    zero_lag_correlation,
 )
 
 __all__ = [
@@ -59,6 +57,11 @@ _TOO_BIG = 2.0**400
 _TOO_SMALL = 2.0**-400
 
 
+def _number(value: Any) -> float:
+    """A stored number, NaN where it is missing (``None``)."""
+    return math.nan if value is None else float(value)
+
+
 @dataclass(frozen=True)
 class SignalCharacteristics:
     """λ1–λ6 of one signal pair, with the physical errors they are built from.
@@ -72,7 +75,18 @@ class SignalCharacteristics:
         Lag of the peak of the mean-removed cross-correlation, in seconds. Negative means the
         simulated signal lags the reference.
     peak_correlation:
-        The normalised cross-correlation (same form as λ1) at ``lag_s``.
+        ρ at ``lag_s``: the mean-removed correlation coefficient the lag search maximises
+        (:mod:`pytest_hevval.core.lag`), clipped to [0, 1]. Never below
+        ``correlation_at_zero_lag``. Not λ1's form: λ1 is the spec's correlation at zero
+        lag over the whole record.
+    correlation_at_zero_lag:
+        ρ at zero lag, the same quantity.
+    max_lag_s:
+        Half-width of the lag search that was run, in seconds (``alignment.max_lag_s``, at most
+        a quarter of the record).
+    lag_at_bound:
+        The lag lies on the edge of that search (|lag| ≥ max_lag_s − dt/2), so the peak may lie
+        beyond it.
     mae, rms, delta_e, error_std:
         E_MAE, E_RMS, ΔE = E_RMS − E_MAE and σ (N−1) of e = y_ref − y_sim, in the signal's units.
     mean_error:
@@ -93,6 +107,9 @@ class SignalCharacteristics:
     n_samples: int
     dt: float
     correlation: CorrelationKind = "xcorr"
+    correlation_at_zero_lag: float = math.nan
+    max_lag_s: float = math.nan
+    lag_at_bound: bool = False
     lag_search: LagSearch | None = field(default=None, compare=False, repr=False)
     #: The sums of the groups of ``group_runs`` (see ``core.local.grouped_tables``) when the
     #: compiled main pass took them along, else None.
@@ -129,7 +146,7 @@ class SignalCharacteristics:
     def lambda_error_std(self) -> float:
         return self.lambdas[5]
 
-    def as_dict(self) -> dict[str, float | int | str | list[float]]:
+    def as_dict(self) -> dict[str, float | int | str | bool | list[float]]:
         return {
             "lambdas": list(self.lambdas),
             "lag_s": self.lag_s,
@@ -143,6 +160,9 @@ class SignalCharacteristics:
             "n_samples": self.n_samples,
             "dt": self.dt,
             "correlation": self.correlation,
+            "correlation_at_zero_lag": self.correlation_at_zero_lag,
+            "max_lag_s": self.max_lag_s,
+            "lag_at_bound": self.lag_at_bound,
         }
 
     @classmethod
@@ -167,6 +187,10 @@ class SignalCharacteristics:
             n_samples=int(data.get("n_samples", 0)),
             dt=float(data.get("dt", 0.0)),
             correlation=data.get("correlation", "xcorr"),
+            # Results written before these fields existed read as unknown.
+            correlation_at_zero_lag=_number(data.get("correlation_at_zero_lag")),
+            max_lag_s=_number(data.get("max_lag_s")),
+            lag_at_bound=bool(data.get("lag_at_bound", False)),
         )
 
 
@@ -674,7 +698,15 @@ def signal_characteristics(
     # The sums are in the units of the records searched (rescaled or not): so are the means.
     r_mean = sums.ref_sum / n
     s_mean = sums.sim_sum / n
-    search, centred_peak = _search(
+    whole: dict[str, float] = {}
+    if n > _EXACT_LIMIT and max_lag > 0:
+        # The pyramid's last level needs the whole records' centred sums: from the pass's sums
+        # where they keep their digits, so the search reads only the samples it must.
+        from .standard._moments import moments_from_pass
+
+        moments = moments_from_pass(sums.record(scale), ref, sim)
+        whole = {"sim_energy": moments.sim_m2, "co_moment": moments.co_m2}
+    search = _search(
         lag_ref,
         lag_sim,
         max_lag,
@@ -683,22 +715,15 @@ def signal_characteristics(
         scale=lag_scale,
         workers=workers,
         levels=levels or (),
+        **whole,
     )
     del levels
-    if centred_peak is None:
-        peak_correlation = _correlation_at(
-            lag_ref, lag_sim, search.lag, sums, correlation, lag_scale
-        )
-    else:
-        peak_correlation = _correlation_from_centred(
-            lag_ref, lag_sim, search.lag, sums, correlation, lag_scale, centred_peak, r_mean, s_mean
-        )
 
     lambdas = tuple(found.lambdas[name] for name in FUSED_CHARACTERISTICS)
     return SignalCharacteristics(
         lambdas=lambdas,  # type: ignore[arg-type]
         lag_s=search.lag * float(dt),
-        peak_correlation=peak_correlation,
+        peak_correlation=search.correlation,
         mae=found.mae,
         rms=found.rms,
         delta_e=found.delta_e,
@@ -708,81 +733,10 @@ def signal_characteristics(
         n_samples=n,
         dt=float(dt),
         correlation=correlation,
+        correlation_at_zero_lag=search.zero_lag_correlation,
+        max_lag_s=search.max_lag * float(dt),
+        lag_at_bound=search.at_bound,
         lag_search=search,
         group_sums=group_sums,
         sums=sums.record(scale),
     )
-
-
-def _zero_lag_correlation(sums: _Sums, kind: CorrelationKind) -> float:
-    """λ1 of the whole record (the peak correlation when the lag found is 0)."""
-    return zero_lag_correlation(
-        sums.n, sums.cross, sums.ref_sq, sums.sim_sq, sums.ref_sum, sums.sim_sum, kind
-    )
-
-
-def _correlation_at(
-    ref: FloatArray, sim: FloatArray, lag: int, sums: _Sums, kind: CorrelationKind, scale: float
-) -> float:
-    """Normalised correlation at one lag (``lag`` > 0 pairs ref[n+lag] with sim[n])."""
-    if lag == 0:
-        return _zero_lag_correlation(sums, kind)
-    n = ref.shape[0]
-    if lag > 0:
-        r = ref[lag:]
-        s = sim[: n - lag]
-    else:
-        r = ref[: n + lag]
-        s = sim[-lag:]
-    # Sums below are in the same (possibly rescaled) units as ``sums``.
-    cross = dot_overlap(r, s, scale)
-    if kind == "pearson":
-        m: int = r.shape[0]
-        r_sum = float(np.sum(r, dtype=np.float64)) * scale
-        s_sum = float(np.sum(s, dtype=np.float64)) * scale
-        cov = cross - r_sum * s_sum / m
-        var_r = dot_overlap(r, r, scale) - r_sum**2 / m
-        var_s = dot_overlap(s, s, scale) - s_sum**2 / m
-        return _coefficient(cov, var_r, var_s)
-    # MATLAB 'coeff' normalises by the zero-lag energies at every lag.
-    return _coefficient(cross, sums.ref_sq, sums.sim_sq)
-
-
-def _correlation_from_centred(
-    ref: AnyFloatArray,
-    sim: AnyFloatArray,
-    lag: int,
-    sums: _Sums,
-    kind: CorrelationKind,
-    scale: float,
-    centred: float,
-    r_mean: float,
-    s_mean: float,
-) -> float:
-    """:func:`_correlation_at` from the search's mean-removed C(lag), without another read.
-
-    Over the overlap of M samples, Σ r·s = C + μ_s·Σ r + μ_r·Σ s − M·μ_r·μ_s for the very means
-    C was centred with, and the overlap's sums are the whole record's minus the |lag| samples
-    that fall off its ends. Rounding stays that of summing Σ r·s directly.
-    """
-    if lag == 0:
-        return _zero_lag_correlation(sums, kind)
-    n = ref.shape[0]
-    k = abs(lag)
-    # lag > 0 pairs ref[lag:] with sim[:n−lag]: ref loses its head and sim its tail.
-    r_off = ref[:k] if lag > 0 else ref[n - k :]
-    s_off = sim[n - k :] if lag > 0 else sim[:k]
-    r_edge = np.asarray(r_off, dtype=np.float64) * scale
-    s_edge = np.asarray(s_off, dtype=np.float64) * scale
-    m: int = n - k
-    mu_r = r_mean * scale
-    mu_s = s_mean * scale
-    r_sum = sums.ref_sum - float(r_edge.sum())
-    s_sum = sums.sim_sum - float(s_edge.sum())
-    cross = centred + mu_s * r_sum + mu_r * s_sum - m * mu_r * mu_s
-    if kind == "pearson":
-        cov = cross - r_sum * s_sum / m
-        var_r = sums.ref_sq - _dot(r_edge, r_edge) - r_sum**2 / m
-        var_s = sums.sim_sq - _dot(s_edge, s_edge) - s_sum**2 / m
-        return _coefficient(cov, var_r, var_s)
-    return _coefficient(cross, sums.ref_sq, sums.sim_sq)

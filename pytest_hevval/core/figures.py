@@ -5,24 +5,27 @@ returns plain JSON-safe lists; the report then draws every per-signal plot from 
 record of any length reduces to at most ``points`` buckets plus a fixed-size correlation curve
 and histogram, so a one-hour, 100 Hz trace costs about the same to ship as a one-minute one.
 
-Pure numpy (scipy through :mod:`pytest_hevval.core.lag`, imported on first use so that importing
-the report package stays cheap).
+Pure numpy (:mod:`pytest_hevval.core.lag` is imported on first use, so that importing the report
+package stays cheap).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from ..errors import DegenerateSignalError
 
+if TYPE_CHECKING:
+    from .lag import LagSearch
+
 __all__ = ["FIGURE_SCHEMA_VERSION", "figure_data"]
 
 #: Bumped when the keys or meaning of :func:`figure_data`'s output change.
-FIGURE_SCHEMA_VERSION = 1
+FIGURE_SCHEMA_VERSION = 2
 
 # Significant digits kept in the shipped lists: plots are a few hundred pixels tall, so six
 # digits are far below one pixel while keeping JSON roughly half the size of full repr.
@@ -60,6 +63,7 @@ def figure_data(
     max_lag: int,
     points: int = 2000,
     bins: int = 50,
+    search: LagSearch | None = None,
 ) -> dict[str, Any]:
     r"""Decimated overlay, correlation curve, derivative match and error histogram of one pair.
 
@@ -77,13 +81,19 @@ def figure_data(
         Most buckets in the time-axis plots.
     bins:
         Bins of the error histogram.
+    search:
+        The λ pass's lag search; its lag and its exact ρ at the lag and at zero lag mark the
+        curve's peak, so the figure states what every other output states. Without it the
+        peak is the curve's own.
 
     Returns
     -------
     dict
         JSON-safe. ``overlay`` holds per bucket the mid time and the min/max of reference,
         simulated and residual e = y_ref − y_sim (so spikes survive decimation);
-        ``correlation`` the 'coeff'-normalised curve with its peak (Fig. 5 of the paper);
+        ``correlation`` ρ(m), the mean-removed correlation the lag search maximises
+        (:mod:`pytest_hevval.core.lag`), with its peak, its value at zero lag and whether
+        the peak lies on the edge of the search (Fig. 5 of the paper);
         ``derivative`` the fraction of samples per overlay bucket whose central-difference
         derivative signs agree (Fig. 7); ``histogram`` the error histogram with its empirical
         CDF (Fig. 9).
@@ -98,7 +108,7 @@ def figure_data(
     The derivative match uses the same convention as λ2: sign(y[i+1] − y[i−1]) with the first
     and last derivative set to 0, so the count-weighted mean of ``derivative.match`` is λ2.
     """
-    from .lag import correlation_curve
+    from .lag import LagSearch, correlation_curve
 
     ref = np.asarray(reference, dtype=np.float64)
     sim = np.asarray(simulated, dtype=np.float64)
@@ -135,9 +145,18 @@ def figure_data(
     match_per_bucket = matches / counts
 
     lags, curve = correlation_curve(ref, sim, max_lag, points=401)
-    zero = int(np.argmin(np.abs(lags)))
-    # Peak like λ1's lag search: ties to the most negative lag (argmax order).
-    peak_index = int(np.argmax(curve))
+    if search is None:
+        zero = int(np.argmin(np.abs(lags)))
+        # Ties go to the lag closest to zero, as in the search.
+        best = np.flatnonzero(curve == np.max(curve))
+        peak_index = int(best[np.argmin(np.abs(lags[best]))])
+        search = LagSearch(
+            lag=int(lags[peak_index]),
+            max_lag=int(lags[-1]),
+            method="fft",
+            correlation=float(curve[peak_index]),
+            zero_lag_correlation=float(curve[zero]),
+        )
 
     hist_counts, hist_edges = np.histogram(
         residual, bins=bins, range=_histogram_range(residual, bins)
@@ -163,10 +182,11 @@ def figure_data(
         "correlation": {
             "lag_s": _rounded(lags.astype(np.float64) * dt, 9),
             "value": _rounded(curve),
-            "peak": _round_scalar(float(curve[peak_index])),
-            "peak_lag_s": _round_scalar(float(lags[peak_index]) * dt, 9),
-            "zero_lag": _round_scalar(float(curve[zero])),
-            "max_lag_s": _round_scalar(float(max(abs(int(lags[0])), abs(int(lags[-1])))) * dt, 9),
+            "peak": _round_scalar(search.correlation),
+            "peak_lag_s": _round_scalar(search.lag * dt, 9),
+            "zero_lag": _round_scalar(search.zero_lag_correlation),
+            "max_lag_s": _round_scalar(search.max_lag * dt, 9),
+            "at_bound": search.at_bound,
         },
         "derivative": {
             "match": _rounded(match_per_bucket, 4),

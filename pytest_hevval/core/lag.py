@@ -15,6 +15,12 @@ smooth the correlation without moving its peak; the coarsest level is searched e
 the whole ±max_lag window and each finer level only a few samples around the scaled-up
 estimate, ending with a window of exact correlations at full resolution. Cost: one extra read
 of both arrays plus a handful of in-cache dot products per sample.
+
+What the search maximises is reported with the lag, as a coefficient: ρ(m) = C(m) /
+√(E_ref(m)·E_sim), the mean-removed correlation of the simulation's fixed window with the
+reference shifted by m (E_ref(m) and E_sim the centred energies of the two windows), clipped to
+[0, 1]. Its value at the lag and at zero lag are the one pair of correlations every output
+prints beside the lag; the lag is never one where ρ is below ρ(0).
 """
 
 from __future__ import annotations
@@ -24,14 +30,21 @@ import math
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from . import kernel
+from .sums import _coefficient
 
-__all__ = ["LagSearch", "correlation_curve", "dot_overlap", "search_lag"]
+__all__ = [
+    "LagSearch",
+    "correlation_curve",
+    "dot_overlap",
+    "search_lag",
+    "window_correlations",
+]
 
 FloatArray = npt.NDArray[np.floating]
 
@@ -51,12 +64,23 @@ _CHUNK = 1 << 17
 
 @dataclass(frozen=True)
 class LagSearch:
-    """Where the mean-removed cross-correlation peaks, and how that was found."""
+    """Where the mean-removed cross-correlation peaks, how that was found, and its value there.
+
+    ``correlation`` is ρ(lag) and ``zero_lag_correlation`` ρ(0), the coefficient the search
+    maximises (module docstring); ``correlation ≥ zero_lag_correlation`` always.
+    """
 
     lag: int
     max_lag: int
     method: Literal["none", "fft", "pyramid"]
     levels: int = 1
+    correlation: float = math.nan
+    zero_lag_correlation: float = math.nan
+
+    @property
+    def at_bound(self) -> bool:
+        """The lag lies on the edge of the ±max_lag search, so the peak may lie beyond it."""
+        return self.max_lag > 0 and abs(self.lag) >= self.max_lag
 
 
 # OpenBLAS runs ddot on its own worker threads above 10 000 elements and dgemv above 9 216.
@@ -436,9 +460,24 @@ def _correlate_valid(
     return valid
 
 
-def _fft_search(
+#: A window's centred energy at most count·(this·mean)² is rounding of a constant: its
+#: samples differ from their mean by less than 1e-9 of it, so it carries no timing.
+_FLAT = 1e-9
+
+
+def _flat_to_zero(
+    energy: npt.NDArray[np.float64] | float, mean: float, count: int
+) -> npt.NDArray[np.float64]:
+    """``energy`` with a constant window's rounding-level energy set to 0 (see _FLAT)."""
+    floor = count * (_FLAT * mean) ** 2
+    values = np.asarray(energy, dtype=np.float64)
+    return np.where(values <= floor, 0.0, values)
+
+
+def _fft_scores(
     r: FloatArray, s: FloatArray, max_lag: int, r_mean: float, s_mean: float, scale: float
-) -> int:
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float]:
+    """C(m) and E_ref(m) for every m in [−max_lag, max_lag] by one FFT, and E_sim."""
     rc = _centred(r, r_mean, scale)
     sc = _centred(s[max_lag : s.shape[0] - max_lag], s_mean, scale)
     # 'valid' slides the fixed simulation window over the reference: index k is lag k − max_lag.
@@ -447,7 +486,66 @@ def _fft_search(
     n = r.shape[0]
     lags = np.arange(-max_lag, max_lag + 1)
     energy = cumulative[n - max_lag + lags] - cumulative[max_lag + lags]
+    # A constant reference window has no timing: it is not a candidate (see _best).
+    energy = _flat_to_zero(energy, r_mean * scale, n - 2 * max_lag)
+    return window, energy, _dot(sc, sc)
+
+
+def _fft_search(
+    r: FloatArray, s: FloatArray, max_lag: int, r_mean: float, s_mean: float, scale: float
+) -> int:
+    window, energy, _ = _fft_scores(r, s, max_lag, r_mean, s_mean, scale)
     return _best(window, energy, -max_lag)
+
+
+def _rho(
+    cross: npt.NDArray[np.float64] | float,
+    ref_energy: npt.NDArray[np.float64] | float,
+    sim_energy: float,
+    means: tuple[float, float],
+    count: int,
+) -> npt.NDArray[np.float64]:
+    """ρ = C / √(E_ref·E_sim) clipped to [0, 1]; a constant window is one without power."""
+    r = _flat_to_zero(ref_energy, means[0], count)
+    s = _flat_to_zero(np.full_like(r, sim_energy), means[1], count)
+    return np.asarray(_coefficient(np.asarray(cross, dtype=np.float64), r, s), dtype=np.float64)
+
+
+def window_correlations(
+    reference: FloatArray, simulated: FloatArray, max_lag: int
+) -> npt.NDArray[np.float64]:
+    """ρ(m) for m in [−max_lag, max_lag] (module docstring), exactly, by one FFT.
+
+    ``max_lag`` is at most a quarter of the record, as in the search.
+    """
+    r_mean = float(np.mean(reference, dtype=np.float64))
+    s_mean = float(np.mean(simulated, dtype=np.float64))
+    window, energy, sim_energy = _fft_scores(reference, simulated, max_lag, r_mean, s_mean, 1.0)
+    count = reference.shape[0] - 2 * max_lag
+    return _rho(window, energy, sim_energy, (r_mean, s_mean), count)
+
+
+def _found(
+    lag: int,
+    peak: tuple[float, float],
+    zero: tuple[float, float],
+    sim_energy: float,
+    window: tuple[float, float, int],
+    **how: Any,
+) -> LagSearch:
+    """The search's result from (C, E_ref) at the lag and at zero lag.
+
+    ``window`` holds both means (times the search's scale) and the window's length. Should
+    ρ(0) reach ρ(lag), which the exact search allows only for a constant simulated window or
+    where clipping to [0, 1] makes a tie, and the pyramid's refinement could, zero lag is the
+    better match and is reported.
+    """
+    means, count = (window[0], window[1]), window[2]
+    at_lag = float(_rho(peak[0], peak[1], sim_energy, means, count))
+    at_zero = float(_rho(zero[0], zero[1], sim_energy, means, count))
+    if at_zero >= at_lag:
+        lag, at_lag = 0, at_zero
+    return LagSearch(lag=lag, correlation=at_lag, zero_lag_correlation=at_zero, **how)
 
 
 def search_lag(
@@ -463,7 +561,7 @@ def search_lag(
     """Lag (in samples) of the peak of the mean-removed cross-correlation within ±max_lag.
 
     The correlation at each lag is normalised by the reference energy in that lag's window;
-    near-ties go to the lag closest to zero.
+    near-ties go to the lag closest to zero. The result carries ρ at the lag and at zero lag.
     """
     return _search(
         reference,
@@ -473,7 +571,7 @@ def search_lag(
         sim_mean=sim_mean,
         scale=scale,
         workers=workers,
-    )[0]
+    )
 
 
 def _search(
@@ -487,26 +585,43 @@ def _search(
     workers: int,
     levels: Sequence[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = (),
     ref_energy: float | None = None,
-) -> tuple[LagSearch, float | None]:
-    """:func:`search_lag`, plus the mean-removed C(lag) over the lag's whole overlap when the
-    search computed it exactly.
+    sim_energy: float | None = None,
+    co_moment: float | None = None,
+) -> LagSearch:
+    """:func:`search_lag`, optionally from pyramid levels a pass has already made.
 
     ``levels`` optionally holds the first pyramid levels (block means by 4, 16, …) of both
     signals, already made by a pass that read the data anyway, so that building the pyramid
     needs no extra read of the full records.
     ``ref_energy`` optionally gives Σ ((r − μ)·scale)² over the whole record, for the same
-    reason; without it the final level reads the reference once more.
+    reason; without it the final level reads the reference once more. ``sim_energy`` and
+    ``co_moment`` (Σ ((s − μ)·scale)² and Σ (r − μ)(s − μ)·scale² over the whole record) spare
+    the reads of ρ's normalisation and of its zero-lag value in the same way: only the
+    2·max_lag samples outside the window are read.
     """
     n = reference.shape[0]
     # The fixed comparison window [max_lag, n − max_lag) must keep at least half the record.
     max_lag = int(max(0, min(max_lag, n // 4)))
-    if max_lag == 0:
-        return LagSearch(lag=0, max_lag=0, method="none"), None
     r_mean = float(np.mean(reference, dtype=np.float64)) if ref_mean is None else ref_mean
     s_mean = float(np.mean(simulated, dtype=np.float64)) if sim_mean is None else sim_mean
+    if max_lag == 0:
+        values, ref_window = _exact_window(
+            reference, simulated, 0, 0, r_mean, s_mean, scale, workers, 0
+        )
+        zero = (float(values[0]), ref_window)
+        sim_window = _centred_energy(simulated, s_mean, scale, 0, n)
+        return _found(
+            0, zero, zero, sim_window, (r_mean * scale, s_mean * scale, n), max_lag=0, method="none"
+        )
     if n <= _EXACT_LIMIT:
-        lag = _fft_search(reference, simulated, max_lag, r_mean, s_mean, scale)
-        return LagSearch(lag=lag, max_lag=max_lag, method="fft"), None
+        window, energy, sim_window = _fft_scores(
+            reference, simulated, max_lag, r_mean, s_mean, scale
+        )
+        lag = _best(window, energy, -max_lag)
+        at = (float(window[lag + max_lag]), float(energy[lag + max_lag]))
+        zero = (float(window[max_lag]), float(energy[max_lag]))
+        window_means = (r_mean * scale, s_mean * scale, n - 2 * max_lag)
+        return _found(lag, at, zero, sim_window, window_means, max_lag=max_lag, method="fft")
 
     # Pyramid of block means: levels[k] has factor _FACTOR**k.
     refs: list[FloatArray] = [reference]
@@ -522,7 +637,9 @@ def _search(
     factor = _FACTOR**top
     coarse_max = min(math.ceil(max_lag / factor) + 1, refs[top].shape[0] // 4)
     best = _fft_search(refs[top], sims[top], coarse_max, r_mean, s_mean, scale)
-    value = 0.0
+    values = energy = np.zeros(1, dtype=np.float64)
+    lo = hi = 0
+    total = 0.0
     for level in range(top - 1, -1, -1):
         factor = _FACTOR**level
         level_max = math.ceil(max_lag / factor) if level else max_lag
@@ -543,26 +660,43 @@ def _search(
                 + _centred_energy(refs[level], r_mean, scale, 0, level_max + lo)
                 + _centred_energy(refs[level], r_mean, scale, size - level_max + lo, size)
             )
-        energy = _window_energy(refs[level], r_mean, scale, level_max, lo, hi, total)
+        energy = _flat_to_zero(
+            _window_energy(refs[level], r_mean, scale, level_max, lo, hi, total),
+            r_mean * scale,
+            refs[level].shape[0] - 2 * level_max,
+        )
         best = _best(values, energy, lo)
-        value = float(values[best - lo])
-    value += _overlap_ends(reference, simulated, best, max_lag, r_mean, s_mean, scale)
-    search = LagSearch(lag=best, max_lag=max_lag, method="pyramid", levels=top + 1)
-    return search, value
-
-
-def _overlap_ends(
-    r: FloatArray, s: FloatArray, lag: int, half: int, r_mean: float, s_mean: float, scale: float
-) -> float:
-    """The part of C(lag) over the lag's whole overlap that lies outside [half, n − half)."""
-    n = r.shape[0]
-    total = 0.0
-    for a, b in ((max(0, -lag), half), (n - half, min(n, n - lag))):
-        if b > a:
-            total += _dot(
-                _centred(r[a + lag : b + lag], r_mean, scale), _centred(s[a:b], s_mean, scale)
-            )
-    return total
+    at = (float(values[best - lo]), float(energy[best - lo]))
+    ends = ((0, max_lag), (n - max_lag, n))
+    if lo <= 0 <= hi:
+        zero = (float(values[-lo]), float(energy[-lo]))
+    elif co_moment is not None:
+        # The window's sums at zero lag are the whole record's less its two ends (``total``
+        # is the reference's whole centred energy, from the last level).
+        cross = co_moment
+        own = total
+        for a, b in ends:
+            rc = _centred(reference[a:b], r_mean, scale)
+            cross -= _dot(rc, _centred(simulated[a:b], s_mean, scale))
+            own -= _dot(rc, rc)
+        zero = (cross, max(own, 0.0))
+    else:
+        # Zero lag lies outside the refined window: one more exact sum, over the same window.
+        values, ref_window = _exact_window(
+            reference, simulated, 0, 0, r_mean, s_mean, scale, workers, max_lag
+        )
+        zero = (float(values[0]), ref_window)
+    if sim_energy is None:
+        sim_window = _centred_energy(simulated, s_mean, scale, max_lag, n - max_lag)
+    else:
+        sim_window = sim_energy - sum(
+            _centred_energy(simulated, s_mean, scale, a, b) for a, b in ends
+        )
+        sim_window = max(sim_window, 0.0)
+    window_means = (r_mean * scale, s_mean * scale, n - 2 * max_lag)
+    return _found(
+        best, at, zero, sim_window, window_means, max_lag=max_lag, method="pyramid", levels=top + 1
+    )
 
 
 def correlation_curve(
@@ -572,31 +706,24 @@ def correlation_curve(
     *,
     points: int = 401,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
-    """The 'coeff'-normalised cross-correlation at up to ``points`` lags within ±max_lag.
+    """ρ(m), the coefficient the lag search maximises, at up to ``points`` lags within ±max_lag.
 
-    For display (the paper's Fig. 5). Long records are block-averaged first, so the curve is
-    the correlation smoothed over at most the display step.
+    For display (the paper's Fig. 5). ``max_lag`` is capped at a quarter of the record, as in
+    the search. Long records and wide windows are block-averaged first (by at least the
+    display step), so the curve is then ρ of the block means: the correlation smoothed over
+    that step. The search's own ρ at the lag and at zero lag are exact.
     """
     n = reference.shape[0]
-    max_lag = int(max(0, min(max_lag, n - 1)))
+    max_lag = int(max(0, min(max_lag, n // 4)))
     step = max(1, math.ceil((2 * max_lag + 1) / points))
     r: FloatArray = reference
     s: FloatArray = simulated
+    factor = 1
     if step > 1 or n > _EXACT_LIMIT:
         factor = max(step, math.ceil(n / _EXACT_LIMIT))
         r = _block_means(reference, factor)
         s = _block_means(simulated, factor)
-        step_lags = max(1, max_lag // factor)
-    else:
-        factor = 1
-        step_lags = max_lag
-    r64 = np.asarray(r, dtype=np.float64)
-    s64 = np.asarray(s, dtype=np.float64)
-    from scipy import signal as sps
-
-    full = sps.correlate(r64, s64, mode="full", method="fft")
-    norm = math.sqrt(_dot(r64, r64) * _dot(s64, s64)) or 1.0
-    zero = s64.shape[0] - 1
-    window = full[zero - step_lags : zero + step_lags + 1] / norm
-    lags = (np.arange(-step_lags, step_lags + 1) * factor).astype(np.int64)
-    return lags, window.astype(np.float64)
+    half = min(max_lag // factor, r.shape[0] // 4)
+    values = window_correlations(r, s, half)
+    lags = (np.arange(-half, half + 1) * factor).astype(np.int64)
+    return lags, values.astype(np.float64)

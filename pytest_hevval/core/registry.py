@@ -69,13 +69,19 @@ class CharacteristicValue:
 Compute = Callable[[Any, Any, float], "float | CharacteristicValue"]
 
 
+#: λ1's correlation forms (a spec's ``correlation``) as sentences name them.
+_FORMS = {"xcorr": "xcorr coefficient", "pearson": "Pearson's r"}
+
+
 @dataclass(frozen=True)
 class Characteristic:
     """One characteristic λ: its identity, presentation, weight and computation.
 
     ``explanation`` is a ``str.format`` template for a failing value's physical meaning. It may
     use ``{error}`` (the physical error named by ``error``, e.g. ``mae``), ``{unit}`` (`` V`` or
-    empty), ``{range}`` (the reference range), ``{peak_correlation}`` and ``{lag_s}``.
+    empty), ``{range}`` (the reference range), ``{peak_correlation}`` and ``{lag_s}`` (the
+    lag and the mean-removed correlation there, :mod:`pytest_hevval.core.lag`), and ``{form}``
+    (λ1's form: ``xcorr coefficient`` or ``Pearson's r``).
     """
 
     name: str
@@ -119,6 +125,7 @@ class Characteristic:
             range=float(errors.get("reference_range", math.nan)),
             peak_correlation=float(errors.get("peak_correlation", math.nan)),
             lag_s=float(errors.get("lag_s", math.nan)),
+            form=_FORMS.get(str(errors.get("correlation", "xcorr")), "correlation"),
         )
 
     def _definition(self) -> tuple[Any, ...]:
@@ -136,7 +143,7 @@ _BUILTINS: tuple[Characteristic, ...] = (
         name="lag_correlation",
         symbol="λ1",
         label="lag correlation",
-        explanation="zero-lag correlation; peak {peak_correlation:.4f} at {lag_s:+.3g} s",
+        explanation="{form} at zero lag, over the whole record",
         colour="#0072B2",
         order=1,
     ),

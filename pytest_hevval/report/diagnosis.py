@@ -21,6 +21,7 @@ from ..core.diagnosis import (
 from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
+from .sentences import lag_bound_text
 
 __all__ = [
     "SUMMARY_NAMES",
@@ -437,14 +438,9 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
 
 
 def _bound_text(found: Mapping[str, Any]) -> str:
-    """A lag on the edge of the search says so: the peak may lie beyond it."""
-    if not found.get("lag_at_bound"):
-        return ""
-    width = float(found.get("max_lag_s") or 0.0)
-    return (
-        f", on the edge of the ±{width:g} s search: the true lag may be larger; widen "
-        f"alignment.max_lag_s (e.g. to {2 * width:g} s) to find it"
-    )
+    """A lag on the edge of the search says so, in the words of every scored signal's lag."""
+    bound = lag_bound_text(found)
+    return f", {bound}" if bound else ""
 
 
 def describe(found: Mapping[str, Any]) -> list[str]:

@@ -22,7 +22,7 @@ from ..errors import MissingExtraError
 from ..results.local import LocalFailure
 from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg
-from .sentences import local_failure_text
+from .sentences import lag_text, local_failure_text
 from .terminal import runtime_of, runtime_text
 from .text import campaigns_of
 from .trace import trace_rows
@@ -76,6 +76,7 @@ def _signal_view(
         "cells": model.cells(signal),
         "standard_metrics": model.standard_metric_rows(signal),
         "measurement": model.measurement_lines(signal),
+        "lag": lag_text(signal),
         "failed": failed,
         "is_origin": failed and bool(signal.get("origin")),
         "origins": [(o, anchors.get(o)) for o in origins if o != path],

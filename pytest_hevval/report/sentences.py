@@ -3,13 +3,16 @@ where the error lies. The terminal, the failure reports and the HTML report all 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 from ..core.measurement import ERROR_CHARACTERISTICS
 from ..core.registry import describe
 from ..core.uncertainty import value_text
 from ..defaults import UNCERTAINTY_SIGMA
 from ..results.campaign import CampaignVerdict, campaign_of, campaign_verdicts
+from ..results.codec import number_or_nan
 from ..results.local import NAMED_GROUPS, LocalFailure
 from ..results.measurement import ErrorCheck
 from ..results.spec_result import Failure, SignalResult, SpecResult
@@ -19,6 +22,8 @@ __all__ = [
     "failure_lines",
     "failure_sentence",
     "failure_text",
+    "lag_bound_text",
+    "lag_text",
     "local_failure_text",
     "outcome_line",
     "verdict_line",
@@ -85,6 +90,48 @@ def local_failure_text(failure: LocalFailure, title: str) -> str:
         f"{noun} ({failure.passed}/{failure.judged} pass, {need}): worst {failure.value:.4f}; "
         f"{named}{more}"
     )
+
+
+def lag_bound_text(found: Mapping[str, Any]) -> str:
+    """What a lag on the edge of its search means, and the spec change that widens the search.
+
+    ``found`` holds ``lag_at_bound`` and ``max_lag_s`` (a signal's JSON entry, its
+    characteristics' ``as_dict``, or a diagnosis payload), and optionally ``n_samples`` and
+    ``dt``: the search reaches at most a quarter of the record. '' for a lag inside the search.
+    """
+    if not found.get("lag_at_bound"):
+        return ""
+    width = number_or_nan(found.get("max_lag_s"))
+    text = f"on the edge of the ±{width:g} s search, so the peak may lie beyond it"
+    if not math.isfinite(width) or width <= 0:
+        return text
+    n, dt = found.get("n_samples"), number_or_nan(found.get("dt"))
+    quarter = int(n) // 4 * dt if isinstance(n, int) and math.isfinite(dt) else math.inf
+    wider = min(2 * width, quarter)
+    if wider > width * (1 + 1e-9):
+        return f"{text}: widen it in the spec, alignment: {{max_lag_s: {wider:.4g}}}"
+    return (
+        f"{text}; the search already spans a quarter of the record, so shift the model's "
+        "time in the spec (alignment: {offset_s: …}) or score a longer record"
+    )
+
+
+def lag_text(errors: Mapping[str, Any]) -> str:
+    """The lag and the correlation at it, as every output of a scored signal words them.
+
+    ``lag −5 s, where the mean-removed correlation peaks: 0.9912 (0.9880 at zero lag); on the
+    edge of the ±5 s search, …``. The correlation is ρ of :mod:`pytest_hevval.core.lag`, which
+    the lag maximises, so the value at the lag is never below the one at zero lag. ``errors``
+    is a signal's JSON entry or its characteristics' ``as_dict``.
+    """
+    lag = number_or_nan(errors.get("lag_s"))
+    peak = number_or_nan(errors.get("peak_correlation"))
+    zero = number_or_nan(errors.get("correlation_at_zero_lag"))
+    text = f"lag {lag:+.3g} s, where the mean-removed correlation peaks: {peak:.4f}"
+    if math.isfinite(zero):
+        text += f" ({zero:.4f} at zero lag)"
+    bound = lag_bound_text(errors)
+    return f"{text}; {bound}" if bound else text
 
 
 def failure_lines(signal: SignalResult) -> list[str]:

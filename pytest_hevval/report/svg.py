@@ -462,7 +462,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
             xc.frame(
                 parts,
                 x_label="lag [s] (negative: model lags)",
-                y_label="correlation",
+                y_label="mean-removed correlation",
                 share=share,
             )
             parts.append(f'<g clip-path="url(#{ident}-xc)">')
@@ -483,6 +483,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
                         if is_finite_number(correlation.get("zero_lag"))
                         else ""
                     )
+                    + (" · on the search edge" if correlation.get("at_bound") else "")
                     + "</text>"
                 )
 

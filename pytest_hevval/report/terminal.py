@@ -17,6 +17,7 @@ from ..results.verdict import RunVerdict
 from .sentences import (
     failure_lines,
     failure_text,
+    lag_text,
     outcome_line,
     verdict_line,
     where_lines,
@@ -53,10 +54,7 @@ def signal_failure_report(
         f"α = {signal.alpha:g}",
     ]
     lines.extend(f"  {text}" for text in failure_lines(signal))
-    lines.append(
-        f"  lag {signal.lag_s:+.3g} s, peak correlation {signal.peak_correlation:.4f} "
-        f"(λ1 at zero lag {signal.lambdas['lag_correlation']:.4f})"
-    )
+    lines.append(f"  {lag_text(signal.characteristics.as_dict())}")
     lines.extend(f"  {text}" for text in where_lines(signal))
     by_path = {s.path: s for s in result.signals}
     if signal.origins == [signal.path]:

@@ -38,7 +38,12 @@ RESULT_SCHEMA_VERSION = 2
 PHYSICAL_ERRORS: tuple[str, ...] = ("lag_s", "mae", "rms", "delta_e", "error_std", "mean_error")
 #: The numbers measured on a signal's pair besides its λ: the physical errors and the peak of
 #: the cross-correlation.
-MEASURED_NUMBERS: tuple[str, ...] = (PHYSICAL_ERRORS[0], "peak_correlation", *PHYSICAL_ERRORS[1:])
+MEASURED_NUMBERS: tuple[str, ...] = (
+    PHYSICAL_ERRORS[0],
+    "peak_correlation",
+    "correlation_at_zero_lag",
+    *PHYSICAL_ERRORS[1:],
+)
 #: The physical errors of a signal, flat in its JSON form beside ``lambdas``.
 ERROR_KEYS = (
     *MEASURED_NUMBERS,
@@ -46,6 +51,9 @@ ERROR_KEYS = (
     "n_samples",
     "dt",
     "correlation",
+    # The lag search's half-width in seconds, and whether the lag lies on its edge.
+    "max_lag_s",
+    "lag_at_bound",
 )
 
 

@@ -1096,6 +1096,7 @@ def _figures(
         max_lag=chars.lag_search.max_lag if chars.lag_search else 0,
         # About one point per pixel of the page's plots; the JSON stays half the size.
         points=1000,
+        search=chars.lag_search,
     )
 
 
