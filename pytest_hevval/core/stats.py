@@ -438,9 +438,8 @@ SPECTRUM_OVERSAMPLING = 32
 def ar_spectrum(phi: FloatArray, sigma2: float, size: int) -> FloatArray:
     """σ² / |1 − Σ_k φ_k e^(−iωk)|² at ω_m = 2πm / size, m = 0 … size // 2: the spectral density
     (times 2π) of an AR process, whose inverse DFT over ``size`` points is its autocovariances."""
-    omega = 2.0 * np.pi * np.arange(size // 2 + 1) / size
-    lags = np.arange(1, phi.shape[0] + 1)
-    transfer = 1.0 - np.exp(-1j * np.outer(omega, lags)) @ phi
+    # The transfer function 1 − Σ φ_k e^(−iω_m k) at every ω_m is the DFT of the AR polynomial.
+    transfer = sfft.rfft(np.concatenate(([1.0], -phi)), n=size)
     return np.asarray(sigma2 / np.maximum(np.abs(transfer) ** 2, 1e-300), dtype=np.float64)
 
 
