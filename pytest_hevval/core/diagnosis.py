@@ -564,10 +564,11 @@ def diagnose_residual(
     m ≠ 0, the ``lag`` candidate selected (below), a coefficient of the sign of −m and at least
     half a sample.
 
-    *Gain and offset.* On the lag-aligned pair, reference ≈ gain · simulated + offset, fitted by
-    the same pre-whitened HAC regression. Each is *significant* when its p-value is below α/2
-    (Bonferroni over the two), its (1 − α) interval excludes 1 (gain) or 0 (offset), and the
-    effect is material: |gain − 1| > 0.5 %, |offset| > 0.5 % of the reference range.
+    *Gain and offset.* On the lag-aligned pair, reference ≈ gain · simulated + offset, tested by
+    the filtered regression below and sized by least squares (*Sizes*). Each is *significant*
+    when its p-value is below α/2 (Bonferroni over the two), its (1 − α) interval excludes 1
+    (gain) or 0 (offset), and the effect is material: |gain − 1| > 0.5 %, |offset| > 0.5 % of
+    the reference range.
 
     *Forward selection.* Candidates z_j are standardised on the regression grid; constant and
     collinear ones (R² > 1 − 10⁻⁶ on those before them) are dropped with a note. At step k
@@ -585,6 +586,12 @@ def diagnose_residual(
     degrees of freedom
     ν = n (1 − φ̄ρ)/(1 + φ̄ρ) − k, φ̄ = Σφ and ρ the lag-one autocorrelation of the regressor
     (Bretherton et al. 1999), which keeps slowly varying regressors in persistent noise honest.
+
+    *Sizes.* Every printed coefficient and interval is least squares with the exact covariance
+    (XᵀX)⁻¹XᵀΣX(XᵀX)⁻¹ under the AR model of its residual (:func:`.stats.ar_model_fit`), an
+    effect's on the coarsest scale where it passes its test: filtering weighs the fast part of
+    a regressor most, where timing jitter and a logged channel's noise dilute its coefficient.
+    Under the gatekeeping order the first family is sized and credited among itself first.
     """
     dt = _checked_dt(dt)
     _check_settings(alpha, max_selected, max_samples)
