@@ -17,6 +17,9 @@ from pathlib import Path
 import pandas as pd
 
 I3_TRIPS = ("A01", "A02", "A06", "A12", "A32", "B02", "B03", "B16", "B17", "B34")
+# Trips only docs/closing-the-loop.md walks (walks/), in data/i3/walks/: the campaign's
+# `Trip*.parquet` pattern does not reach into that folder.
+I3_WALK_TRIPS = ("B24",)
 
 # The channels the model reads, the channels it is scored against, and the ones the
 # diagnosis candidates use. Everything else (cabin and vent temperatures, heater internals)
@@ -56,10 +59,12 @@ def main() -> None:
     args = parser.parse_args()
     here = Path(__file__).resolve().parent.parent / "data"
 
-    for trip in I3_TRIPS:
+    i3_targets = [(trip, here / "i3") for trip in I3_TRIPS]
+    i3_targets += [(trip, here / "i3" / "walks") for trip in I3_WALK_TRIPS]
+    for trip, folder in i3_targets:
         source = args.i3 / f"Trip{trip}.csv"
         frame = pd.read_csv(source, sep=";", encoding="latin-1")
-        target = here / "i3" / f"Trip{trip}.parquet"
+        target = folder / f"Trip{trip}.parquet"
         write(frame.loc[:, list(I3_COLUMNS)], target)
         print(f"{sha256(source)}  {source.name} -> {target.name} ({target.stat().st_size} B)")
 
