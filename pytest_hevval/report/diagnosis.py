@@ -336,7 +336,9 @@ def _describe_effects(found: Mapping[str, Any]) -> list[str]:
     if relevant:
         lines.append(
             f"  effects (significant, each explaining at least {100 * share:.0f} % of the "
-            "residual), largest first; shares add up to what they explain together:"
+            "residual), in the order tested (loads and suspects, then the signal's own gain, "
+            "offset and lag, then other channels), largest first within each; shares add up "
+            "to what they explain together:"
         )
     for i, e in enumerate(relevant, start=1):
         mean = float(e.get("offset_explained") or 0.0)
