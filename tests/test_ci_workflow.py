@@ -328,3 +328,21 @@ def test_the_workflow_parses_as_github_reads_it() -> None:
     triggers = document[True]
     assert set(triggers) == {"pull_request", "push", "workflow_dispatch"}
     assert document["permissions"] == {"contents": "write", "pull-requests": "write"}
+
+
+def _bash_function(script: str, name: str) -> str:
+    """The body of the bash function ``name`` in ``script``, its lines stripped."""
+    found = re.search(rf"^{name}\(\) {{\n(.*?)\n}}$", script, re.S | re.M)
+    assert found is not None, f"no function {name}() in the script"
+    return "\n".join(line.strip() for line in found.group(1).splitlines() if line.strip())
+
+
+def test_ci_runs_the_readme_test_command_verbatim() -> None:
+    """What a developer runs to test the project is what CI runs (``.ci/run``)."""
+    section = (ROOT / "README.md").read_text(encoding="utf-8").split("## Run the tests", 1)[1]
+    block = re.search(r"```bash\n(.*?)\n```", section, re.S)
+    assert block is not None, "README.md's 'Run the tests' shows no bash block"
+    command = block.group(1).strip()
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    assert _bash_function(ci, "readme_tests") == command
+    assert re.search(r'^step "README test command" readme_tests$', ci, re.M), ci
