@@ -13,8 +13,13 @@ from hypothesis import strategies as st
 
 from pytest_hevval.cli import main
 from pytest_hevval.errors import SpecError
-from pytest_hevval.history.runtime import runtime_changes
-from pytest_hevval.results.runtime import RUNTIME_SLOWDOWN, ModelRuntime, RuntimeGate
+from pytest_hevval.history.runtime import runtime_change_lines, runtime_changes
+from pytest_hevval.results.runtime import (
+    RUNTIME_MIN_GROWTH_S,
+    RUNTIME_SLOWDOWN,
+    ModelRuntime,
+    RuntimeGate,
+)
 from pytest_hevval.spec.load import parse_spec_text
 from tests.strategies import call_times
 from tests.test_plugin import write_data
@@ -187,7 +192,22 @@ def test_the_rule_judges_the_fastest_calls_cpu_and_not_the_wall_clock(
         [_result("a.hevval.yaml", _runtime(before))], [_result("a.hevval.yaml", after)]
     )
     assert change.ratio == pytest.approx(work)
-    assert change.regression == (min(before) * work > RUNTIME_SLOWDOWN * min(before))
+    grown = min(before) * work - min(before)
+    assert change.regression == (
+        min(before) * work > RUNTIME_SLOWDOWN * min(before) and grown >= RUNTIME_MIN_GROWTH_S
+    )
+
+
+def test_a_few_hundredths_of_a_second_more_is_not_a_runtime_regression() -> None:
+    """A 25 ms model timed at 48 ms under load is the machine's noise, said so."""
+    [change] = runtime_changes(
+        [_result("a.hevval.yaml", _runtime([0.025]))],
+        [_result("a.hevval.yaml", _runtime([0.048]))],
+    )
+    assert change.ratio > RUNTIME_SLOWDOWN
+    assert not change.regression
+    (line,) = runtime_change_lines([change], "v1", "v2")
+    assert "within the machine's noise; not a regression" in line
 
 
 @given(call_times)

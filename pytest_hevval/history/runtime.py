@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..defaults import split_key
-from ..results.runtime import RUNTIME_SLOWDOWN, ModelRuntime
+from ..results.runtime import RUNTIME_MIN_GROWTH_S, RUNTIME_SLOWDOWN, ModelRuntime
 
 __all__ = ["RuntimeChange", "runtime_change_lines", "runtime_changes"]
 
@@ -44,7 +44,10 @@ class RuntimeChange:
 
     @property
     def regression(self) -> bool:
-        return self.after_cpu_s > RUNTIME_SLOWDOWN * self.before_cpu_s
+        return (
+            self.after_cpu_s > RUNTIME_SLOWDOWN * self.before_cpu_s
+            and self.after_cpu_s - self.before_cpu_s >= RUNTIME_MIN_GROWTH_S
+        )
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -120,11 +123,15 @@ def runtime_change_lines(changes: Sequence[RuntimeChange], before: str, after: s
     """One line per spec file whose model ran in both runs; regressions say so."""
     lines = []
     for change in changes:
-        what = (
-            f"RUNTIME REGRESSION (more than {RUNTIME_SLOWDOWN:g}× the CPU time)"
-            if change.regression
-            else f"within {RUNTIME_SLOWDOWN:g}× the CPU time"
-        )
+        if change.regression:
+            what = f"RUNTIME REGRESSION (more than {RUNTIME_SLOWDOWN:g}× the CPU time)"
+        elif change.ratio > RUNTIME_SLOWDOWN:
+            what = (
+                f"under {RUNTIME_MIN_GROWTH_S:g} s of CPU more, within the machine's noise; "
+                "not a regression"
+            )
+        else:
+            what = f"within {RUNTIME_SLOWDOWN:g}× the CPU time"
         over = f" over {change.recordings} recordings" if change.recordings > 1 else ""
         lines.append(
             f"model runtime {change.spec} ({before} → {after}){over}: CPU of the fastest calls "

@@ -16,11 +16,15 @@ from typing import Any
 
 from ..defaults import RUNTIME_CLOCKS
 
-__all__ = ["RUNTIME_SLOWDOWN", "ModelRuntime", "RuntimeGate"]
+__all__ = ["RUNTIME_MIN_GROWTH_S", "RUNTIME_SLOWDOWN", "ModelRuntime", "RuntimeGate"]
 
 #: How many times the CPU time of a model's fastest new call must exceed its fastest recorded
 #: one before ``hevval compare`` reports a runtime regression.
 RUNTIME_SLOWDOWN = 1.5
+#: ... and by at least this many seconds of CPU (summed over the recordings): a model whose
+#: calls take a few hundredths of a second is timed at the machine's noise (a 25 ms call came
+#: out 0.94× to 1.91× between three identical runs on a loaded machine).
+RUNTIME_MIN_GROWTH_S = 0.1
 
 
 @dataclass(frozen=True)
