@@ -1602,15 +1602,7 @@ def _effects(
     ]
     if any(family) and not all(family):
         members = [i for i, f in enumerate(family) if f]
-        _, _, own = _fitted_terms(
-            scales,
-            [chosen[i] for i in members],
-            [centres[i] for i in members],
-            [holm_levels[i] for i in members],
-            alpha=alpha,
-            dt=dt,
-            scale=scale,
-        )
+        own = _refitted(members, scales, chosen, centres, holm_levels, alpha, dt, scale)
         for i, t in zip(members, own, strict=True):
             raw[i] = t
     joint, test = sizes[0], fits[0]
@@ -1696,15 +1688,7 @@ def _effects(
     # computes) would otherwise distort it, and the fix a user applies is the finding alone.
     named = [i for i in sorted(findings) if i < len(chosen)]
     if named and len(named) < len(chosen):
-        _, _, refitted = _fitted_terms(
-            scales,
-            [chosen[i] for i in named],
-            [centres[i] for i in named],
-            [holm_levels[i] for i in named],
-            alpha=alpha,
-            dt=dt,
-            scale=scale,
-        )
+        refitted = _refitted(named, scales, chosen, centres, holm_levels, alpha, dt, scale)
         for i, t in zip(named, refitted, strict=True):
             raw[i] = t._replace(significant=raw[i].significant)
     fixes = [_own_fix(r, t, refit=i in named) for i, t in enumerate(raw)]
@@ -1761,6 +1745,29 @@ def _effects(
 
     effects.sort(key=lambda e: (not e.relevant, not e.significant, tier(e), -e.share))
     return tuple(effects), _lambdas(ref, sim, reference_range), predicted, where
+
+
+def _refitted(
+    subset: Sequence[int],
+    scales: Sequence[_Scale],
+    chosen: Sequence[_Series],
+    centres: Sequence[float],
+    holm_levels: Sequence[float],
+    alpha: float,
+    dt: float,
+    scale: float,
+) -> list[_Term]:
+    """The terms of ``subset`` (positions in ``chosen``) fitted among themselves only."""
+    _, _, terms = _fitted_terms(
+        scales,
+        [chosen[i] for i in subset],
+        [centres[i] for i in subset],
+        [holm_levels[i] for i in subset],
+        alpha=alpha,
+        dt=dt,
+        scale=scale,
+    )
+    return terms
 
 
 def _ordered_shares(together: FloatArray, first: Sequence[bool], total: float) -> FloatArray:

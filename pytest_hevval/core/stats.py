@@ -385,6 +385,28 @@ def residualise(v: FloatArray, x: FloatArray) -> FloatArray:
     return np.asarray(v - np.einsum("ti,i...->t...", x, coef), dtype=np.float64)
 
 
+def _base_projected(
+    y: FloatArray, base: FloatArray, z_rows: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """y and every candidate row with the base design projected out, and the rows' sums of
+    squares (Frisch–Waugh–Lovell)."""
+    q0 = orthonormal(base)
+    y_perp = project_out(y[None, :], q0)[0]
+    z_perp = project_out(z_rows, q0)
+    return y_perp, z_perp, np.einsum("ji,ji->j", z_perp, z_perp)
+
+
+def _screened(beta: FloatArray, se: FloatArray, df: npt.NDArray[np.int64]) -> Screen:
+    """Two-sided Student-t p-values; a candidate without a standard error gets p = 1."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.abs(beta) / se
+    from scipy import stats  # over a second to import; scoring never needs it
+
+    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
+    p = np.where(np.isfinite(se), p, 1.0)
+    return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+
+
 def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> Screen:
     """Test every row of z_rows (one candidate each), one at a time, added to the base design.
 
@@ -395,10 +417,7 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
     """
     m, n = z_rows.shape
     k = base.shape[1] + 1
-    q0 = orthonormal(base)
-    y_perp = project_out(y[None, :], q0)[0]
-    z_perp = project_out(z_rows, q0)
-    zz0 = np.einsum("ji,ji->j", z_perp, z_perp)
+    y_perp, z_perp, zz0 = _base_projected(y, base, z_rows)
     with np.errstate(invalid="ignore", divide="ignore"):
         b0 = np.where(zz0 > 0, np.einsum("jt,t->j", z_perp, y_perp) / zz0, 0.0)
     beta = np.zeros(m)
@@ -420,13 +439,7 @@ def screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: int) -> S
         lrv = float(long_run_sums((z_t * e)[:, None])[0])
         se[j] = math.sqrt(lrv * nw / max(nw - k, 1)) / zz
         df[j] = int(effective_df(n, k, phi, rho[j : j + 1])[0])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.abs(beta) / se
-    from scipy import stats  # over a second to import; scoring never needs it
-
-    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
-    p = np.where(np.isfinite(se), p, 1.0)
-    return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+    return _screened(beta, se, df)
 
 
 #: The FFT length of :func:`ar_model_fit` is at least this many times the record: the
@@ -562,10 +575,7 @@ def ar_model_screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: 
     AR model of that fit's residual."""
     m, n = z_rows.shape
     k = base.shape[1] + 1
-    q0 = orthonormal(base)
-    y_perp = project_out(y[None, :], q0)[0]
-    z_perp = project_out(z_rows, q0)
-    zz = np.einsum("ji,ji->j", z_perp, z_perp)
+    y_perp, z_perp, zz = _base_projected(y, base, z_rows)
     beta = np.zeros(m)
     se = np.full(m, np.inf)
     df = np.ones(m, dtype=np.int64)
@@ -581,13 +591,7 @@ def ar_model_screen(y: FloatArray, base: FloatArray, z_rows: FloatArray, order: 
         se[j] = math.sqrt(max(variance, 0.0))
         white = _variance_of(spectrum, size) / zz[j]
         df[j] = int(_equivalent_df(n, k, np.array([white]), np.array([variance]))[0])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.abs(beta) / se
-    from scipy import stats  # over a second to import; scoring never needs it
-
-    p = 2.0 * stats.t.sf(np.nan_to_num(t, nan=0.0, posinf=np.inf), df)
-    p = np.where(np.isfinite(se), p, 1.0)
-    return Screen(beta=beta, se=se, p=np.asarray(p, dtype=np.float64), df=df)
+    return _screened(beta, se, df)
 
 
 def effective_samples(u: FloatArray, order: int) -> float:
