@@ -432,6 +432,10 @@ class _Series:
     members: tuple[str, ...] = ()
 
 
+def _excludes_zero(interval: tuple[float, float]) -> bool:
+    return not interval[0] <= 0.0 <= interval[1]
+
+
 def _interval(beta: float, se: float, df: int, alpha: float) -> tuple[float, float]:
     from scipy import stats  # over a second to import; scoring never needs it
 
@@ -863,14 +867,13 @@ def _gain_and_offset(
         else np.ones((sim_g.shape[0], 1))
     )
     response = ref_g if sim_varies else ref_g - sim_g
-    # Tested on the filtered regression, sized by least squares (see _fitted_terms).
-    test = hac_fit(response, design, order)
-    test_se = np.sqrt(np.maximum(np.diag(test.cov), 0.0))
+    # The simulated signal is no candidate that could match the residual by chance: tested
+    # and sized by the same least-squares fit (see _fitted_terms for why not the filtered one).
     head = ar_model_fit(response, design, order)
     head_se = np.sqrt(np.maximum(np.diag(head.cov), 0.0))
     offset = float(head.beta[0])
     offset_interval = _interval(offset, float(head_se[0]), int(head.df[0]), alpha)
-    offset_p = _p_value(float(test.beta[0]), float(test_se[0]), int(test.df[0]))
+    offset_p = _p_value(offset, float(head_se[0]), int(head.df[0]))
     # Gain and offset are two tests of one question ("is the simulated signal itself off?"):
     # Bonferroni over the pair keeps the chance of a false headline at most alpha.
     headline_level = alpha / 2.0
@@ -887,7 +890,7 @@ def _gain_and_offset(
     gain_se = float(head_se[1])
     gain_interval = _interval(gain, gain_se, int(head.df[1]), alpha)
     gain_significant = (
-        _p_value(float(test.beta[1]) - 1.0, float(test_se[1]), int(test.df[1])) <= headline_level
+        _p_value(gain - 1.0, gain_se, int(head.df[1])) <= headline_level
         and not (gain_interval[0] <= 1.0 <= gain_interval[1])
         and abs(gain - 1.0) > GAIN_MATERIALITY
     )
@@ -1187,6 +1190,7 @@ def _joint_model(
         coef = b_std / s.std
         df = int(joint.df[pos + 1])
         p = _p_value(float(test.beta[pos + 1]), float(test_se[pos + 1]), int(test.df[pos + 1]))
+        interval = _interval(coef, se_std / s.std, df, alpha)
         remaining_full -= coef * (s.full - s.mean)
         remaining_grid -= coef * (s.grid - s.mean)
         findings.append(
@@ -1196,9 +1200,9 @@ def _joint_model(
                 explained_fraction=_full_rate_r2(r, [s.full]),
                 joint_explained_fraction=joint_r2_full[pos],
                 coefficient=coef * s.unit,
-                interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
+                interval=_scaled(interval, s.unit),
                 p_value=p,
-                significant=p <= holm_levels[pos],
+                significant=p <= holm_levels[pos] and _excludes_zero(interval),
                 selected=True,
                 rank=0,
             )
@@ -1225,6 +1229,7 @@ def _alone_findings(
             continue
         coef = float(sizes.beta[j]) / s.std
         p = float(alone.p[j])
+        interval = _interval(coef, float(sizes.se[j]) / s.std, int(sizes.df[j]), alpha)
         findings.append(
             CandidateFinding(
                 name=s.name,
@@ -1232,11 +1237,10 @@ def _alone_findings(
                 explained_fraction=_full_rate_r2(r, [s.full]),
                 joint_explained_fraction=None,
                 coefficient=coef * s.unit,
-                interval=_scaled(
-                    _interval(coef, float(sizes.se[j]) / s.std, int(sizes.df[j]), alpha), s.unit
-                ),
+                interval=_scaled(interval, s.unit),
                 p_value=p,
-                significant=p <= alpha * float(weights[j]) / float(np.sum(weights)),
+                significant=p <= alpha * float(weights[j]) / float(np.sum(weights))
+                and _excludes_zero(interval),
                 selected=False,
                 rank=0,
             )
@@ -1877,12 +1881,18 @@ def _fitted_terms(
             _p_value(float(fit.beta[pos]), float(se[pos]), int(fit.df[pos]))
             for fit, se in zip(fits, errors, strict=True)
         ]
-        at = int(np.argmin(tests))
-        # Sized on the coarsest scale where the effect is still shown: block means average
-        # out what a measured channel's own noise and the timing jitter between model and
-        # measurement add at the fine scale, which would dilute the coefficient toward zero.
-        shown = [i for i, p in enumerate(tests) if p * len(scales) <= holm_levels[pos - 1]]
-        at = max(shown) if shown else at
+        # Sized on the coarsest scale where the effect is still shown (its test passes and
+        # its interval excludes zero): block means average out what a measured channel's own
+        # noise and the timing jitter between model and measurement add at the fine scale,
+        # which would dilute the coefficient toward zero. An effect is significant only where
+        # both say so, so that no significant effect is printed with an interval holding 0.
+        intervals = [
+            _interval(float(f.beta[pos]), float(e[pos]), int(f.df[pos]), alpha)
+            for f, e in zip(sizes, size_errors, strict=True)
+        ]
+        passing = [i for i, p in enumerate(tests) if p * len(scales) <= holm_levels[pos - 1]]
+        shown = [i for i in passing if _excludes_zero(intervals[i])]
+        at = max(shown) if shown else max(passing) if passing else int(np.argmin(tests))
         fit, se = sizes[at], size_errors[at]
         b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
         coef = b_std / s.std
@@ -1894,7 +1904,7 @@ def _fitted_terms(
                 coefficient=coef * s.unit,
                 interval=_scaled(_interval(coef, se_std / s.std, df, alpha), s.unit),
                 p_value=p,
-                significant=p <= holm_levels[pos - 1],
+                significant=bool(shown),
                 term=coef * (s.full - centre),
                 mean_shift=coef * (float(np.mean(s.full)) - centre) / scale,
                 time_scale_s=scales[at].factor * dt,
