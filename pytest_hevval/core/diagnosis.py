@@ -1892,7 +1892,18 @@ def _fitted_terms(
         ]
         passing = [i for i, p in enumerate(tests) if p * len(scales) <= holm_levels[pos - 1]]
         shown = [i for i in passing if _excludes_zero(intervals[i])]
-        at = max(shown) if shown else max(passing) if passing else int(np.argmin(tests))
+        # A delay acts within a second: on 10 s means the slope of the simulated signal is
+        # matched by slow errors as much as by the delay. It is sized on the regression grid.
+        fast = [i for i in shown if i == 0] if s.kind == "lag" else []
+        at = (
+            min(fast)
+            if fast
+            else max(shown)
+            if shown
+            else max(passing)
+            if passing
+            else int(np.argmin(tests))
+        )
         fit, se = sizes[at], size_errors[at]
         b_std, se_std, df = float(fit.beta[pos]), float(se[pos]), int(fit.df[pos])
         coef = b_std / s.std
