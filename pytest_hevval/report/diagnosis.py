@@ -96,6 +96,10 @@ def summary(found: SignalDiagnosis | Diagnosis) -> str:
         lag_at_bound=found.lag_at_bound,
         timing_significant=found.timing_significant,
         remaining=found.remaining,
+        headline=[
+            *(["gain"] if found.gain_significant else []),
+            *(["offset"] if found.offset_significant else []),
+        ],
     )
 
 
@@ -149,6 +153,7 @@ def _summary(
     lag_at_bound: bool,
     timing_significant: bool,
     remaining: Any,
+    headline: Sequence[str] = (),
 ) -> str:
     parts = [_effect_phrase(e) for e in effects if e.relevant]
     if timing_significant and not any(e.relevant and e.kind == "lag" for e in effects):
@@ -161,6 +166,13 @@ def _summary(
         text = "no significant effect found: the residual is indistinguishable from noise"
         if minor or stand_ins:
             text = "no relevant effect found"
+        elif headline:
+            # The simulated signal itself is off (its own fit says so), but no candidate,
+            # gain term included, explains enough of the residual to be named.
+            text = (
+                "no significant effect found among the candidates, though the headline fit "
+                f"finds the simulated signal's {' and '.join(headline)} off"
+            )
         elif not remaining.white:
             text += " (autocorrelated noise; an effect outside the candidates is not excluded)"
         parts.append(text)
