@@ -10,7 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pytest_hevval.core.importance import MAX_TERMS, explained_sums, shapley_shares
+from pytest_hevval.core.importance import (
+    MAX_TERMS,
+    explained_sums,
+    shapley_from_sums,
+    shapley_shares,
+)
 
 from .strategies import regression_terms
 
@@ -107,3 +112,27 @@ def test_too_many_terms_or_a_bad_gram_are_refused() -> None:
     with pytest.raises(ValueError, match="2 × 2"):
         explained_sums(np.eye(3), np.ones(2))
     assert shapley_shares(np.eye(2), np.ones(2), 0.0).tolist() == [0.0, 0.0]
+
+
+def test_shares_in_the_gatekeeping_order_credit_the_first_family_first() -> None:
+    """The first family shares what it explains together; the others share what they add to
+    it; with every term in one family, the plain Shapley shares."""
+    from pytest_hevval.core.diagnosis import _ordered_shares
+
+    rng = np.random.default_rng(7)
+    n = 400
+    x = rng.standard_normal((n, 4))
+    x[:, 3] = 0.9 * x[:, 0] + 0.1 * rng.standard_normal(n)  # a follower of term 0
+    y = x[:, 0] + 0.5 * x[:, 1] + rng.standard_normal(n)
+    gram, cross, total = x.T @ x, x.T @ y, float(y @ y)
+    together = explained_sums(gram, cross)
+    first = [True, True, False, False]
+    shares = _ordered_shares(together, first, total)
+    assert shares[:2].sum() == pytest.approx(together[0b0011] / total)
+    assert shares[2:].sum() == pytest.approx((together[0b1111] - together[0b0011]) / total)
+    assert np.all(shares >= 0.0)
+    # The follower gets only what it adds to term 0, far less than its plain Shapley share.
+    plain = shapley_from_sums(together, total)
+    assert shares[3] < 0.5 * plain[3]
+    np.testing.assert_allclose(_ordered_shares(together, [True] * 4, total), plain)
+    np.testing.assert_allclose(_ordered_shares(together, [False] * 4, total), plain)
