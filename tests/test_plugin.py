@@ -440,13 +440,15 @@ def test_reports_and_history_under_xdist_hold_what_a_serial_run_writes(
 
     On one kernel path: the auto path may take the compiled kernel in one process and numpy
     in another (this test process has loaded the kernel already), and the two agree only to
-    the last bits."""
+    the last bits. Both runs compute in fresh processes: run inline, the serial run inherits
+    whatever an earlier test left in this process (the BLAS thread pool among it), and the
+    diagnosis's least-squares sums then differ from the workers' in the ninth digit."""
     monkeypatch.setenv("HEVVAL_KERNEL", "numpy")
     write_data(project.path, fault="leaf")
     written: dict[str, tuple[Any, Any]] = {}
     for name, extra in (("serial", []), ("xdist", ["-p", "xdist", "-n", "2"])):
         history = project.path / f"history-{name}"
-        project.runpytest(
+        project.runpytest_subprocess(
             "--hevval",
             *extra,
             "--hevval-report=json",

@@ -111,7 +111,9 @@ def test_runtime_is_measured_reported_recorded_and_gated(timed: pytest.Pytester)
     runtime = json.loads((report / "report.json").read_text())["specs"][0]["runtime"]
     assert len(runtime["wall_s"]) == 2
     assert min(runtime["cpu_s"]) >= 0.2
-    assert min(runtime["wall_s"]) >= min(runtime["cpu_s"])
+    # The model computes for 0.2 s on one thread, so its wall time holds at least that; the
+    # process's CPU time can exceed the wall clock by what other threads (BLAS) add meanwhile.
+    assert min(runtime["wall_s"]) >= 0.2
     assert runtime["simulated_s"] == pytest.approx(119.9)
     assert runtime["passed"] is False
     assert "real-time factor" in (report / "report.md").read_text()
