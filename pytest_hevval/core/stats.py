@@ -460,11 +460,7 @@ def _quadratic_forms(columns: FloatArray, spectrum: FloatArray, size: int) -> Fl
     """Xᵀ Σ X for the columns of X (samples × k), Σ_ts = γ(t − s) given by its spectrum on
     ``size`` ≥ 2n points: (1/size) Σ_m f_m X̂_m^H X̂_m, a one-sided sum of the real DFT."""
     transformed = sfft.rfft(columns, n=size, axis=0)
-    weights = np.full(spectrum.shape[0], 2.0)
-    weights[0] = 1.0
-    if size % 2 == 0:
-        weights[-1] = 1.0
-    weighted = transformed * (weights * spectrum)[:, None]
+    weighted = transformed * _two_sided(spectrum, size)[:, None]
     return np.asarray(np.real(transformed.conj().T @ weighted) / size, dtype=np.float64)
 
 
@@ -496,17 +492,27 @@ def residual_spectrum(u: FloatArray, phi: FloatArray, k: int, size: int) -> Floa
     lowest = min(LOW_FREQUENCIES, (n - 1) // 2)
     if lowest <= 0:
         return spectrum
-    periodogram = np.abs(np.fft.rfft(u - float(np.mean(u)))[1 : lowest + 1]) ** 2 / n
     at = np.rint(np.arange(1, lowest + 1) * size / n).astype(np.int64)
-    model = spectrum[at]
+    floor = _drift_level(u - float(np.mean(u)), spectrum[at])
+    if floor is not None:
+        top = int(at[-1])
+        spectrum[: top + 1] = np.maximum(spectrum[: top + 1], floor)
+    return spectrum
+
+
+def _drift_level(centred: FloatArray, model: FloatArray) -> float | None:
+    """The mean periodogram of ``centred`` at its lowest Fourier frequencies ω_j = 2πj/n,
+    j = 1 … len(model), when it rejects ``model`` (the AR spectrum there) at
+    :data:`LOW_FREQUENCY_LEVEL` (Σ 2 I_j / f(ω_j) is χ² with 2J degrees of freedom under the
+    model); None when the model holds."""
+    n, lowest = centred.shape[0], model.shape[0]
+    periodogram = np.abs(np.fft.rfft(centred)[1 : lowest + 1]) ** 2 / n
     from scipy import stats  # over a second to import; scoring never needs it
 
     limit = float(stats.chi2.ppf(1.0 - LOW_FREQUENCY_LEVEL, 2 * lowest))
     if float(np.sum(2.0 * periodogram / np.maximum(model, 1e-300))) > limit:
-        floor = float(np.mean(periodogram))
-        top = int(at[-1])
-        spectrum[: top + 1] = np.maximum(spectrum[: top + 1], floor)
-    return spectrum
+        return float(np.mean(periodogram))
+    return None
 
 
 def _innovations(u: FloatArray, phi: FloatArray, k: int) -> float:
@@ -551,11 +557,17 @@ def ar_model_fit(y: FloatArray, x: FloatArray, order: int) -> HacFit:
 
 def _variance_of(spectrum: FloatArray, size: int) -> float:
     """γ(0) of the process whose spectrum on ``size`` points is given."""
+    return float(np.sum(_two_sided(spectrum, size))) / size
+
+
+def _two_sided(spectrum: FloatArray, size: int) -> FloatArray:
+    """A real signal's one-sided spectrum (m = 0 … size // 2) weighted so that its sum is the
+    sum over all ``size`` frequencies: every bin twice but zero and, for an even size, Nyquist."""
     weights = np.full(spectrum.shape[0], 2.0)
     weights[0] = 1.0
     if size % 2 == 0:
         weights[-1] = 1.0
-    return float(np.sum(weights * spectrum)) / size
+    return np.asarray(weights * spectrum, dtype=np.float64)
 
 
 def _equivalent_df(n: int, k: int, white: FloatArray, actual: FloatArray) -> npt.NDArray[np.int64]:
@@ -626,12 +638,9 @@ def effective_samples(u: FloatArray, order: int) -> float:
     model = sigma2 / np.maximum(np.abs(transfer) ** 2, 1e-300)
     long_run = sigma2 / max((1.0 - float(np.sum(phi))) ** 2, 1e-300)
     if lowest > 0 and sigma2 > 0.0:
-        periodogram = np.abs(np.fft.rfft(centred)[1 : lowest + 1]) ** 2 / n
-        from scipy import stats  # over a second to import; scoring never needs it
-
-        limit = float(stats.chi2.ppf(1.0 - LOW_FREQUENCY_LEVEL, 2 * lowest))
-        if float(np.sum(2.0 * periodogram / model)) > limit:
-            long_run = max(long_run, float(np.mean(periodogram)))
+        drift = _drift_level(centred, model)
+        if drift is not None:
+            long_run = max(long_run, drift)
     if long_run <= 0.0:
         return float(n)
     return float(min(max(n * gamma0 / long_run, 1.0), n))
