@@ -170,6 +170,7 @@ def _headline(job: Job) -> str:
     return lines[0]
 
 
+@pytest.mark.deployment
 def test_the_workflow_gates_pull_requests_against_mains_accepted_history(tmp_path: Path) -> None:
     hub = _GitHub(tmp_path)
     # Main's model starts with a battery 2 % larger than the fitted one.
