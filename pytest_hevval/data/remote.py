@@ -1,7 +1,7 @@
 """Data that lives elsewhere: fsspec URLs such as ``s3://``, ``gs://``, ``abfs://``, ``https://``.
 
 A spec's ``reference.path`` or ``model.path`` containing ``://`` is kept as written (see
-:mod:`pytest_hevval.spec.load`) and read here, on the machine that evaluates the spec, so a Dask
+:mod:`pytest_hevval.spec.sources`) and read here, on the machine that evaluates the spec, so a Dask
 worker next to the data reads it directly instead of receiving it through the client.
 
 Two ways of reading, chosen per format:
