@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from pytest_hevval.core import kernel
+from pytest_hevval.data import kernel_cache
 from pytest_hevval.data.align import align_records
 from pytest_hevval.data.record import Channel, Record
 
@@ -129,7 +130,7 @@ def _engine(signals: int, repeat: int) -> int:
             )
     print(
         f"{signals} signals × 1 h, model columns on and off the grid, {repeat} fresh processes "
-        f"each; load average {os.getloadavg()[0]:.1f}; {kernel.describe()}"
+        f"each; load average {os.getloadavg()[0]:.1f}; {kernel_cache.describe()}"
     )
     for key in ("wall", "cpu", "peak_mb"):
         on = [r[key] for r in runs["on the grid"]]
@@ -236,7 +237,7 @@ def main() -> int:
 
     print(
         f"{args.columns} columns × {n:,} samples sharing one time array; best and median of "
-        f"{args.repeat}; load average {os.getloadavg()[0]:.1f}; {kernel.describe()}"
+        f"{args.repeat}; load average {os.getloadavg()[0]:.1f}; {kernel_cache.describe()}"
     )
     floor = min(times["on the grid, used as logged"])
     for way, seconds in times.items():

@@ -275,7 +275,8 @@ def main() -> None:
         return
     singles, campaign = prepare(args.recordings)
     sys.path.insert(0, str(ROOT))
-    from pytest_hevval.core.kernel import KERNEL_ENV, describe
+    from pytest_hevval.core.kernel import KERNEL_ENV
+    from pytest_hevval.data.kernel_cache import describe
 
     print(
         f"{args.recordings} recordings of {SECONDS / 60:g} min at {RATE_HZ:g} Hz, "

@@ -64,7 +64,7 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 def _run(args: argparse.Namespace) -> int:
     from . import __version__
-    from .core.kernel import compile_note, finish_run
+    from .data.kernel_cache import compile_note, finish_run
     from .data.remote import relative_to
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
@@ -643,7 +643,7 @@ def _recorded_run(command: argparse.ArgumentParser, default_help: str) -> None:
 
 
 def _kernel(args: argparse.Namespace) -> int:
-    from .core import kernel
+    from .data import kernel_cache as kernel
 
     if args.compile:
         for name, seconds in kernel.compile_all().items():
@@ -671,7 +671,7 @@ class _VersionAction(argparse.Action):
         self.version = version
 
     def __call__(self, parser: argparse.ArgumentParser, *args: Any, **kwargs: Any) -> None:
-        from .core.kernel import describe
+        from .data.kernel_cache import describe
 
         try:
             path = describe()

@@ -18,7 +18,7 @@ import os
 import pytest
 from hypothesis import settings
 
-from pytest_hevval.core import kernel
+from pytest_hevval.data import kernel_cache
 from pytest_hevval.history.compare import CI_VARIABLES, is_ci
 from pytest_hevval.plugin import session
 from pytest_hevval.scoring import engine
@@ -57,7 +57,7 @@ with contextlib.suppress(ImportError):
 # A run with numba's cache cold compiles the kernel in a background process and says so in its
 # summary; tests of that set this back (tests/test_kernel.py), the others must not depend on
 # whether an earlier test warmed the cache.
-os.environ[kernel.BACKGROUND_COMPILE_ENV] = "0"
+os.environ[kernel_cache.BACKGROUND_COMPILE_ENV] = "0"
 # The compiled kernel (the fast extra) loads numba on first use; an inline run would unload it
 # and the next would pay its import again.
 with contextlib.suppress(Exception):
@@ -76,7 +76,7 @@ def _kernel_unavailable() -> str | None:
     if importlib.util.find_spec("numba") is None:
         return 'numba is not installed (the "fast" extra)'
     if kernel._load() is None:
-        return f"numba cannot be loaded: {kernel.describe()}"
+        return f"numba cannot be loaded: {kernel_cache.describe()}"
     return None
 
 

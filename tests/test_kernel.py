@@ -20,6 +20,7 @@ from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
 from pytest_hevval.core.local import LOCAL_CHARACTERISTICS, Grouping, labelled_table
+from pytest_hevval.data import kernel_cache
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
 from tests.conftest import _kernel_unavailable, needs_kernel
 from tests.strategies import signal_pairs
@@ -254,7 +255,7 @@ def test_each_compiled_function_has_one_signature_for_writable_and_read_only_inp
     """A record read from Parquet is read-only, one computed in memory is not: both reach the
     kernel read-only, so a warm cache never compiles again mid-run."""
     module = kernel.load_or_raise()
-    kernel.compile_all()  # writable inputs
+    kernel_cache.compile_all()  # writable inputs
     x = np.sin(np.linspace(0.0, 6.0, 512))
     y = np.cos(np.linspace(0.0, 6.0, 512))
     for a in (x, y):
@@ -362,13 +363,13 @@ def fresh_choice(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> list[list[s
             started.append(command)
 
     monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
-    monkeypatch.delenv(kernel.BACKGROUND_COMPILE_ENV)
+    monkeypatch.delenv(kernel_cache.BACKGROUND_COMPILE_ENV)
     monkeypatch.setattr(kernel, "_would_save", [0.0])
-    monkeypatch.setattr(kernel, "_background", {})
+    monkeypatch.setattr(kernel_cache, "_background", {})
     monkeypatch.setattr(kernel, "_loaded", {})
     monkeypatch.setattr(kernel, "_numba_installed", lambda: True)
     monkeypatch.setattr(kernel, "cache_folder", lambda: tmp_path / "cache")
-    monkeypatch.setattr(kernel, "_launch", Process)
+    monkeypatch.setattr(kernel_cache, "_launch", Process)
     return started
 
 
@@ -416,23 +417,23 @@ def test_a_cold_cache_is_compiled_in_the_background_when_the_run_ends(
     its cores) and starts one compile as it ends, for the next runs."""
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
     cells = int(kernel.KERNEL_LOAD_S / kernel.NUMPY_EXTRA_S["dtw_path"]) + 1
-    assert kernel.compile_note() is None
+    assert kernel_cache.compile_note() is None
     assert kernel.kernel_for(cells, ("dtw_path",)) is None
     assert kernel.kernel_for(cells, ("dtw_path",)) is None
     assert fresh_choice == []
-    kernel.finish_run()
-    kernel.finish_run()
+    kernel_cache.finish_run()
+    kernel_cache.finish_run()
     assert len(fresh_choice) == 1
     command = fresh_choice[0]
     marker = tmp_path / "cache" / ".hevval-compiling"
     assert command[0] == sys.executable
     assert command[3] == str(marker)
     assert command[4:] == [
-        *kernel.FIRST_COMPILED,
-        *(n for n in kernel.COMPILED if n not in kernel.FIRST_COMPILED),
+        *kernel_cache.FIRST_COMPILED,
+        *(n for n in kernel.COMPILED if n not in kernel_cache.FIRST_COMPILED),
     ]
     assert marker.is_file()
-    assert "compiled in the background" in (kernel.compile_note() or "")
+    assert "compiled in the background" in (kernel_cache.compile_note() or "")
 
 
 def test_a_process_that_lost_more_than_a_compile_to_numpy_compiles_at_once(
@@ -455,11 +456,13 @@ def test_a_spec_long_enough_to_pay_alone_starts_the_compile_before_it_is_scored(
 ) -> None:
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
     paying = math.ceil(kernel.KERNEL_LOAD_S / kernel.NUMPY_EXTRA_S["main_pass"])
-    kernel.expect(paying - 1)
+    kernel_cache.expect(paying - 1)
     assert fresh_choice == []
-    kernel.expect(paying)
+    kernel_cache.expect(paying)
     assert len(fresh_choice) == 1
-    assert fresh_choice[0][4 : 4 + len(kernel.FIRST_COMPILED)] == list(kernel.FIRST_COMPILED)
+    assert fresh_choice[0][4 : 4 + len(kernel_cache.FIRST_COMPILED)] == list(
+        kernel_cache.FIRST_COMPILED
+    )
 
 
 def test_the_engine_announces_each_spec_as_its_signals_times_its_samples(
@@ -469,7 +472,7 @@ def test_the_engine_announces_each_spec_as_its_signals_times_its_samples(
     from pytest_hevval.spec.load import load_specs
 
     announced: list[int] = []
-    monkeypatch.setattr(kernel, "expect", announced.append)
+    monkeypatch.setattr(kernel_cache, "expect", announced.append)
     t = np.arange(1000) * 0.1
     pd.DataFrame({"t": t, "a": np.sin(t), "b": np.cos(t)}).to_csv(tmp_path / "ref.csv", index=False)
     pd.DataFrame({"t": t, "a": np.sin(t), "b": np.cos(t)}).to_csv(tmp_path / "sim.csv", index=False)
@@ -489,14 +492,14 @@ def test_the_note_names_a_compile_another_process_of_the_run_started(
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
     marker = tmp_path / "cache" / ".hevval-compiling"
     marker.parent.mkdir()
-    assert kernel.compile_note() is None
+    assert kernel_cache.compile_note() is None
     marker.touch()
-    assert "compiled in the background" in (kernel.compile_note() or "")
+    assert "compiled in the background" in (kernel_cache.compile_note() or "")
     monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
-    assert kernel.compile_note() is None  # a run told to stay on numpy is not told of it
+    assert kernel_cache.compile_note() is None  # a run told to stay on numpy is not told of it
     monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): True)
-    assert kernel.compile_note() is None  # it ended: nothing to say
+    assert kernel_cache.compile_note() is None  # it ended: nothing to say
 
 
 def test_a_compile_under_way_elsewhere_is_not_started_again(
@@ -505,11 +508,11 @@ def test_a_compile_under_way_elsewhere_is_not_started_again(
     marker = tmp_path / "cache" / ".hevval-compiling"
     marker.parent.mkdir()
     marker.touch()
-    assert kernel.start_background_compile() is False
-    monkeypatch.setattr(kernel, "_background", {})
-    old = time.time() - kernel.COMPILE_LOCK_S - 1
+    assert kernel_cache.start_background_compile() is False
+    monkeypatch.setattr(kernel_cache, "_background", {})
+    old = time.time() - kernel_cache.COMPILE_LOCK_S - 1
     os.utime(marker, (old, old))  # its process died long ago
-    assert kernel.start_background_compile() is True
+    assert kernel_cache.start_background_compile() is True
     assert len(fresh_choice) == 1
 
 
@@ -518,22 +521,22 @@ def test_a_run_ends_by_compiling_only_what_it_would_have_used(
     monkeypatch: pytest.MonkeyPatch, fresh_choice: list[list[str]]
 ) -> None:
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): False)
-    kernel.finish_run()
+    kernel_cache.finish_run()
     assert fresh_choice == []  # a short run, which a warm kernel would not serve either
     monkeypatch.setattr(kernel, "_would_save", [kernel.KERNEL_LOAD_S])
-    monkeypatch.setenv(kernel.BACKGROUND_COMPILE_ENV, "0")
-    kernel.finish_run()
+    monkeypatch.setenv(kernel_cache.BACKGROUND_COMPILE_ENV, "0")
+    kernel_cache.finish_run()
     assert fresh_choice == []
-    monkeypatch.delenv(kernel.BACKGROUND_COMPILE_ENV)
+    monkeypatch.delenv(kernel_cache.BACKGROUND_COMPILE_ENV)
     monkeypatch.setenv(kernel.KERNEL_ENV, "numpy")
-    kernel.finish_run()
+    kernel_cache.finish_run()
     assert fresh_choice == []
     monkeypatch.setenv(kernel.KERNEL_ENV, "auto")
-    kernel.finish_run()
+    kernel_cache.finish_run()
     assert len(fresh_choice) == 1
-    monkeypatch.setattr(kernel, "_background", {})
+    monkeypatch.setattr(kernel_cache, "_background", {})
     monkeypatch.setattr(kernel, "cache_warm", lambda names=(): True)
-    kernel.finish_run()
+    kernel_cache.finish_run()
     assert len(fresh_choice) == 1
 
 
@@ -541,13 +544,13 @@ def test_background_compile_fills_the_cache_and_clears_its_marker(tmp_path: Path
     """The real child process: after it, a fresh process finds every function cached."""
     python_path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
     env = {**os.environ, "PYTHONPATH": python_path, "NUMBA_CACHE_DIR": str(tmp_path / "nc")}
-    env.pop(kernel.BACKGROUND_COMPILE_ENV)
+    env.pop(kernel_cache.BACKGROUND_COMPILE_ENV)
     script = (
-        "from pytest_hevval.core import kernel\n"
-        "assert kernel.start_background_compile(('dtw_path',))\n"
-        "assert kernel._background['process'].wait(timeout=280) == 0\n"
-        "assert not (kernel.cache_folder() / '.hevval-compiling').exists()\n"
-        "print(all(kernel.cached_functions().values()))\n"
+        "from pytest_hevval.data import kernel_cache\n"
+        "assert kernel_cache.start_background_compile(('dtw_path',))\n"
+        "assert kernel_cache._background['process'].wait(timeout=280) == 0\n"
+        "assert not (kernel_cache.cache_folder() / '.hevval-compiling').exists()\n"
+        "print(all(kernel_cache.cached_functions().values()))\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300
@@ -635,3 +638,27 @@ def test_compiled_group_sums_count_sign_agreement_with_ties_as_numpy_does() -> N
         fast = labelled_table(ref, sim, labels, 5, compiled=True).values
         plain = labelled_table(ref, sim, labels, 5, compiled=False).values
         np.testing.assert_array_equal(fast[:, 9], plain[:, 9])
+
+
+def test_the_core_writes_no_file_and_starts_no_process() -> None:
+    """Filling numba's cache, its lock file and the background compile live in
+    ``data/kernel_cache.py``; the core only chooses a path and dispatches. (Importing
+    ``subprocess``, ``tempfile`` or ``shutil`` is forbidden to it by pyproject.toml's import
+    contract; this looks for the calls that write without them.)"""
+    import re
+
+    writes = re.compile(
+        r"\bopen\(|\.write_text\(|\.write_bytes\(|\.mkdir\(|\.unlink\(|\.touch\(|\.rename\("
+        r"|\.replace\(\s*Path|os\.(?:remove|rename|replace|makedirs|mkdir|system|spawn\w*|fork)\b"
+        r"|Popen|np\.save|\.tofile\(|\bprint\("
+    )
+    found = [
+        f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
+        for path in sorted((ROOT / "pytest_hevval" / "core").rglob("*.py"))
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if writes.search(line) and not line.lstrip().startswith("#")
+    ]
+    assert found == []
+    # The check finds what it looks for: the lifecycle's own source writes.
+    lifecycle = (ROOT / "pytest_hevval" / "data" / "kernel_cache.py").read_text(encoding="utf-8")
+    assert writes.search(lifecycle)

@@ -178,12 +178,12 @@ def test_a_table_cannot_be_changed_by_its_reader(tmp_path: Path) -> None:
 
 
 def test_building_the_tables_leaves_the_callers_sums_writable() -> None:
-    from pytest_hevval.core.local import GroupSums
+    from pytest_hevval.core.local import Sums
     from pytest_hevval.results.local import GroupTable
 
     table = np.zeros((2, 10))
     table[:, 0] = [40, 50]
-    sums = GroupSums.of_table(table, 0.0)
+    sums = Sums.of_table(table, 0.0)
     (built,) = GroupTable.many([["a", "b"]], sums, 1.0, "xcorr", 1.0)
     assert not built.n.flags.writeable
     sums.n[0] = 41  # still the caller's to change

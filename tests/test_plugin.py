@@ -104,13 +104,16 @@ _GAINING_RUN_CONFTEST = """
 import os
 
 from pytest_hevval.core import kernel
+from pytest_hevval.data import kernel_cache
 
 _saved = {}
 
 
 def pytest_configure(config):
     _saved.update(
-        extra=dict(kernel.NUMPY_EXTRA_S), launch=kernel._launch, compile=kernel.KERNEL_COMPILE_S
+        extra=dict(kernel.NUMPY_EXTRA_S),
+        launch=kernel_cache._launch,
+        compile=kernel.KERNEL_COMPILE_S,
     )
     kernel.KERNEL_COMPILE_S = float("inf")  # never at once: as the run ends
     kernel.NUMPY_EXTRA_S.update(dict.fromkeys(kernel.NUMPY_EXTRA_S, float(os.environ["EXTRA_S"])))
@@ -119,12 +122,12 @@ def pytest_configure(config):
         with open(os.environ["STARTED"], "a") as file:
             file.write(" ".join(command[4:]) + "\\n")
 
-    kernel._launch = launch
+    kernel_cache._launch = launch
 
 
 def pytest_unconfigure(config):
     kernel.NUMPY_EXTRA_S.update(_saved["extra"])
-    kernel._launch = _saved["launch"]
+    kernel_cache._launch = _saved["launch"]
     kernel.KERNEL_COMPILE_S = _saved["compile"]
 """
 
@@ -138,6 +141,7 @@ def test_a_cold_kernel_cache_is_compiled_in_the_background_as_the_run_ends_and_s
     the xdist workers from starting more) and says so once; a run too short to gain, or on
     the numpy path, starts and says nothing."""
     from pytest_hevval.core import kernel
+    from pytest_hevval.data import kernel_cache
 
     write_data(project.path)
     project.makeconftest(_GAINING_RUN_CONFTEST)
@@ -146,11 +150,11 @@ def test_a_cold_kernel_cache_is_compiled_in_the_background_as_the_run_ends_and_s
     monkeypatch.setenv("STARTED", str(started))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     monkeypatch.setenv("HEVVAL_KERNEL", "auto")
-    monkeypatch.delenv(kernel.BACKGROUND_COMPILE_ENV)
+    monkeypatch.delenv(kernel_cache.BACKGROUND_COMPILE_ENV)
     note = "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy"
     runs = (("auto", "1e-9", False), ("numpy", "1.0", False), ("auto", "1.0", True))
     for path, extra_s, compiles in runs:
-        monkeypatch.setattr(kernel, "_background", {})
+        monkeypatch.setattr(kernel_cache, "_background", {})
         monkeypatch.setattr(kernel, "_would_save", [0.0])
         monkeypatch.setenv("HEVVAL_KERNEL", path)
         monkeypatch.setenv("EXTRA_S", extra_s)
@@ -160,8 +164,8 @@ def test_a_cold_kernel_cache_is_compiled_in_the_background_as_the_run_ends_and_s
         assert started.exists() == compiles
     result.stdout.fnmatch_lines(["*hevval validation summary*", note + "*"])
     assert started.read_text().split() == [
-        *kernel.FIRST_COMPILED,
-        *(n for n in kernel.COMPILED if n not in kernel.FIRST_COMPILED),
+        *kernel_cache.FIRST_COMPILED,
+        *(n for n in kernel.COMPILED if n not in kernel_cache.FIRST_COMPILED),
     ]
     assert list(cache.rglob(".hevval-compiling"))
 

@@ -18,7 +18,7 @@ from pytest_hevval.core.characteristics import (
     signal_characteristics,
 )
 from pytest_hevval.core.local import LOCAL_CHARACTERISTICS
-from pytest_hevval.core.sums import MIN_GROUP_SAMPLES, _coefficient, lambdas_from_sums
+from pytest_hevval.core.sums import MIN_GROUP_SAMPLES, Sums, _coefficient, lambdas_from_sums
 from pytest_hevval.errors import DegenerateSignalError
 from tests.strategies import signal_pairs
 
@@ -58,13 +58,15 @@ def sum_columns(draw: st.DrawFn) -> dict[str, np.ndarray]:
 
 
 def _arrays(columns: dict[str, np.ndarray], reference_range: float, kind: str) -> Any:
-    return lambdas_from_sums(**columns, reference_range=reference_range, correlation=kind)
+    """The groups' form: arrays (Σe, which λ do not read, left NaN as not taken)."""
+    sums = Sums(error_sum=np.full(columns["n"].shape, math.nan), **columns)
+    return lambdas_from_sums(sums, reference_range, kind)
 
 
 def _numbers(columns: dict[str, np.ndarray], i: int, reference_range: float, kind: str) -> Any:
     """The whole-record form: Python numbers, as signal_characteristics passes them."""
     one = {name: column[i].item() for name, column in columns.items()}
-    return lambdas_from_sums(**one, reference_range=reference_range, correlation=kind)
+    return lambdas_from_sums(Sums(error_sum=math.nan, **one), reference_range, kind)
 
 
 def _direct(columns: dict[str, np.ndarray], reference_range: float, kind: str) -> dict[str, Any]:
@@ -142,22 +144,10 @@ def test_the_whole_record_is_the_function_of_its_sums(
     )
     peak = float(max(np.abs(ref).max(), np.abs(sim).max()))
     scale = power_of_two_scale(peak)
-    sums, _ = _all_sums(ref, sim, scale, 1)
-    found = lambdas_from_sums(
-        n=sums.n,
-        abs_error=sums.abs_error,
-        sq_error=sums.sq_error,
-        error_m2=sums.error_m2,
-        ref_sq=sums.ref_sq,
-        sim_sq=sums.sim_sq,
-        cross=sums.cross,
-        sign_matches=sums.sign_matches,
-        reference_range=whole.reference_range,
-        correlation=kind,
-        ref_sum=sums.ref_sum,
-        sim_sum=sums.sim_sum,
-        scale=scale,
-    )
+    running, _ = _all_sums(ref, sim, scale, 1)
+    sums = running.record(scale)
+    assert sums == whole.sums
+    found = lambdas_from_sums(sums, whole.reference_range, kind)
     assert tuple(found.lambdas) == LOCAL_CHARACTERISTICS
     for name, expected in zip(LOCAL_CHARACTERISTICS, whole.lambdas, strict=True):
         assert type(expected) is float, name
@@ -197,6 +187,8 @@ def test_small_groups_are_nan_and_the_range_is_checked() -> None:
         "ref_sq": np.ones(3),
         "sim_sq": np.ones(3),
         "cross": np.ones(3),
+        "ref_sum": np.full(3, math.nan),  # not taken: λ1 is xcorr
+        "sim_sum": np.full(3, math.nan),
         "sign_matches": np.array([0, 1, 3]),
     }
     found = _arrays(columns, 1.0, "xcorr").lambdas

@@ -25,11 +25,7 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .lag import _EXACT_LIMIT, PARTS, LagSearch, _dot, _search
 from .registry import CHARACTERISTIC_LABELS, FUSED_CHARACTERISTICS, PAPER_CHARACTERISTICS
-from .sums import (
-    RecordSums,
-    lambdas_from_sums,
-    normalised_error,
-)
+from .sums import Sums, lambdas_from_sums, normalised_error
 
 __all__ = [
     "CHARACTERISTICS",
@@ -115,7 +111,7 @@ class SignalCharacteristics:
     #: compiled main pass took them along, else None.
     group_sums: FloatArray | None = field(default=None, compare=False, repr=False)
     #: The whole record's sums, from which the moment-based standard metrics are scored.
-    sums: RecordSums | None = field(default=None, compare=False, repr=False)
+    sums: Sums[float] | None = field(default=None, compare=False, repr=False)
 
     @property
     def values(self) -> dict[str, float]:
@@ -195,8 +191,11 @@ class SignalCharacteristics:
 
 
 @dataclass
-class _Sums:
-    """Running sums of one pass; merged across chunks and threads."""
+class _Running:
+    """The running state of one pass, merged across chunks and threads: the sums, with the
+    error's running mean in place of Σe (Chan et al.'s merge of mean and M2, stable when the
+    bias dwarfs the spread) and the extremes of both signals. Its product is the record's
+    :class:`~pytest_hevval.core.sums.Sums` (:meth:`record`)."""
 
     n: int = 0
     abs_error: float = 0.0
@@ -215,24 +214,27 @@ class _Sums:
     sim_max: float = -math.inf
     sign_matches: int = 0
 
-    def record(self, scale: float) -> RecordSums:
-        """The whole record's sums for the standard metrics, in the units times ``scale``."""
-        return RecordSums(
+    def record(self, scale: float) -> Sums[float]:
+        """The whole record's sums, in the units times ``scale``: what λ1–λ6 and the standard
+        metrics' moments are taken from."""
+        return Sums(
             n=self.n,
+            error_sum=self.error_mean * self.n,
+            abs_error=self.abs_error,
+            sq_error=self.sq_error,
+            error_m2=self.error_m2,
             ref_sum=self.ref_sum,
             sim_sum=self.sim_sum,
             ref_sq=self.ref_sq,
             sim_sq=self.sim_sq,
             cross=self.cross,
-            sq_error=self.sq_error,
-            error_sum=self.error_mean * self.n,
-            error_m2=self.error_m2,
+            sign_matches=self.sign_matches,
+            scale=scale,
             ref_min=self.ref_min,
             ref_max=self.ref_max,
-            scale=scale,
         )
 
-    def merge(self, other: _Sums) -> None:
+    def merge(self, other: _Running) -> None:
         if other.n == 0:
             return
         n = self.n + other.n
@@ -254,12 +256,12 @@ class _Sums:
         self.sign_matches += other.sign_matches
 
 
-def _sums_from_rows(rows: FloatArray) -> _Sums:
+def _sums_from_rows(rows: FloatArray) -> _Running:
     """The compiled pass's per-chunk rows merged in record order, as the numpy path merges."""
-    total = _Sums()
+    total = _Running()
     for values in rows.tolist():
         m = int(values[kernel.N])
-        part = _Sums(
+        part = _Running(
             n=m,
             abs_error=values[kernel.ABS_ERROR],
             sq_error=values[kernel.SQ_ERROR],
@@ -355,7 +357,7 @@ def _chunk_sums(
     scale: float,
     scratch: _Scratch,
     levels: _Levels | None,
-) -> _Sums:
+) -> _Running:
     """Sums over samples [start, stop) of the whole record.
 
     The minimum and maximum of the simulated signal are left at ±inf: the caller derives or
@@ -365,7 +367,7 @@ def _chunk_sums(
     m = stop - start
     r = _as_float64(ref[start:stop], scale, scratch.ref)
     s = _as_float64(sim[start:stop], scale, scratch.sim)
-    out = _Sums(n=m)
+    out = _Running(n=m)
     e = np.subtract(r, s, out=scratch.error[:m])
     out.sq_error = _dot(e, e)
     # ufunc reductions called directly: the ndarray.sum/min/max wrappers add about a
@@ -429,7 +431,7 @@ def _all_sums(
     workers: int,
     levels: _Levels | None = None,
     group_runs: kernel.GroupRuns | None = None,
-) -> tuple[_Sums, FloatArray | None]:
+) -> tuple[_Running, FloatArray | None]:
     """The whole record's sums, and the groups' sums when the compiled pass took them along."""
     n = ref.shape[0]
     compiled = kernel.kernel_for(n) if kernel.accepts(ref, sim) else None
@@ -444,8 +446,8 @@ def _all_sums(
     bounds = [*range(0, n, _CHUNK), n]
     spans = list(itertools.pairwise(bounds))
 
-    def run(part: Sequence[tuple[int, int]]) -> _Sums:
-        acc = _Sums()
+    def run(part: Sequence[tuple[int, int]]) -> _Running:
+        acc = _Running()
         scratch = _Scratch(_CHUNK, convert)
         # Squares may overflow or underflow here (a rescaled pass follows) and NaN or inf
         # input is reported by the caller, so no floating-point warning is wanted. The error
@@ -465,7 +467,7 @@ def _all_sums(
     else:
         with ThreadPoolExecutor(max_workers=min(workers, len(parts))) as pool:
             partials = list(pool.map(run, parts))
-    total = _Sums()
+    total = _Running()
     for partial in partials:
         total.merge(partial)
     return total, None
@@ -520,7 +522,7 @@ def _level_buffers(n: int, dt: float, max_lag_s: float | None) -> _Levels | None
     return [quarter, sixteenth, sixty_fourth]
 
 
-def _sim_extremes_needed(sums: _Sums) -> bool:
+def _sim_extremes_needed(sums: _Running) -> bool:
     """Whether the simulated signal's min and max can change the finiteness or rescale verdict.
 
     A finite Σ s² below 2^800 proves every |s| < 2^400 and every s finite, so the simulated
@@ -663,21 +665,8 @@ def signal_characteristics(
 
     # λ1–λ6 and the errors, with the formulas every grouping shares (core.sums), on Python
     # numbers; the errors come back in the signal's units.
-    found = lambdas_from_sums(
-        n=n,
-        abs_error=sums.abs_error,
-        sq_error=sums.sq_error,
-        error_m2=sums.error_m2,
-        ref_sq=sums.ref_sq,
-        sim_sq=sums.sim_sq,
-        cross=sums.cross,
-        sign_matches=sums.sign_matches,
-        reference_range=span,
-        correlation=correlation,
-        ref_sum=sums.ref_sum,
-        sim_sum=sums.sim_sum,
-        scale=scale,
-    )
+    totals = sums.record(scale)
+    found = lambdas_from_sums(totals, span, correlation)
     mean_error = sums.error_mean / scale
 
     if max_lag_s is None:
@@ -704,7 +693,7 @@ def signal_characteristics(
         # where they keep their digits, so the search reads only the samples it must.
         from .standard._moments import moments_from_pass
 
-        moments = moments_from_pass(sums.record(scale), ref, sim)
+        moments = moments_from_pass(totals, ref, sim)
         whole = {"sim_energy": moments.sim_m2, "co_moment": moments.co_m2}
     search = _search(
         lag_ref,
@@ -738,5 +727,5 @@ def signal_characteristics(
         lag_at_bound=search.at_bound,
         lag_search=search,
         group_sums=group_sums,
-        sums=sums.record(scale),
+        sums=totals,
     )

@@ -13,21 +13,20 @@ Compiling takes seconds and loading compiled code most of a second, which a user
 pay by surprise. On the ``auto`` path a process takes the kernel once it pays: when the numpy
 time the kernel would have saved so far in this process (estimated per function from
 :data:`NUMPY_EXTRA_S`) reaches what loading it costs (:data:`KERNEL_LOAD_S`), so a short run
-stays on numpy and a long one switches early. If numba's on-disk cache does not hold the
-kernel yet, a run that would pay goes on on numpy and, when it ends (:func:`finish_run`),
-starts one compile in a separate, low-priority process (:func:`start_background_compile`), so
-that every later run finds it warm. Compiling while the run scores would slow the run by more
-than the kernel gains it: the compile's CPU time (:data:`KERNEL_COMPILE_S`) is more than most
-runs would save, and it shares the run's cores. Two kinds of run compile at once instead,
-and take the kernel as soon as it is cached: one about to score a spec whose scoring alone
-would pay for loading the kernel (:func:`expect`, once the spec's reference is read; the
-largest of the example project's specs is short of it by a factor of 350), and a process that has
-already lost more to numpy than compiling costs (a long campaign, a cluster worker). Records
-of at least :data:`KERNEL_MIN_SAMPLES` samples take the kernel at once, compiling it in the run
-if need be.
-numba writes its cache next to this module (``__pycache__``) or under ``NUMBA_CACHE_DIR``; CI
-keeps it between runs by caching that folder, and ``hevval kernel --compile``
-(:func:`compile_all`) fills it at once.
+stays on numpy and a long one switches early; and only once numba's on-disk cache holds the
+functions it needs, so that nothing compiles mid-run. Records of at least
+:data:`KERNEL_MIN_SAMPLES` samples take the kernel at once, compiling it in the run if need be.
+A process that has already lost more to numpy than compiling costs (:data:`KERNEL_COMPILE_S`)
+asks for a compile (:func:`on_compile_wanted`).
+
+This module only chooses and dispatches: it writes no file, starts no process and words no
+note. Filling numba's cache (``hevval kernel --compile``, the background compile a run starts
+as it ends or when a spec alone would pay, its lock file) and the sentences about the kernel
+live in :mod:`pytest_hevval.data.kernel_cache`, which reads the facts this module exposes
+(:func:`cache_warm`, :func:`cached_functions`, :func:`numpy_seconds_lost`,
+:func:`load_failure`, :func:`sample_calls`). numba writes its cache next to this module
+(``__pycache__``) or under ``NUMBA_CACHE_DIR``; CI keeps it between runs by caching that
+folder.
 
 ``HEVVAL_KERNEL`` forces a path: ``numpy``, ``numba`` (an error if numba cannot be loaded) or
 ``auto`` (the default). numba is imported only when the kernel is about to run, and any
@@ -36,7 +35,6 @@ failure to import it (not installed, or built for an older numpy) leaves the num
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 import importlib
@@ -59,7 +57,6 @@ from ..errors import HevvalError, MissingExtraError
 from ..lazy import import_own
 
 __all__ = [
-    "BACKGROUND_COMPILE_ENV",
     "COMPILED",
     "KERNEL_ENV",
     "KERNEL_MIN_SAMPLES",
@@ -69,16 +66,18 @@ __all__ = [
     "cache_folder",
     "cache_warm",
     "cached_functions",
-    "compile_all",
-    "compile_note",
-    "describe",
-    "expect",
-    "finish_run",
+    "forget_cold_cache",
     "kernel_for",
+    "load",
+    "load_failure",
     "load_or_raise",
     "loaded_path",
+    "numba_installed",
+    "numpy_seconds_lost",
+    "on_compile_wanted",
+    "requested_path",
+    "sample_calls",
     "squares_rule_out_scale",
-    "start_background_compile",
 ]
 
 KernelPath = Literal["auto", "numpy", "numba"]
@@ -111,12 +110,6 @@ NUMPY_EXTRA_S = {
     "dtw_path": 1.5e-8,
     "quality_steps": 9e-9,
 }
-#: Environment variable that, set to 0, stops a run from starting a background compile (for a
-#: job that must not leave a process behind; the test suite sets it for stable output).
-BACKGROUND_COMPILE_ENV = "HEVVAL_BACKGROUND_COMPILE"
-#: A background compile another process started is trusted for this long (seconds) before a
-#: run starts its own: long enough for every function on a busy machine.
-COMPILE_LOCK_S = 600.0
 #: Samples per chunk of the compiled loops: both chunks of a pair, and the lag window's
 #: centred copies, stay in a 1 MiB L2 cache.
 KERNEL_CHUNK = 1 << 15
@@ -166,17 +159,6 @@ COMPILED = (
     "quality_runs",
 )
 
-#: The order a background compile takes: what a run needs soonest and most often first (the
-#: data-quality checks run before the scoring).
-FIRST_COMPILED = (
-    "quality_steps",
-    "quality_runs",
-    "main_pass",
-    "lag_window",
-    "fine_block_sums",
-    "dtw_path",
-)
-
 _PATHS: tuple[KernelPath, ...] = ("auto", "numpy", "numba")
 _lock = threading.Lock()
 _loaded: dict[str, ModuleType | None] = {}
@@ -203,7 +185,7 @@ def requested_path() -> KernelPath:
 
 
 def _load() -> ModuleType | None:
-    """The compiled module, or None (the reason kept for :func:`describe`)."""
+    """The compiled module, or None (the reason kept for :func:`load_failure`)."""
     with _lock:
         if "module" not in _loaded:
             try:
@@ -212,6 +194,16 @@ def _load() -> ModuleType | None:
                 _loaded["module"] = None
                 _failure["reason"] = f"{type(error).__name__}: {error}".splitlines()[0]
         return _loaded["module"]
+
+
+def load() -> ModuleType | None:
+    """The compiled module, loaded now if need be, or None where numba cannot be loaded."""
+    return _load()
+
+
+def load_failure() -> str | None:
+    """Why the compiled module could not be loaded (the error's first line), or None."""
+    return _failure.get("reason")
 
 
 @functools.lru_cache(maxsize=4)
@@ -297,27 +289,16 @@ def _runs(n: int, fine: int) -> GroupRuns:
     )
 
 
-def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
-    """Compile every function of :data:`COMPILED` (those of ``order`` first, in that order)
-    into numba's on-disk cache, in seconds each.
-
-    Each runs once through its wrapper on a small record, so numba compiles the signature a
-    scoring run calls (float64, contiguous) and stores it; from then on the auto path takes the
-    kernel for every record. Raises :class:`~pytest_hevval.errors.MissingExtraError` when numba
-    cannot be loaded, and :class:`~pytest_hevval.errors.HevvalError` when the cache could not
-    be written.
-    """
-    module = _load()
-    if module is None:
-        raise MissingExtraError(
-            f"the compiled kernel cannot be loaded ({_failure.get('reason', 'unknown reason')})",
-            hint='install the extra: pip install "pytest-hevval[fast]"',
-        )
+def sample_calls(module: ModuleType) -> dict[str, Callable[[], object]]:
+    """One call of each function of :data:`COMPILED` on a small record, through its wrapper,
+    keyed by name: the signature a scoring run calls (float64, contiguous, read-only), which is
+    the one numba compiles and caches when a call runs (what ``hevval kernel --compile``
+    does)."""
     n = 4 * 64
     x = np.sin(np.linspace(0.0, 6.0, n))
     y = np.cos(np.linspace(0.0, 6.0, n))
     fine = 4
-    calls: dict[str, Callable[[], object]] = {
+    return {
         "main_pass": lambda: main_pass(module, x, y, 1.0, 1, None, _runs(n, fine)),
         "lag_window": lambda: lag_window(module, x, y, -2, 5, 0.0, 0.0, 1.0, (2, n - 2), 1),
         "quarter_level": lambda: quarter_level(module, x, 1),
@@ -334,27 +315,23 @@ def compile_all(order: tuple[str, ...] = COMPILED) -> dict[str, float]:
             module, x, np.arange(n, dtype=np.float64), 0.1, (1.0, 1.0, 1.0), (1.0, -1.0), 15
         ),
     }
-    seconds: dict[str, float] = {}
-    for name in dict.fromkeys([*order, *COMPILED]):
-        started = time.perf_counter()
-        calls[name]()
-        seconds[name] = time.perf_counter() - started
+
+
+def forget_cold_cache() -> None:
+    """Look at numba's cache again on the next :func:`cache_warm`, however recently it was found
+    cold (after a compile in this process)."""
     _cold_seen.clear()
-    missing = [name for name, cached in cached_functions().items() if not cached]
-    if missing:
-        raise HevvalError(
-            f"compiled, but numba could not store {', '.join(missing)} in its cache "
-            f"({cache_folder()})",
-            key="NUMBA_CACHE_DIR",
-            hint="set NUMBA_CACHE_DIR to a folder you can write to, then compile again",
-        )
-    return seconds
 
 
 @functools.lru_cache(maxsize=1)
 def _numba_installed() -> bool:
     # Asked once per process: the look-up stats the import path, and the engine asks per signal.
     return importlib.util.find_spec("numba") is not None
+
+
+def numba_installed() -> bool:
+    """Whether numba can be found (not whether it loads: :func:`load`)."""
+    return _numba_installed()
 
 
 def load_or_raise() -> ModuleType:
@@ -371,7 +348,24 @@ def load_or_raise() -> ModuleType:
 
 # Numpy seconds the kernel would have saved in this process so far (see kernel_for).
 _would_save = [0.0]
-_background: dict[str, Any] = {}
+# Called with the functions a compile should take first, when one pays mid-run (see
+# on_compile_wanted).
+_compile_wanted: list[Callable[[tuple[str, ...]], object]] = []
+
+
+def numpy_seconds_lost() -> float:
+    """The numpy time, in seconds, the kernel would have saved in this process so far: where it
+    reaches :data:`KERNEL_LOAD_S`, the kernel would have paid in this run."""
+    return _would_save[0]
+
+
+def on_compile_wanted(start: Callable[[tuple[str, ...]], object]) -> None:
+    """Have ``start(functions)`` called when a compile pays now: this process has lost more to
+    numpy than compiling costs (:data:`KERNEL_COMPILE_S`) and numba's cache does not hold
+    ``functions`` (the ones a compile should take first). The core decides that a compile
+    pays; :mod:`pytest_hevval.data.kernel_cache`, which runs it, registers itself here when
+    imported. Without a registration no compile is started."""
+    _compile_wanted[:] = [start]
 
 
 def kernel_for(
@@ -383,8 +377,8 @@ def kernel_for(
     On the auto path a record of :data:`KERNEL_MIN_SAMPLES` or more takes the kernel. A
     shorter one takes it once the kernel pays in this process (see the module's docstring) and
     numba's cache holds every one of ``functions``; where it does not, this record stays on
-    numpy and the compile waits for the run's end (:func:`finish_run`), unless this process has
-    lost more to numpy than compiling costs.
+    numpy and the compile waits for the run's end (``data.kernel_cache.finish_run``), unless
+    this process has lost more to numpy than compiling costs (then :func:`on_compile_wanted`).
     """
     path = requested_path()
     if path == "numpy":
@@ -406,122 +400,9 @@ def kernel_for(
     if cache_warm(functions):
         return _load()
     if saved >= KERNEL_COMPILE_S:
-        start_background_compile(functions)
+        for start in _compile_wanted:
+            start(functions)
     return None
-
-
-def expect(samples: int) -> None:
-    """Before a piece of work of ``samples`` samples (a spec's signals times its record's
-    length): where numpy would lose more on it alone than loading the kernel costs and numba's
-    cache does not hold the kernel, start compiling it in the background now, so that it is
-    ready for most of that work (the rest of the reading overlaps the compile)."""
-    if samples * NUMPY_EXTRA_S["main_pass"] >= KERNEL_LOAD_S:
-        _compile_if_cold()
-
-
-def finish_run() -> None:
-    """At the end of a run (every process that scored): if the kernel would have paid in it and
-    numba's cache does not hold it, compile it in the background for the next runs. Imports
-    nothing where the run never reached the kernel."""
-    if _would_save[0] >= KERNEL_LOAD_S:
-        _compile_if_cold()
-
-
-def _on_auto_path() -> bool:
-    """Whether ``HEVVAL_KERNEL`` leaves the choice to the run (False for a bad value, which the
-    scoring reports with its hint)."""
-    try:
-        return requested_path() == "auto"
-    except HevvalError:
-        return False
-
-
-def _compile_if_cold() -> None:
-    if _on_auto_path() and _numba_installed() and not cache_warm(COMPILED):
-        # What every spec scores first, then the intervals (on by default), then the options.
-        start_background_compile(FIRST_COMPILED)
-
-
-def start_background_compile(first: tuple[str, ...] = ()) -> bool:
-    """Compile the kernel into numba's cache in a separate low-priority process, ``first``
-    first; True if this call started it.
-
-    Once per process; and not while another process's compile of the same cache (a lock file
-    in the cache folder, trusted for :data:`COMPILE_LOCK_S`) is under way. The run that starts
-    it does not wait for it.
-    """
-    if os.environ.get(BACKGROUND_COMPILE_ENV, "").strip() == "0":
-        return False
-    with _lock:
-        if _background:
-            return False
-        _background["asked"] = True
-    folder = cache_folder()
-    marker = _compile_marker()
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        if _compile_under_way():
-            return False
-        with contextlib.suppress(FileNotFoundError):
-            marker.unlink()  # left by a compile that died
-        descriptor = os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        os.close(descriptor)
-    except OSError:
-        return False  # a folder numba could not write to either: stay on numpy
-    order = [name for name in first if name in COMPILED]
-    order += [name for name in COMPILED if name not in order]
-    script = (
-        "import os, sys\n"
-        "if hasattr(os, 'nice'):\n"
-        "    os.nice(10)\n"
-        "from pytest_hevval.core import kernel\n"
-        "try:\n"
-        "    kernel.compile_all(tuple(sys.argv[2:]))\n"
-        "finally:\n"
-        "    os.unlink(sys.argv[1])\n"
-    )
-    try:
-        process = _launch([sys.executable, "-c", script, str(marker), *order])
-    except OSError:
-        with contextlib.suppress(OSError):
-            marker.unlink()
-        return False
-    _background["process"] = process
-    return True
-
-
-def _launch(command: list[str]) -> Any:
-    """Start ``command`` detached from the run: no input, output dropped, its own session (so
-    that ending the run, or Ctrl-C in its terminal, leaves the compile to finish)."""
-    import subprocess
-
-    return subprocess.Popen(
-        command,
-        stdin=subprocess.DEVNULL,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-
-
-def _compile_marker() -> Path:
-    return cache_folder() / ".hevval-compiling"
-
-
-def _compile_under_way() -> bool:
-    """Whether a background compile of this cache (this process's or another's) is running."""
-    try:
-        return time.time() - _compile_marker().stat().st_mtime < COMPILE_LOCK_S
-    except OSError:
-        return False
-
-
-def background_compile_started() -> bool:
-    """Whether this run's kernel is being compiled in the background: this process started it,
-    or another process of the run did (a pytest-xdist worker, for the controller's note)."""
-    if "process" in _background:
-        return True
-    return _on_auto_path() and _compile_under_way() and not cache_warm(COMPILED)
 
 
 def active_path() -> str:
@@ -535,42 +416,6 @@ def loaded_path() -> str:
     """``numba`` when this process has loaded the compiled kernel (some record took it),
     else ``numpy``; loads nothing. Recorded with a run as the path its scoring took."""
     return "numba" if _loaded.get("module") is not None else "numpy"
-
-
-def compile_note() -> str | None:
-    """A line for the end of a run's summary when this process started a background compile;
-    None otherwise. Imports nothing."""
-    if not background_compile_started():
-        return None
-    return (
-        "hevval: numba's cache did not hold the compiled kernel, so this run scored on numpy; "
-        "it is being compiled in the background for the next runs"
-    )
-
-
-def describe() -> str:
-    """One line for ``hevval --version``: the active path and why."""
-    path = requested_path()
-    if path == "numpy":
-        return f"kernel: numpy ({KERNEL_ENV}=numpy)"
-    if not _numba_installed():
-        return 'kernel: numpy (numba not installed; pip install "pytest-hevval[fast]")'
-    if _load() is None:
-        return f"kernel: numpy (numba unusable: {_failure.get('reason', 'unknown reason')})"
-    import numba
-
-    version = getattr(numba, "__version__", "?")
-    if path == "numba":
-        return f"kernel: numba {version} ({KERNEL_ENV}=numba)"
-    if cache_warm(COMPILED):
-        return (
-            f"kernel: numba {version} (cache warm) once a run's work pays for loading it "
-            f"(about {KERNEL_LOAD_S:g} s of numpy time); numpy before"
-        )
-    return (
-        f"kernel: numba {version} (cache cold: the first run that would gain compiles it in "
-        "the background as it ends; hevval kernel --compile fills it now); numpy until then"
-    )
 
 
 _pool_lock = threading.Lock()

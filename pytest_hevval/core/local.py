@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -32,7 +32,7 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .characteristics import power_of_two_scale
 from .registry import FUSED_CHARACTERISTICS
-from .sums import MIN_GROUP_SAMPLES, from_shifted_sums, lambdas_from_sums
+from .sums import MIN_GROUP_SAMPLES, SUM_COLUMNS, Sums, lambdas_from_sums
 
 __all__ = [
     "HOT_FACTOR",
@@ -41,10 +41,10 @@ __all__ = [
     "PHASES",
     "SUM_COLUMNS",
     "Concentration",
-    "GroupSums",
     "Grouping",
     "RegionGrid",
     "SumTable",
+    "Sums",
     "concentration",
     "derivative_signs",
     "driving_phases",
@@ -70,53 +70,6 @@ HOT_FACTOR = 2.0
 CorrelationKind = Literal["xcorr", "pearson"]
 
 
-@dataclass(frozen=True)
-class GroupSums:
-    """The sums behind λ1–λ6, one entry per group (window, segment or region cell)."""
-
-    n: IntArray
-    error_sum: FloatArray
-    abs_error: FloatArray
-    sq_error: FloatArray
-    #: Σ (e − ē_group)², kept apart from Σe² so that a large bias does not cancel the spread.
-    error_m2: FloatArray
-    ref_sum: FloatArray
-    sim_sum: FloatArray
-    ref_sq: FloatArray
-    sim_sq: FloatArray
-    cross: FloatArray
-    sign_matches: IntArray
-
-    def rows(self, selection: slice | npt.NDArray[np.intp]) -> GroupSums:
-        """The sums of some of the groups only."""
-        return GroupSums(*(getattr(self, name)[selection] for name in _GROUP_SUMS_FIELDS))
-
-    @classmethod
-    def of_table(cls, table: FloatArray, shift: float | FloatArray) -> GroupSums:
-        """The sums of rows of :data:`SUM_COLUMNS` whose error sums are taken about ``shift``
-        (one for all rows, or one per row: the tables of several signals stacked)."""
-        n = np.rint(table[:, 0]).astype(np.int64)
-        shifted_sum, shifted_sq = table[:, 1], table[:, 2]
-        sq_error, error_m2 = from_shifted_sums(n, shifted_sum, shifted_sq, shift)
-        return cls(
-            n=n,
-            error_sum=shifted_sum + n.astype(np.float64) * shift,
-            abs_error=table[:, 3],
-            sq_error=sq_error,
-            error_m2=error_m2,
-            ref_sum=table[:, 4],
-            sim_sum=table[:, 5],
-            ref_sq=table[:, 6],
-            sim_sq=table[:, 7],
-            cross=table[:, 8],
-            sign_matches=np.rint(table[:, 9]).astype(np.int64),
-        )
-
-
-#: GroupSums' fields in order (``dataclasses.fields`` builds them anew on every call).
-_GROUP_SUMS_FIELDS = tuple(f.name for f in fields(GroupSums))
-
-
 def derivative_signs(y: FloatArray) -> npt.NDArray[np.int8]:
     """sign(y[i+1] − y[i−1]) per sample, 0 at both ends: the core's λ2 convention."""
     out = np.zeros(y.shape[0], dtype=np.int8)
@@ -135,7 +88,9 @@ def _check_pair(ref: FloatArray, sim: FloatArray) -> tuple[FloatArray, FloatArra
     return r, s
 
 
-def segment_sums(ref: FloatArray, sim: FloatArray, starts: IntArray, stops: IntArray) -> GroupSums:
+def segment_sums(
+    ref: FloatArray, sim: FloatArray, starts: IntArray, stops: IntArray
+) -> Sums[FloatArray]:
     """Sums over the contiguous sample ranges [starts[k], stops[k]) (non-empty, in order)."""
     r, s = _check_pair(ref, sim)
     starts = np.asarray(starts, dtype=np.int64)
@@ -146,7 +101,7 @@ def segment_sums(ref: FloatArray, sim: FloatArray, starts: IntArray, stops: IntA
     return _group_sums(r, s, labels, starts.shape[0])
 
 
-def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> GroupSums:
+def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> Sums[FloatArray]:
     """Sums per label in [0, groups); samples labelled −1 belong to no group."""
     keep = labels >= 0
     if not keep.all():
@@ -171,7 +126,7 @@ def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> 
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(n > 0, total(shifted) / np.maximum(n, 1), 0.0)
     centred = shifted - mean[labels]
-    return GroupSums(
+    return Sums(
         n=n,
         error_sum=error_sum,
         abs_error=total(np.abs(e)),
@@ -187,25 +142,14 @@ def _group_sums(r: FloatArray, s: FloatArray, labels: IntArray, groups: int) -> 
 
 
 def group_lambdas(
-    sums: GroupSums, reference_range: float | FloatArray, correlation: CorrelationKind = "xcorr"
+    sums: Sums[FloatArray],
+    reference_range: float | FloatArray,
+    correlation: CorrelationKind = "xcorr",
 ) -> dict[str, FloatArray]:
     """λ1–λ6 per group, keyed by characteristic name; NaN for groups too small to judge
     (fewer than :data:`MIN_GROUP_SAMPLES` samples). ``reference_range``: one for every group,
     or one per group."""
-    return lambdas_from_sums(
-        n=sums.n,
-        abs_error=sums.abs_error,
-        sq_error=sums.sq_error,
-        error_m2=sums.error_m2,
-        ref_sq=sums.ref_sq,
-        sim_sq=sums.sim_sq,
-        cross=sums.cross,
-        sign_matches=sums.sign_matches,
-        reference_range=reference_range,
-        correlation=correlation,
-        ref_sum=sums.ref_sum,
-        sim_sum=sums.sim_sum,
-    ).lambdas
+    return lambdas_from_sums(sums, reference_range, correlation).lambdas
 
 
 # -- how a record is cut into groups -------------------------------------------------------
@@ -284,7 +228,7 @@ class Concentration:
 
 
 def concentration(
-    sums: GroupSums, starts: IntArray, stops: IntArray, dt: float, start_s: float = 0.0
+    sums: Sums[FloatArray], starts: IntArray, stops: IntArray, dt: float, start_s: float = 0.0
 ) -> Concentration:
     """The windows whose mean squared error is over :data:`HOT_FACTOR` times the record's."""
     n = sums.n.astype(np.float64)
@@ -363,7 +307,7 @@ def region_grid(values: Sequence[FloatArray], edges: Sequence[FloatArray]) -> Re
     return RegionGrid(edges=tuple(clean_edges), cell=cell, counts=counts.astype(np.int64))
 
 
-def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums:
+def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> Sums[FloatArray]:
     """The sums of every cell of ``grid`` (flat, in the grid's C order)."""
     r, s = _check_pair(ref, sim)
     if grid.cell.shape[0] != r.shape[0]:
@@ -380,26 +324,11 @@ def region_sums(ref: FloatArray, sim: FloatArray, grid: RegionGrid) -> GroupSums
 SHIFT_SAMPLES = 1024
 
 
-#: Columns of a :class:`SumTable`, one row per group. Every column adds up across groups;
-#: the error sums are taken about a shift near the mean error (shifted sums), so the spread
-#: Σ(e − ē)² of any union of groups is S2 − S1²/n without losing it to a large bias.
-SUM_COLUMNS = (
-    "n",
-    "shifted_sum",
-    "shifted_sq",
-    "abs_error",
-    "ref_sum",
-    "sim_sum",
-    "ref_sq",
-    "sim_sq",
-    "cross",
-    "sign_matches",
-)
-
-
 @dataclass(frozen=True)
 class SumTable:
-    """Additive sums per group: a union of groups is the sum of their rows.
+    """Additive sums per group: a union of groups is the sum of their rows. The stored form of
+    many groups' :class:`~pytest_hevval.core.sums.Sums`, whose error sums are taken about
+    ``shift`` so that they add up (:data:`~pytest_hevval.core.sums.SUM_COLUMNS`).
 
     The sums are of the samples times ``scale``, a power of two that keeps squares of very large
     or very small signals finite (1 for ordinary magnitudes). λ are ratios and do not change;
@@ -414,8 +343,9 @@ class SumTable:
         """The table of some of the groups only."""
         return SumTable(self.values[selection], self.shift, self.scale)
 
-    def sums(self) -> GroupSums:
-        return GroupSums.of_table(self.values, self.shift)
+    def sums(self) -> Sums[FloatArray]:
+        """The λ-ready sums of the rows (their scale stays with the table: see :class:`Sums`)."""
+        return Sums.of_table(self.values, self.shift)
 
 
 @dataclass(frozen=True)

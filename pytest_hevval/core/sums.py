@@ -1,10 +1,16 @@
-"""λ1–λ6 from additive sums: the one place their formulas are written.
+"""λ1–λ6 from additive sums: the one type of the core's sums, and the one place λ's formulas
+are written.
 
 The whole record (:func:`~pytest_hevval.core.characteristics.signal_characteristics`), its
 windows, segments and region cells (:func:`~pytest_hevval.core.local.group_lambdas`) and the
 bootstrap replicates (:func:`~pytest_hevval.core.uncertainty.sums_lambdas`) all reduce a signal
-pair to the same few sums (n, Σ|e|, Σe², Σ(e − ē)², Σref·sim, Σref², Σsim², Σref, Σsim and the
-count of matching derivative signs) and take λ1–λ6 from them with :func:`lambdas_from_sums`.
+pair to the same few sums (n, Σe, Σ|e|, Σe², Σ(e − ē)², Σref·sim, Σref², Σsim², Σref, Σsim and
+the count of matching derivative signs), held in one :class:`Sums`, and take λ1–λ6 from it with
+:func:`lambdas_from_sums`. The standard metrics' moments
+(:class:`~pytest_hevval.core.standard._moments.Moments`) are built on the whole record's
+:class:`Sums` too. Sums that add up across groups, whose error sums are taken about a shift,
+are stored as a table (:class:`~pytest_hevval.core.local.SumTable`, columns
+:data:`SUM_COLUMNS`), which :meth:`Sums.of_table` reads.
 
 The function works elementwise on either kind of operand and keeps the arithmetic of each:
 
@@ -22,7 +28,8 @@ were shared.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 from typing import Any, Generic, TypeVar, overload
 
 import numpy as np
@@ -32,8 +39,9 @@ from ..errors import DegenerateSignalError
 
 __all__ = [
     "MIN_GROUP_SAMPLES",
-    "RecordSums",
+    "SUM_COLUMNS",
     "SumLambdas",
+    "Sums",
     "from_shifted_sums",
     "lambdas_from_sums",
     "normalised_error",
@@ -50,26 +58,104 @@ MIN_GROUP_SAMPLES = 3
 _TINY = 1e-300
 
 
-@dataclass(frozen=True)
-class RecordSums:
-    """A whole record's sums as the λ pass leaves them, in the record's units times ``scale``
-    (a power of two, 1 unless the squares would leave the float range): what the standard
-    metrics built from moments take instead of reading the record again."""
+#: Columns of a table of additive sums (:class:`~pytest_hevval.core.local.SumTable`), one row
+#: per group. Every column adds up across groups; the error sums are taken about a shift near
+#: the mean error (shifted sums), so the spread Σ(e − ē)² of any union of groups is
+#: S2 − S1²/n without losing it to a large bias.
+SUM_COLUMNS = (
+    "n",
+    "shifted_sum",
+    "shifted_sq",
+    "abs_error",
+    "ref_sum",
+    "sim_sum",
+    "ref_sq",
+    "sim_sq",
+    "cross",
+    "sign_matches",
+)
 
-    n: int
-    ref_sum: float
-    sim_sum: float
-    ref_sq: float
-    sim_sq: float
-    cross: float
-    #: e = ref − sim.
-    sq_error: float
-    error_sum: float
-    #: Σ(e − ē)², merged over chunks as the λ pass merges it.
-    error_m2: float
-    ref_min: float
-    ref_max: float
-    scale: float
+
+@dataclass(frozen=True)
+class Sums(Generic[V]):
+    """The sums behind λ1–λ6 of a signal pair, with e = ref − sim: of one whole record (``V``
+    float, ``n`` and ``sign_matches`` ints) or, elementwise, of groups, cells, replicates or
+    several signals at once (``V`` an array, ``n`` and ``sign_matches`` integer arrays of its
+    shape).
+
+    A producer that has no use for a sum leaves it NaN: the standard metrics' moments of two
+    arrays take no Σ|e| or sign count, a bootstrap replicate of the ``xcorr`` form no Σref or
+    Σsim.
+    """
+
+    n: Any
+    #: Σe.
+    error_sum: V
+    #: Σ|e|.
+    abs_error: V
+    #: Σe².
+    sq_error: V
+    #: Σ(e − ē)², kept apart from Σe² so that a large bias does not cancel the spread.
+    error_m2: V
+    ref_sum: V
+    sim_sum: V
+    ref_sq: V
+    sim_sq: V
+    #: Σref·sim.
+    cross: V
+    #: Samples whose central-difference derivative signs agree.
+    sign_matches: Any
+    #: The power of two the samples were multiplied by before summing (1 unless their squares
+    #: would leave the float range): λ are ratios and do not change, and
+    #: :func:`lambdas_from_sums` divides the errors by it. Sums read from a table keep 1 here:
+    #: the table holds its scale (``SumTable.scale``), and their readers scale the range.
+    scale: float = 1.0
+    #: The reference's smallest and largest sample (times ``scale``), which the whole record's
+    #: pass finds along; NaN for groups and replicates.
+    ref_min: float = math.nan
+    ref_max: float = math.nan
+
+    def rows(self, selection: slice | npt.NDArray[np.intp]) -> Sums[V]:
+        """The sums of some of the groups only."""
+        picked = {name: getattr(self, name)[selection] for name in _ELEMENTWISE}
+        return Sums(**picked, scale=self.scale, ref_min=self.ref_min, ref_max=self.ref_max)
+
+    @classmethod
+    def of_columns(
+        cls, columns: Mapping[str, FloatArray], shift: float | FloatArray
+    ) -> Sums[FloatArray]:
+        """The sums of columns named as :data:`SUM_COLUMNS`, of one shape (e.g. groups, or
+        replicates × signals), whose error sums are taken about ``shift`` (broadcast against
+        them: one for all, or one per row or signal). ``ref_sum`` and ``sim_sum`` may be left
+        out (NaN then)."""
+        n = np.rint(columns["n"]).astype(np.int64)
+        shifted_sum = columns["shifted_sum"]
+        sq_error, error_m2 = from_shifted_sums(n, shifted_sum, columns["shifted_sq"], shift)
+        unsummed = np.broadcast_to(np.float64(math.nan), n.shape)
+        return Sums(
+            n=n,
+            error_sum=shifted_sum + n.astype(np.float64) * shift,
+            abs_error=columns["abs_error"],
+            sq_error=sq_error,
+            error_m2=error_m2,
+            ref_sum=columns.get("ref_sum", unsummed),
+            sim_sum=columns.get("sim_sum", unsummed),
+            ref_sq=columns["ref_sq"],
+            sim_sq=columns["sim_sq"],
+            cross=columns["cross"],
+            sign_matches=np.rint(columns["sign_matches"]).astype(np.int64),
+        )
+
+    @classmethod
+    def of_table(cls, table: FloatArray, shift: float | FloatArray) -> Sums[FloatArray]:
+        """The sums of rows of :data:`SUM_COLUMNS` whose error sums are taken about ``shift``
+        (one for all rows, or one per row: the tables of several signals stacked)."""
+        return cls.of_columns({name: table[:, c] for c, name in enumerate(SUM_COLUMNS)}, shift)
+
+
+#: The fields of :class:`Sums` that hold one value per group, in order (``dataclasses.fields``
+#: builds them anew on every call).
+_ELEMENTWISE = tuple(f.name for f in fields(Sums) if f.name not in ("scale", "ref_min", "ref_max"))
 
 
 class _Numbers:
@@ -221,55 +307,36 @@ def normalised_error(error: float, reference_range: float) -> float:
 
 
 def lambdas_from_sums(
-    *,
-    n: Any,
-    abs_error: V,
-    sq_error: V,
-    error_m2: V,
-    ref_sq: V,
-    sim_sq: V,
-    cross: V,
-    sign_matches: Any,
-    reference_range: Any,
-    correlation: str = "xcorr",
-    ref_sum: V | None = None,
-    sim_sum: V | None = None,
-    scale: float = 1.0,
+    sums: Sums[V], reference_range: Any, correlation: str = "xcorr"
 ) -> SumLambdas[V]:
-    """λ1–λ6 from additive sums, elementwise.
+    """λ1–λ6 from a pair's :class:`Sums`, elementwise.
 
     Parameters
     ----------
-    n:
-        Samples: an ``int`` for Python numbers, an integer array for arrays.
-    abs_error, sq_error, error_m2:
-        Σ|e|, Σe² and Σ(e − ē)² with e = ref − sim.
-    ref_sq, sim_sq, cross:
-        Σref², Σsim², Σref·sim.
-    sign_matches:
-        Samples whose central-difference derivative signs agree (integers).
+    sums:
+        The sums: Python numbers for a whole record, arrays for groups or replicates.
+        ``sums.scale`` is the factor the samples were multiplied by; errors are divided by it.
     reference_range:
-        The normalising range R in the sums' units divided by ``scale``; broadcasts against the
-        sums for arrays.
+        The normalising range R in the sums' units divided by ``sums.scale``; broadcasts
+        against the sums for arrays.
     correlation:
-        ``"xcorr"`` or ``"pearson"`` (then ``ref_sum`` and ``sim_sum``, Σref and Σsim, are
-        needed).
-    scale:
-        The factor the samples were multiplied by before summing; errors are divided by it.
+        ``"xcorr"`` or ``"pearson"`` (then from Σref and Σsim too).
 
     Raises
     ------
     DegenerateSignalError
         ``reference_range`` is not > 0 (for arrays also: not finite).
     """
+    n = sums.n
+    scale = sums.scale
     ops = _ops(n)
     ranges = ops.check_range(reference_range)
     nf = n.astype(np.float64) if isinstance(n, np.ndarray) else n
     small = n < MIN_GROUP_SAMPLES
     safe_n = ops.where(small, 1.0, nf)
-    mae = abs_error / safe_n
-    rms = ops.sqrt(sq_error / safe_n)
-    error_std = ops.sqrt(error_m2 / ops.where(small, 1.0, nf - 1.0))
+    mae = sums.abs_error / safe_n
+    rms = ops.sqrt(sums.sq_error / safe_n)
+    error_std = ops.sqrt(sums.error_m2 / ops.where(small, 1.0, nf - 1.0))
     if scale != 1.0:
         mae = mae / scale
         rms = rms / scale
@@ -278,7 +345,7 @@ def lambdas_from_sums(
     rms = ops.maximum(rms, mae)
     delta_e = rms - mae
     lag_correlation = zero_lag_correlation(
-        safe_n, cross, ref_sq, sim_sq, ref_sum, sim_sum, correlation
+        safe_n, sums.cross, sums.ref_sq, sums.sim_sq, sums.ref_sum, sums.sim_sum, correlation
     )
 
     def normalised(error: Any) -> Any:
@@ -286,7 +353,7 @@ def lambdas_from_sums(
 
     values = {
         "lag_correlation": lag_correlation,
-        "derivative_match": sign_matches / safe_n,
+        "derivative_match": sums.sign_matches / safe_n,
         "mae": normalised(mae),
         "rms": normalised(rms),
         "anomaly": normalised(delta_e),
@@ -301,7 +368,7 @@ def from_shifted_sums(
     n: IntArray, shifted_sum: FloatArray, shifted_sq: FloatArray, shift: float | FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Σe² and Σ(e − ē)² from the sums Σd, Σd² of d = e − ``shift`` over ``n`` samples (see
-    :class:`~pytest_hevval.core.local.SumTable`), elementwise; both at least 0."""
+    :data:`SUM_COLUMNS`), elementwise; both at least 0."""
     nf = n.astype(np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
         error_m2 = np.where(n > 0, shifted_sq - shifted_sum**2 / np.maximum(nf, 1.0), 0.0)

@@ -47,7 +47,7 @@ from ..errors import DegenerateSignalError
 from . import kernel
 from .characteristics import power_of_two_scale
 from .local import SHIFT_SAMPLES, SUM_COLUMNS, SumTable, labelled_table
-from .sums import from_shifted_sums, lambdas_from_sums
+from .sums import Sums, lambdas_from_sums
 
 __all__ = [
     "CONFIDENCE",
@@ -477,33 +477,17 @@ def sums_lambdas(
     reference_range: float | FloatArray,
     correlation: str = "xcorr",
 ) -> dict[str, FloatArray]:
-    """λ1–λ6 from columns of additive sums, elementwise: :meth:`SumTable.sums` and
-    :func:`~pytest_hevval.core.local.group_lambdas` in one, for many signals at once (both
-    through :func:`~pytest_hevval.core.sums.from_shifted_sums` and
-    :func:`~pytest_hevval.core.sums.lambdas_from_sums`).
+    """λ1–λ6 from columns of additive sums, elementwise, for many signals at once: the columns
+    read as :class:`~pytest_hevval.core.sums.Sums` (``Sums.of_columns``, as
+    :meth:`SumTable.sums` reads a table) and λ from them by
+    :func:`~pytest_hevval.core.sums.lambdas_from_sums`, as
+    :func:`~pytest_hevval.core.local.group_lambdas` takes them.
 
     ``columns`` maps the names of ``SUM_COLUMNS`` to arrays of one shape (``ref_sum`` and
     ``sim_sum`` only for ``pearson``), e.g. (replicates, signals); ``shift`` and
-    ``reference_range`` broadcast against them (one per signal). The same functions as those
-    two, so the values are theirs.
+    ``reference_range`` broadcast against them (one per signal).
     """
-    n = np.rint(columns["n"]).astype(np.int64)
-    sq_error, error_m2 = from_shifted_sums(n, columns["shifted_sum"], columns["shifted_sq"], shift)
-    pearson = correlation == "pearson"
-    return lambdas_from_sums(
-        n=n,
-        abs_error=columns["abs_error"],
-        sq_error=sq_error,
-        error_m2=error_m2,
-        ref_sq=columns["ref_sq"],
-        sim_sq=columns["sim_sq"],
-        cross=columns["cross"],
-        sign_matches=np.rint(columns["sign_matches"]).astype(np.int64),
-        reference_range=reference_range,
-        correlation=correlation,
-        ref_sum=columns["ref_sum"] if pearson else None,
-        sim_sum=columns["sim_sum"] if pearson else None,
-    ).lambdas
+    return lambdas_from_sums(Sums.of_columns(columns, shift), reference_range, correlation).lambdas
 
 
 def _needed_columns(correlation: str) -> tuple[int, ...]:

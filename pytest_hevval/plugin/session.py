@@ -334,7 +334,7 @@ class HevvalSession:
     def end(self, session: pytest.Session) -> None:
         """In every process: a kernel this run would have used is compiled for the next runs
         (before a worker reports done, so that the controller's note finds it under way)."""
-        from ..core.kernel import finish_run
+        from ..data.kernel_cache import finish_run
 
         finish_run()
         if self.is_controller:
@@ -343,7 +343,7 @@ class HevvalSession:
     def finish(self, session: pytest.Session) -> None:
         """Judge deferred campaign gates; write reports, the comparison, the ratchet and the
         history record, once."""
-        from ..core.kernel import compile_note
+        from ..data.kernel_cache import compile_note
 
         if self.gates and not (session.shouldfail or session.shouldstop):
             self.judge_gates(session)

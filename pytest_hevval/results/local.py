@@ -18,7 +18,7 @@ from ..core.local import (
     MIN_GROUP_SAMPLES,
     Concentration,
     CorrelationKind,
-    GroupSums,
+    Sums,
     group_lambdas,
 )
 from .codec import json_numbers, number_or_nan
@@ -84,7 +84,7 @@ class GroupTable:
     def from_sums(
         cls,
         labels: Sequence[str],
-        sums: GroupSums,
+        sums: Sums[FloatArray],
         reference_range: float,
         correlation: str,
         total_sq: float,
@@ -98,7 +98,7 @@ class GroupTable:
     def many(
         cls,
         labels: Sequence[Sequence[str]],
-        sums: GroupSums,
+        sums: Sums[FloatArray],
         reference_range: float | FloatArray,
         correlation: str,
         total_sq: float | FloatArray,

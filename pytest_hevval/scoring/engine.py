@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from ..core import kernel
 from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.registry import Characteristic, compute_characteristic
 from ..core.tree import ScoredNode, TreeNode, error_origins, global_metric, iter_nodes, score_tree
 from ..core.uncertainty import BlockSums, block_sums_many, block_sums_stacked
 from ..core.upooling import u_distribution_of
+from ..data import kernel_cache
 from ..data.align import AlignedData, Interpolation, align_records
 from ..data.digest import DEFAULT_HASH, file_digest
 from ..data.quality import assess, fail_on, mask_on_grid
@@ -526,7 +526,9 @@ def _evaluate(
     _check_model_output(spec)
     reference = cache.read(spec.reference, spec.reference_columns())
     nodes = list(spec.walk())
-    kernel.expect(len(nodes) * max((c.values.size for c in reference.channels.values()), default=0))
+    kernel_cache.expect(
+        len(nodes) * max((c.values.size for c in reference.channels.values()), default=0)
+    )
     model_record, model_info, runtime = _load_model(spec, reference, cache, folders)
     aligned = _align(spec, nodes, reference, model_record, workers)
     unique, values = _signal_arrays(nodes, aligned, reference)

@@ -25,7 +25,7 @@ from ..core.local import (
     LOCAL_CHARACTERISTICS,
     PHASES,
     Grouping,
-    GroupSums,
+    Sums,
     SumTable,
     concentration,
     driving_phases,
@@ -285,9 +285,7 @@ def local_results(
     rows = table_rows.shape[0]
     shifts = np.array([s.table.shift for s in signals], dtype=np.float64)
     scales = np.array([s.table.scale for s in signals], dtype=np.float64)
-    sums = GroupSums.of_table(
-        np.concatenate([s.table.values for s in signals]), np.repeat(shifts, rows)
-    )
+    sums = Sums.of_table(np.concatenate([s.table.values for s in signals]), np.repeat(shifts, rows))
     # The windows' squared error of each signal: the share of it in each group.
     window_sq = sums.sq_error.reshape(len(signals), rows)[:, : labels.windows].sum(axis=1)
     ranges = np.array([s.reference_range for s in signals], dtype=np.float64)

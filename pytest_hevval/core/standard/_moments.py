@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sums import RecordSums
+from ..sums import Sums
 from ._inputs import (
     FloatArray,
     checked_pair,
@@ -40,10 +40,10 @@ CANCELLATION_BITS = 10
 
 @dataclass(frozen=True)
 class Moments:
-    """A pair's sums (``sums``), the centred Σ(ref − mean)², Σ(sim − mean)² and the co-moment
-    Σ(ref − mean)(sim − mean)."""
+    """A pair's sums (``sums``, the whole record's, as λ1–λ6 are taken from), the centred
+    Σ(ref − mean)², Σ(sim − mean)² and the co-moment Σ(ref − mean)(sim − mean)."""
 
-    sums: RecordSums
+    sums: Sums[float]
     ref_m2: float
     sim_m2: float
     co_m2: float
@@ -57,15 +57,16 @@ class Moments:
 
     @property
     def n(self) -> int:
-        return self.sums.n
+        count: int = self.sums.n  # a whole record's: an int
+        return count
 
     @property
     def ref_mean(self) -> float:
-        return self.sums.ref_sum / self.sums.n
+        return self.sums.ref_sum / self.n
 
     @property
     def sim_mean(self) -> float:
-        return self.sums.sim_sum / self.sums.n
+        return self.sums.sim_sum / self.n
 
     @property
     def ref_peak(self) -> float:
@@ -94,7 +95,7 @@ def _centred_from_sums(square: float, total: float, n: int) -> float | None:
     return m2
 
 
-def moments_from_pass(sums: RecordSums, reference: FloatArray, simulated: FloatArray) -> Moments:
+def moments_from_pass(sums: Sums[float], reference: FloatArray, simulated: FloatArray) -> Moments:
     """The moments of a pair whose λ pass left ``sums``; a side whose mean dwarfs its spread is
     centred on its samples (one read of that side), any other costs no read at all."""
     n = sums.n
@@ -138,19 +139,22 @@ def moments_of(reference: FloatArray, simulated: FloatArray) -> Moments:
     ref_sum = float(np.sum(r))
     sim_sum = float(np.sum(s))
     error_sum = float(np.sum(e))
-    sums = RecordSums(
+    sums = Sums(
         n=n,
+        error_sum=error_sum,
+        # Neither is a moment: no metric built on moments reads them.
+        abs_error=math.nan,
+        sq_error=float(e @ e),
+        error_m2=_centred(e, 1.0, error_sum / n),
         ref_sum=ref_sum,
         sim_sum=sim_sum,
         ref_sq=float(r @ r),
         sim_sq=float(s @ s),
         cross=float(r @ s),
-        sq_error=float(e @ e),
-        error_sum=error_sum,
-        error_m2=_centred(e, 1.0, error_sum / n),
+        sign_matches=math.nan,
+        scale=scale,
         ref_min=float(np.min(r)),
         ref_max=float(np.max(r)),
-        scale=scale,
     )
     return Moments(
         sums,
