@@ -35,7 +35,7 @@ from pytest_hevval.core.characteristics import (
 )
 from pytest_hevval.errors import DataError, DegenerateSignalError, HevvalError, SpecError
 from pytest_hevval.history import HistoryError, HistoryStore, make_record
-from pytest_hevval.scoring import engine
+from pytest_hevval.scoring import signal_pass
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
 from pytest_hevval.spec.yaml_lines import load_yaml_with_lines
@@ -354,13 +354,13 @@ def test_engine_signal_shared_by_two_sets_is_scored_once(
 ) -> None:
     _write_pair(tmp_path, BASE, NEAR)
     calls: list[int] = []
-    real = engine.signal_characteristics
+    real = signal_pass.signal_characteristics
 
     def counting(*args: Any, **kwargs: Any) -> SignalCharacteristics:
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(engine, "signal_characteristics", counting)
+    monkeypatch.setattr(signal_pass, "signal_characteristics", counting)
     sets = (
         "  - {signal: A, ref: v, sim: v, children: [{signal: v}]}\n"
         "  - {signal: B, ref: v, sim: v, children: [{signal: v}]}\n"

@@ -8,7 +8,7 @@ and weights were lists in paper order.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -140,9 +140,6 @@ class SignalResult:
     @property
     def passed(self) -> bool:
         return not self.failures and not self.local_failures
-
-    def lambda_of(self, characteristic: str) -> float:
-        return self.lambdas[characteristic]
 
     @property
     def lag_s(self) -> float:
@@ -423,7 +420,3 @@ def _intervals(data: Mapping[str, Any] | None, lambdas: Mapping[str, float]) -> 
         if interval is not None:
             out[name] = interval
     return out
-
-
-def worst_first(signals: Sequence[SignalResult]) -> list[SignalResult]:
-    return sorted(signals, key=lambda s: (s.passed, min(s.lambdas.values())))
