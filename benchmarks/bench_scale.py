@@ -219,7 +219,7 @@ def child_e2e(spec_path: str, intervals: bool = True) -> None:
                 "sys_s": usage.ru_stime,
                 "load": os.getloadavg()[0],
                 "signals": len(result.signals),
-                "samples": result.alignment["n_samples"],
+                "samples": result.alignment.n_samples,
                 "phi": result.phi,
                 "read_s": read_done - started,
                 "score_s": finished - read_done,

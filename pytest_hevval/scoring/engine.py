@@ -21,14 +21,21 @@ from ..core.tree import iter_nodes
 from ..data.align import AlignedData
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis
-from ..results.spec_result import SignalResult, SpecResult
+from ..results.spec_result import SpecResult
 from ..spec.model import Spec
 from .align_spec import align_spec, labels_of
 from .data_cache import DataCache
 from .gating import gate, measurement_checks, score_trees
 from .local import local_failures, spec_local_summary
 from .model_runs import check_model_output, load_model
-from .result_assembly import add_campaign_facts, add_intervals, signal_result, spec_result
+from .result_assembly import (
+    SpecScoring,
+    alignment_facts,
+    data_sources,
+    spec_confidence_of,
+    spec_phi,
+    spec_result,
+)
 from .signal_arrays import signal_arrays, signature_of
 from .signal_pass import fused_characteristics, interval_block_sums, registered_characteristics
 from .threads import per_item, scoring_threads
@@ -89,7 +96,7 @@ def _evaluate(
     reference = cache.read(spec.reference, spec.reference_columns())
     nodes = list(spec.walk())
     kernel.expect(len(nodes) * max((c.values.size for c in reference.channels.values()), default=0))
-    model_record, model_info, runtime = load_model(spec, reference, cache, folders)
+    model_record, model_data, runtime = load_model(spec, reference, cache, folders)
     aligned = align_spec(spec, nodes, reference, model_record, workers)
     unique, values = signal_arrays(nodes, aligned, reference)
     dt = aligned.grid.dt
@@ -114,43 +121,44 @@ def _evaluate(
         path: local_failures(spec, node, labels, local.get(signature_of(node)))
         for path, node in node_specs.items()
     }
-    signals: list[SignalResult] = []
-    arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
-    characteristics: dict[str, SignalCharacteristics] = {}
-    for scored_node in iter_nodes(roots):
-        node = node_specs[scored_node.path]
-        signature = signature_of(node)
-        chars = fused[signature]
-        signals.append(
-            signal_result(
-                spec,
-                node,
-                scored_node,
-                chars,
-                {name: parts for name, (_, parts) in registered[signature].items() if parts},
-                failures,
-                scored.figures.get(signature),
-                local.get(signature),
-                missed_locally,
-            )
-        )
-        characteristics[signals[-1].path] = chars
-        if keep_arrays:
-            arrays[signals[-1].path] = values[signature]
-    for signal in signals:
-        signal.within_uncertainty = within.get(signal.path, [])
-    result = spec_result(spec, signals, aligned, model_info, cache)
-    result.runtime = runtime
+    scoring = SpecScoring(roots, node_specs, scored, registered, failures, within, missed_locally)
+    weights = spec.beta()
+    phi = spec_phi(roots, weights)
+    confidence = None
     if intervals:
         blocks = interval_block_sums(
             {k: values[k] for k in values if k not in scored.blocks}, workers
         )
-        add_intervals(spec, result, roots, node_specs, fused, {**scored.blocks, **blocks})
-    result.local = spec_local_summary(
-        spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], result.weights
+        confidence = spec_confidence_of(spec, scoring, {**scored.blocks, **blocks}, phi, weights)
+    local_grid = spec_local_summary(
+        spec,
+        labels,
+        [
+            (n.alpha, found)
+            for n in iter_nodes(roots)
+            if (found := local.get(signature_of(node_specs[n.path]))) is not None
+        ],
+        weights,
     )
-    if spec.campaign is not None:
-        add_campaign_facts(spec, result, scored.u_distributions, node_specs)
+    result = spec_result(
+        spec,
+        scoring,
+        phi,
+        weights,
+        confidence,
+        local_grid,
+        data_sources(spec, aligned, model_data, cache),
+        alignment_facts(aligned),
+        runtime,
+    )
+    arrays: dict[str, tuple[FloatArray, FloatArray]] = {}
+    characteristics: dict[str, SignalCharacteristics] = {}
+    for scored_node in iter_nodes(roots):
+        signature = signature_of(node_specs[scored_node.path])
+        path = "/".join(scored_node.path)
+        characteristics[path] = fused[signature]
+        if keep_arrays:
+            arrays[path] = values[signature]
     return Evaluation(
         spec=spec,
         result=result,

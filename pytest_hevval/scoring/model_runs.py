@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
 from ..data.record import Record, model_column_error
 from ..data.remote import is_url
 from ..errors import DataError
 from ..results.runtime import ModelRuntime, RuntimeGate
+from ..results.spec_facts import ModelData
 from ..spec.model import SignalSpec, Spec
 from .data_cache import DataCache
 from .signal_arrays import columns_of
@@ -39,33 +39,37 @@ def check_model_output(spec: Spec) -> None:
 
 def load_model(
     spec: Spec, reference: Record, cache: DataCache, folders: list[Path]
-) -> tuple[Record, dict[str, Any], ModelRuntime | None]:
+) -> tuple[Record, ModelData, ModelRuntime | None]:
     """The model's output, what identifies the model, and what running it cost (None for
     exported files: they ran elsewhere)."""
     model = spec.model
     if model.kind == "file":
         record = cache.read(model, spec.model_columns())
         # The file's digest is computed while the spec is scored; spec_result waits for it.
-        return record, {"path": model.path, "kind": "file"}, None
+        return record, ModelData(kind="file", path=model.path), None
     runs = [_run_model(spec, reference, folders) for _ in range(spec.runtime.repeat)]
     record = runs[0]
-    info: dict[str, Any]
+    info: ModelData
     if model.kind == "callable":
         from ..data.models import callable_identity
 
-        info = {
-            "callable": model.callable,
-            "params": dict(model.params),
-            "kind": "callable",
-            **callable_identity(str(model.callable)),
-        }
+        identity = callable_identity(str(model.callable))
+        info = ModelData(
+            kind="callable",
+            callable=model.callable,
+            params=dict(model.params),
+            module_file=identity.get("module_file"),
+            module_sha256=identity.get("module_sha256"),
+        )
     else:
-        info = {"path": model.path, "kind": "fmu", "params": dict(model.params)}
-        if record.meta.get("guid"):
-            info["guid"] = record.meta["guid"]
-        if record.meta.get("unscored"):
+        info = ModelData(
+            kind="fmu",
+            path=model.path,
+            params=dict(model.params),
+            guid=record.meta.get("guid") or None,
             # Outputs without numbers (text, bytes), left out when the spec names no outputs.
-            info["unscored_outputs"] = dict(record.meta["unscored"])
+            unscored_outputs=dict(record.meta["unscored"]) if record.meta.get("unscored") else None,
+        )
     costs = [run.meta["cost"] for run in runs]
     peaks = [c.peak_bytes for c in costs if c.peak_bytes is not None]
     time = next(iter(record.channels.values())).time if record.channels else None
