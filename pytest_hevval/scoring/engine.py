@@ -26,7 +26,7 @@ from ..spec.model import Spec
 from .align_spec import align_spec, labels_of
 from .data_cache import DataCache
 from .gating import gate, measurement_checks, score_trees
-from .local import local_failures, spec_local_summary
+from .local import local_failures
 from .model_runs import check_model_output, load_model
 from .result_assembly import (
     SpecScoring,
@@ -130,23 +130,13 @@ def _evaluate(
             {k: values[k] for k in values if k not in scored.blocks}, workers
         )
         confidence = spec_confidence_of(spec, scoring, {**scored.blocks, **blocks}, phi, weights)
-    local_grid = spec_local_summary(
-        spec,
-        labels,
-        [
-            (n.alpha, found)
-            for n in iter_nodes(roots)
-            if (found := local.get(signature_of(node_specs[n.path]))) is not None
-        ],
-        weights,
-    )
     result = spec_result(
         spec,
         scoring,
         phi,
         weights,
         confidence,
-        local_grid,
+        labels,
         data_sources(spec, aligned, model_data, cache),
         alignment_facts(aligned),
         runtime,

@@ -20,7 +20,6 @@ from ..results.spec_facts import (
     DataQuality,
     DataSources,
     FileData,
-    LocalGrid,
     ModelData,
     QualityFinding,
 )
@@ -28,6 +27,7 @@ from ..results.spec_result import Failure, SignalResult, SpecResult
 from ..spec.model import SignalSpec, Spec
 from .confidence import SpecConfidence, spec_confidence
 from .data_cache import DataCache
+from .local import Labels, spec_local_summary
 from .signal_arrays import NodePath, Signature, signature_of
 from .signal_pass import Scored, SignalPass
 
@@ -86,7 +86,7 @@ def spec_result(
     phi: float,
     weights: dict[str, float],
     confidence: SpecConfidence | None,
-    local: LocalGrid | None,
+    labels: Labels | None,
     data: DataSources,
     alignment: AlignmentFacts,
     runtime: ModelRuntime | None,
@@ -95,6 +95,9 @@ def spec_result(
     signals = [
         _signal_result(spec, scoring, node, confidence) for node in iter_nodes(scoring.roots)
     ]
+    local = spec_local_summary(
+        spec, labels, [(s.alpha, s.local) for s in signals if s.local is not None], weights
+    )
     campaign = _campaign_facts(spec)
     return SpecResult(
         name=spec.name if campaign is None else f"{spec.name} · {spec.recording}",
