@@ -219,7 +219,7 @@ def child_e2e(spec_path: str, intervals: bool = True) -> None:
                 "sys_s": usage.ru_stime,
                 "load": os.getloadavg()[0],
                 "signals": len(result.signals),
-                "samples": result.alignment["n_samples"],
+                "samples": result.alignment.n_samples,
                 "phi": result.phi,
                 "read_s": read_done - started,
                 "score_s": finished - read_done,
@@ -370,11 +370,11 @@ def part_quality(signals: int, duration_s: float, rate_hz: float, repeat: int = 
     from pytest_hevval.data.quality import QualityLimits, assess
     from pytest_hevval.data.readers import read_record
     from pytest_hevval.data.record import Channel, Record, SourceOptions
-    from pytest_hevval.scoring.engine import _tune_allocator
+    from pytest_hevval.scoring.allocator import tune_allocator
 
     folder = e2e_data(signals, duration_s, rate_hz)
     n = int(duration_s * rate_hz)
-    _tune_allocator()  # as evaluate_spec does: column-sized temporaries stay in the heap
+    tune_allocator()  # as evaluate_spec does: column-sized temporaries stay in the heap
     columns = [f"c{i:03d}" for i in range(signals)]
     logged = read_record(str(folder / "ref.parquet"), columns, SourceOptions(time="time"))
     rounded = {

@@ -397,12 +397,12 @@ def test_fine_blocks_summed_in_the_scoring_pass_give_the_intervals_of_a_pass_of_
 ) -> None:
     """A long record's fine-block sums are taken on the signal's scoring thread; summed after
     every signal instead (as records short enough to stack are), the intervals are the same."""
-    import pytest_hevval.scoring.engine as engine
+    import pytest_hevval.scoring.signal_pass as signal_pass
 
     _deferred_files(tmp_path, 70_000, False)
     in_pass = _scored(tmp_path, True, monkeypatch)["result"]
     with monkeypatch.context() as patch:
-        patch.setattr(engine, "block_sums_stacked", lambda n: True)
+        patch.setattr(signal_pass, "block_sums_stacked", lambda n: True)
         afterwards = _scored(tmp_path, True, monkeypatch)["result"]
     assert in_pass == afterwards
     signals = in_pass["signals"]  # type: ignore[index]

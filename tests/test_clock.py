@@ -95,9 +95,9 @@ def test_by_clock_lines_up_records_that_start_at_different_times(tmp_path: Path)
     simulated = pd.DataFrame({"time": later, "v": signal[50 : 50 + N]})
     simulated.to_csv(tmp_path / "sim.csv", index=False)
     result = evaluate_spec(parse_spec_text(SPEC, tmp_path / "t.hevval.yaml")).result
-    assert result.alignment["by"] == "clock"
-    assert result.alignment["clock_offset_s"] == pytest.approx(5.0)
-    assert result.alignment["absolute_start"] == "2024-06-01T08:00:05+00:00"
+    assert result.alignment.by == "clock"
+    assert result.alignment.clock_offset_s == pytest.approx(5.0)
+    assert result.alignment.absolute_start == "2024-06-01T08:00:05+00:00"
     assert result.signals[0].lambdas["mae"] == pytest.approx(1.0, abs=1e-9)
 
 

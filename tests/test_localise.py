@@ -102,11 +102,11 @@ def test_an_error_above_100_kmh_fails_exactly_those_cells(tmp_path: Path) -> Non
     (signal,) = evaluation.result.signals  # type: ignore[attr-defined]
     (cell_miss,) = [f for f in signal.local_failures if f.scope == "regions"]
     assert set(cell_miss.where) == {"speed 100–120", "speed 120–140"}
-    grid = evaluation.result.local["regions"]  # type: ignore[attr-defined]
-    assert grid["unvisited"] == [[7]]  # 140–160 km/h is declared but never driven
-    assert grid["phi"][7] is None
-    mae = dict(zip(grid["labels"], signal.local.regions.lambdas["mae"], strict=True))
-    assert all(mae[label] > 0.99 for label in grid["labels"][:5])
+    grid = evaluation.result.local.regions  # type: ignore[attr-defined]
+    assert grid.unvisited == ((7,),)  # 140–160 km/h is declared but never driven
+    assert grid.phi[7] is None
+    mae = dict(zip(grid.labels, signal.local.regions.lambdas["mae"], strict=True))
+    assert all(mae[label] > 0.99 for label in grid.labels[:5])
 
 
 def test_a_condition_loosens_the_windows_where_it_holds(tmp_path: Path) -> None:

@@ -116,13 +116,14 @@ def test_error_blames_the_measurement_with_channel_and_time(tmp_path: Path) -> N
 def test_warn_reports_and_omit_scores_around(tmp_path: Path) -> None:
     _project(tmp_path)
     warned = evaluate_spec(parse_spec_text(SPEC.format(action="warn"), tmp_path / "w.hevval.yaml"))
-    quality = warned.result.data["quality"]
-    assert quality["action"] == "warn"
-    assert [f["kind"] for f in quality["findings"]] == ["straight-line fill"]
-    assert warned.result.alignment["coverage"] == 1.0
+    quality = warned.result.data.quality
+    assert quality is not None
+    assert quality.action == "warn"
+    assert [f.kind for f in quality.findings] == ["straight-line fill"]
+    assert warned.result.alignment.coverage == 1.0
     omitted = evaluate_spec(parse_spec_text(SPEC.format(action="omit"), tmp_path / "o.hevval.yaml"))
     # 39.3–199.1 s of a 400 s record are left out: 1599 of 4001 grid points.
-    assert omitted.result.alignment["coverage"] == pytest.approx(1 - 1599 / 4001)
+    assert omitted.result.alignment.coverage == pytest.approx(1 - 1599 / 4001)
     assert omitted.result.signals[0].characteristics.n_samples == 4001 - 1599
 
 

@@ -35,7 +35,7 @@ from pytest_hevval.core.characteristics import (
 )
 from pytest_hevval.errors import DataError, DegenerateSignalError, HevvalError, SpecError
 from pytest_hevval.history import HistoryError, HistoryStore, make_record
-from pytest_hevval.scoring import engine
+from pytest_hevval.scoring import signal_pass
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
 from pytest_hevval.spec.yaml_lines import load_yaml_with_lines
@@ -325,7 +325,7 @@ def test_engine_scores_huge_and_tiny_magnitudes(tmp_path: Path, scale: float) ->
 def test_engine_scores_three_samples(tmp_path: Path) -> None:
     _write_pair(tmp_path, BASE[:3], NEAR[:3])
     result = evaluate_spec(_spec(tmp_path, ONE)).result
-    assert result.alignment["n_samples"] == 3
+    assert result.alignment.n_samples == 3
     assert 0.0 <= result.phi <= 1.0
 
 
@@ -354,13 +354,13 @@ def test_engine_signal_shared_by_two_sets_is_scored_once(
 ) -> None:
     _write_pair(tmp_path, BASE, NEAR)
     calls: list[int] = []
-    real = engine.signal_characteristics
+    real = signal_pass.signal_characteristics
 
     def counting(*args: Any, **kwargs: Any) -> SignalCharacteristics:
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(engine, "signal_characteristics", counting)
+    monkeypatch.setattr(signal_pass, "signal_characteristics", counting)
     sets = (
         "  - {signal: A, ref: v, sim: v, children: [{signal: v}]}\n"
         "  - {signal: B, ref: v, sim: v, children: [{signal: v}]}\n"
@@ -377,7 +377,7 @@ def test_engine_long_signal(tmp_path: Path) -> None:
     reference = np.sin(t) + 0.1 * np.sin(13 * t)
     _write_pair(tmp_path, reference, reference + 0.01, dt=0.01)
     result = evaluate_spec(_spec(tmp_path, ONE, "alignment: {max_lag_s: 1}\n"))
-    assert result.result.alignment["n_samples"] == LONG
+    assert result.result.alignment.n_samples == LONG
     assert result.result.signals[0].lag_s == 0.0
     assert result.result.signals[0].lambdas["lag_correlation"] > 0.99
 
@@ -385,7 +385,7 @@ def test_engine_long_signal(tmp_path: Path) -> None:
 def test_engine_omits_gaps_when_asked(tmp_path: Path) -> None:
     _write_pair(tmp_path, BASE, np.where(T[5] == T, np.nan, NEAR))
     result = evaluate_spec(_spec(tmp_path, ONE, "alignment: {nan: omit}\n")).result
-    assert result.alignment["coverage"] < 1.0
+    assert result.alignment.coverage < 1.0
     assert 0.0 <= result.phi <= 1.0
 
 
@@ -860,7 +860,7 @@ def test_model_callable_runs_only_when_evaluated(
     result = evaluate_spec(spec).result
     monkeypatch.delitem(sys.modules, "side_effect_model")
     assert ran.read_text() == "yes"
-    assert result.data["model"]["kind"] == "callable"
+    assert result.data.model.kind == "callable"
 
 
 def test_file_models_never_start_a_callable_or_fmu(
@@ -877,7 +877,7 @@ def test_file_models_never_start_a_callable_or_fmu(
     _write_pair(tmp_path, BASE, NEAR)
     candidates = 'candidates: {c: "`v` * 2"}\n'
     result = evaluate_spec(_spec(tmp_path, ONE, candidates)).result
-    assert result.data["model"]["kind"] == "file"
+    assert result.data.model.kind == "file"
 
 
 def test_spec_parsing_imports_no_model(tmp_path: Path) -> None:

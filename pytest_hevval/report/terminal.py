@@ -245,17 +245,17 @@ def _standard_metric_lines(signal: SignalResult, indent: str) -> list[str]:
 
 def quality_lines(result: SpecResult) -> list[str]:
     """The data-quality findings on the measurement, one line each."""
-    quality = result.data.get("quality")
+    quality = result.data.quality
     if not quality:
         return []
-    action = quality.get("action", "warn")
+    action = quality.action
     done = {"warn": "", "omit": ", scored around", "error": ""}.get(action, "")
-    findings = quality.get("findings", [])
+    findings = quality.findings
     lines = [f"  data quality: {len(findings)} finding(s) in the measurement{done}"]
     for found in findings:
         lines.append(
-            f"    {found['channel']}: {found['kind']} at {found['start_s']:.6g}–"
-            f"{found['stop_s']:.6g} s ({found['detail']})"
+            f"    {found.channel}: {found.kind} at {found.start_s:.6g}–"
+            f"{found.stop_s:.6g} s ({found.detail})"
         )
     return lines
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..core.uncertainty import Interval, value_text
 from ..core.upooling import area_to_uniform, pool
 from ..defaults import split_key
-from .codec import data_identity, json_number
+from .codec import json_number
 from .spec_result import SpecResult
 
 __all__ = [
@@ -196,7 +196,8 @@ class CampaignVerdict:
 
 def _identity(result: SpecResult) -> tuple[str, str]:
     """(hash, digest) of a recording's measured data file; empty when it was not hashed."""
-    return data_identity(result.data.get("reference") or {}) or ("", "")
+    reference = result.data.reference
+    return (reference.identity if reference is not None else None) or ("", "")
 
 
 def _mean_lambda(result: SpecResult, name: str) -> float:
@@ -211,9 +212,10 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
     if not results:
         raise ValueError("a campaign verdict needs at least one recording's result")
     first = results[0]
-    campaign = first.campaign or {}
+    campaign = first.campaign
     by_id = {r.recording or r.spec: r for r in results}
-    declared = [str(r) for r in campaign.get("recordings", by_id)]
+    listed = campaign.recordings if campaign is not None else None
+    declared = [str(r) for r in (listed if listed is not None else by_id)]
     outcomes = [
         RecordingOutcome(
             id=recording,
@@ -232,19 +234,21 @@ def verdict(results: Sequence[SpecResult]) -> CampaignVerdict:
     counted = [by_id[o.id] for o in outcomes if o.role != "calibration"]
     names = [name for name in first.weights if any(name in s.lambdas for s in first.signals)]
     paths = [s.path for s in first.signals]
-    quantile = campaign.get("phi_quantile")
+    quantile = campaign.phi_quantile if campaign is not None else None
     found = CampaignVerdict(
         spec=campaign_of(first.spec),
-        name=str(campaign.get("name", first.name)),
+        name=str(
+            campaign.name if campaign is not None and campaign.name is not None else first.name
+        ),
         recordings=outcomes,
         missing=[r for r in declared if r not in by_id],
-        min_pass_rate=campaign.get("min_pass_rate"),
+        min_pass_rate=campaign.min_pass_rate if campaign is not None else None,
         phi_quantile=(float(quantile[0]), float(quantile[1])) if quantile else None,
         phi=Distribution.of([r.phi for r in counted]),
         lambdas={n: Distribution.of([_mean_lambda(r, n) for r in counted]) for n in names},
         signal_pass_rates={path: _pass_rate(counted, path) for path in paths},
         pooled_area=_pooled_areas(counted, paths),
-        unused_models=[str(p) for p in campaign.get("unused_models", ())],
+        unused_models=[str(p) for p in (campaign.unused_models if campaign is not None else ())],
     )
     found.failures = _gate_failures(found)
     return found

@@ -8,7 +8,7 @@ and weights were lists in paper order.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +19,7 @@ from .codec import json_number, keyed_lambdas
 from .local import LocalFailure, LocalResult
 from .measurement import ErrorCheck
 from .runtime import ModelRuntime
+from .spec_facts import AlignmentFacts, CampaignFacts, DataSources, LocalGrid
 
 __all__ = [
     "ERROR_KEYS",
@@ -93,7 +94,7 @@ class Failure:
         )
 
 
-@dataclass
+@dataclass(frozen=True)
 class SignalResult:
     """One signal node of one set, scored.
 
@@ -140,9 +141,6 @@ class SignalResult:
     @property
     def passed(self) -> bool:
         return not self.failures and not self.local_failures
-
-    def lambda_of(self, characteristic: str) -> float:
-        return self.lambdas[characteristic]
 
     @property
     def lag_s(self) -> float:
@@ -266,7 +264,7 @@ class SignalResult:
         )
 
 
-@dataclass
+@dataclass(frozen=True)
 class SpecResult:
     """A whole spec, scored: every signal, Φ and the gate."""
 
@@ -279,14 +277,16 @@ class SpecResult:
     #: β of every characteristic the spec scores, keyed by name.
     weights: dict[str, float]
     signals: list[SignalResult]
-    data: dict[str, Any]
-    alignment: dict[str, Any]
+    #: The measured file, the model and the data-quality findings.
+    data: DataSources
+    #: The time grid both records were put on.
+    alignment: AlignmentFacts
     #: The grid of windows and cells, coverage and Φ per window and per cell.
-    local: dict[str, Any] | None = None
+    local: LocalGrid | None = None
     #: One recording of a campaign: its id, its role and the campaign's gate (see campaign.py).
     recording: str | None = None
     role: str = "validation"
-    campaign: dict[str, Any] | None = None
+    campaign: CampaignFacts | None = None
     #: Φ's 95 % bootstrap interval; None for results recorded without one.
     phi_interval: Interval | None = None
     #: What ``min_phi`` judges: Φ itself, or the lower or upper bound of its interval.
@@ -359,14 +359,18 @@ class SpecResult:
             "phi_passed": self.phi_passed,
             "passed": self.passed,
             "weights": dict(self.weights),
-            "data": self.data,
-            "alignment": self.alignment,
+            "data": self.data.to_dict(),
+            "alignment": self.alignment.to_dict(),
             "signals": [s.to_dict() for s in self.signals],
             **({"requirements": list(self.requirements)} if self.requirements else {}),
             **({"runtime": self.runtime.to_dict()} if self.runtime is not None else {}),
-            **({"local": self.local} if self.local is not None else {}),
+            **({"local": self.local.to_dict()} if self.local is not None else {}),
             **(
-                {"recording": self.recording, "role": self.role, "campaign": self.campaign}
+                {
+                    "recording": self.recording,
+                    "role": self.role,
+                    "campaign": None if self.campaign is None else self.campaign.to_dict(),
+                }
                 if self.recording is not None
                 else {}
             ),
@@ -387,12 +391,12 @@ class SpecResult:
                 if w is not None
             },
             signals=[SignalResult.from_dict(s) for s in data["signals"]],
-            data=dict(data.get("data", {})),
-            alignment=dict(data.get("alignment", {})),
-            local=data.get("local"),
+            data=DataSources.from_dict(data.get("data") or {}),
+            alignment=AlignmentFacts.from_dict(data.get("alignment") or {}),
+            local=LocalGrid.from_dict(data["local"]) if data.get("local") else None,
             recording=data.get("recording"),
             role=str(data.get("role", "validation")),
-            campaign=data.get("campaign"),
+            campaign=CampaignFacts.from_dict(data["campaign"]) if data.get("campaign") else None,
             phi_interval=_interval(float(data["phi"]), data.get("phi_interval")),
             min_phi_on=str(data.get("min_phi_on", "value")),
             requirements=[str(r) for r in data.get("requirements") or []],
@@ -423,7 +427,3 @@ def _intervals(data: Mapping[str, Any] | None, lambdas: Mapping[str, float]) -> 
         if interval is not None:
             out[name] = interval
     return out
-
-
-def worst_first(signals: Sequence[SignalResult]) -> list[SignalResult]:
-    return sorted(signals, key=lambda s: (s.passed, min(s.lambdas.values())))

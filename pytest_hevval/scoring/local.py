@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -35,6 +35,7 @@ from ..core.local import (
 from ..core.tree import global_metric_arrays
 from ..results.codec import json_numbers
 from ..results.local import GroupTable, LocalFailure, LocalResult, concentration_sentence
+from ..results.spec_facts import LocalGrid, RegionGrid
 from ..spec.model import LocalGate, SignalSpec, Spec
 
 __all__ = [
@@ -80,7 +81,7 @@ class Labels:
     #: Per window: the condition holding for most of it (None: none does).
     window_condition: tuple[str | None, ...] = ()
     cell_axis: int | None = None
-    region: Mapping[str, Any] | None = None
+    region: RegionGrid | None = None
 
     @cached_property
     def tables(self) -> tuple[tuple[tuple[str, ...], ...], npt.NDArray[np.intp]]:
@@ -98,7 +99,7 @@ class Labels:
             parts.append((("holds", "rest"), _axis_rows(grouping, axis)[::-1]))
         if self.cell_axis is not None and self.region is not None:
             # Row 0 of the cell axis holds the samples outside the grid.
-            parts.append((self.region["labels"], _axis_rows(grouping, self.cell_axis)[1:]))
+            parts.append((self.region.labels, _axis_rows(grouping, self.cell_axis)[1:]))
         names = tuple(tuple(labels) for labels, _ in parts)
         return names, np.concatenate([rows for _, rows in parts])
 
@@ -178,7 +179,7 @@ def label_samples(
 
     cell: IntArray | None = None
     cells = 0
-    region: dict[str, Any] | None = None
+    region: RegionGrid | None = None
     if spec.regions is not None:
         variables = [
             scored(evaluate(expression, f"regions.by[{i}]"))
@@ -190,16 +191,16 @@ def label_samples(
         cells = int(np.prod(grid.shape))
         fine = fine * (cells + 1) + (cell + 1)
         names = [expression.source for expression in spec.regions.by]
-        region = {
-            "by": names,
-            "edges": [e.tolist() for e in grid.edges],
-            "shape": list(grid.shape),
-            "counts": grid.counts.reshape(-1).tolist(),
-            "labels": _cell_labels(names, grid.edges),
-            "min_samples": spec.regions.min_samples,
-            "unvisited": [list(index) for index in grid.unvisited()],
-            "outside": int((grid.cell < 0).sum()),
-        }
+        region = RegionGrid(
+            by=tuple(names),
+            edges=tuple(tuple(e.tolist()) for e in grid.edges),
+            shape=tuple(grid.shape),
+            counts=tuple(grid.counts.reshape(-1).tolist()),
+            labels=tuple(_cell_labels(names, grid.edges)),
+            min_samples=spec.regions.min_samples,
+            unvisited=tuple(tuple(index) for index in grid.unvisited()),
+            outside=int((grid.cell < 0).sum()),
+        )
 
     shape = [windows]
     phase_axis = None
@@ -446,22 +447,27 @@ def spec_local_summary(
     labels: Labels | None,
     signals: Sequence[tuple[float, LocalResult]],
     weights: Mapping[str, float],
-) -> dict[str, Any] | None:
+) -> LocalGrid | None:
     """What the report draws for the whole spec: the grid, its coverage and Φ per group."""
     if labels is None:
         return None
-    out: dict[str, Any] = {
-        "window_s": spec.local.window_s if spec.local else None,
-        "spans_s": [list(s) for s in labels.spans_s],
-        "phi_windows": local_phi([(a, r.windows.lambdas) for a, r in signals], weights),
-    }
-    if labels.window_condition and any(labels.window_condition):
-        out["window_conditions"] = list(labels.window_condition)
-    if labels.region is not None:
-        out["regions"] = {
-            **labels.region,
-            "phi": local_phi(
-                [(a, r.regions.lambdas) for a, r in signals if r.regions is not None], weights
+    region = labels.region
+    return LocalGrid(
+        window_s=spec.local.window_s if spec.local else None,
+        spans_s=labels.spans_s,
+        phi_windows=tuple(local_phi([(a, r.windows.lambdas) for a, r in signals], weights)),
+        window_conditions=tuple(labels.window_condition)
+        if labels.window_condition and any(labels.window_condition)
+        else (),
+        regions=None
+        if region is None
+        else replace(
+            region,
+            phi=tuple(
+                local_phi(
+                    [(a, r.regions.lambdas) for a, r in signals if r.regions is not None],
+                    weights,
+                )
             ),
-        }
-    return out
+        ),
+    )

@@ -9,7 +9,7 @@ gives the same result and the same history record, apart from the run's own meta
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..data.digest import DEFAULT_HASH
@@ -49,18 +49,18 @@ class RunOptions:
     diagnose: str = "off"
 
 
-def _relative_result(result: SpecResult, rootdir: Path) -> None:
+def _relative_result(result: SpecResult, rootdir: Path) -> SpecResult:
     """Results name files relative to the root, so records move between machines."""
-    result.spec = relative_to(rootdir, result.spec)
-    for side in result.data.values():
-        if isinstance(side, dict) and side.get("path"):
-            side["path"] = relative_to(rootdir, str(side["path"]))
-        if isinstance(side, dict) and side.get("module_file"):
-            side["module_file"] = relative_to(rootdir, str(side["module_file"]))
-    if result.campaign and result.campaign.get("unused_models"):
-        result.campaign["unused_models"] = [
-            relative_to(rootdir, str(path)) for path in result.campaign["unused_models"]
-        ]
+
+    def relative(path: str) -> str:
+        return relative_to(rootdir, path)
+
+    return replace(
+        result,
+        spec=relative(result.spec),
+        data=result.data.with_paths(relative),
+        campaign=result.campaign.with_paths(relative) if result.campaign else None,
+    )
 
 
 def run_specs(
@@ -101,7 +101,7 @@ def _finish(outcome: Outcome, options: RunOptions) -> None:
     (not after a Dask worker scored the spec); the aligned data released unless kept."""
     if not isinstance(outcome, Evaluation):
         return
-    _relative_result(outcome.result, options.rootdir)
+    outcome.result = _relative_result(outcome.result, options.rootdir)
     if options.diagnose != "off":
         outcome.diagnoses = diagnose_failures(outcome, options.diagnose, options.workers)
     if not options.keep_arrays:
