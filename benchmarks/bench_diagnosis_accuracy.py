@@ -244,7 +244,7 @@ def _condition(
 ) -> tuple[FloatArray, FloatArray, list[Any]]:
     """(reference, simulated, candidates) of one draw under ``condition``; ``effect`` is the
     injected load series (zeros for a control)."""
-    from pytest_hevval.core.diagnosis import Candidate
+    from pytest_hevval.core.residual import Candidate
 
     values = trip.series[load]
     sim = trip.simulated

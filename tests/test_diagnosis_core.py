@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy import signal as sps
 from scipy import stats
 
-from pytest_hevval.core.diagnosis import (
+from pytest_hevval.core.residual import (
     Candidate,
     CandidateFinding,
     Diagnosis,

@@ -31,7 +31,7 @@ _DRIVER = r"""
 import json, re, sys
 from pathlib import Path
 import numpy as np
-from pytest_hevval.core.diagnosis import diagnose_residual
+from pytest_hevval.core.residual import diagnose_residual
 from pytest_hevval.scoring.diagnosis import (
     candidates_for, diagnose_failures, diagnose_origin, diagnose_signal,
 )

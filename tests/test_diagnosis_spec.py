@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
+from pytest_hevval.core.residual import MIN_SHARE, Candidate, diagnose_residual
 from pytest_hevval.errors import SpecError
 from pytest_hevval.report.diagnosis import summary
 from pytest_hevval.spec.load import parse_spec_text

@@ -1,6 +1,6 @@
 """The diagnosis in words: the one-line summary, each effect in physical units, and the
 full description ``hevval diagnose`` prints. The numbers come from
-:mod:`pytest_hevval.core.diagnosis`; only sentences are made here.
+:mod:`pytest_hevval.core.residual`; only sentences are made here.
 """
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..core.diagnosis import (
+from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
+from ..core.residual import (
     GENERIC_KINDS,
     MIN_EXPLAINED_INCREASE,
     MIN_SHARE,
@@ -18,7 +19,6 @@ from ..core.diagnosis import (
     Effect,
     Response,
 )
-from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 from .sentences import lag_bound_text

@@ -1,6 +1,6 @@
 """Residual diagnosis of a scored spec: from an evaluation to candidate effects and back.
 
-The maths lives in :mod:`pytest_hevval.core.diagnosis`; this module gathers the candidates —
+The maths lives in :mod:`pytest_hevval.core.residual`; this module gathers the candidates —
 the spec's declared ``candidates:`` expressions, every measured reference channel the spec
 does not use, and the time derivative of each — on the aligned grid, and diagnoses a signal
 (or the level below it, when that one names the cause).
@@ -18,7 +18,8 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.characteristics import SignalCharacteristics, signal_characteristics
-from ..core.diagnosis import (
+from ..core.registry import FUSED_CHARACTERISTICS
+from ..core.residual import (
     GENERIC_KINDS,
     MIN_SHARE,
     PREDICTED_CHARACTERISTICS,
@@ -27,7 +28,6 @@ from ..core.diagnosis import (
     Effect,
     diagnose_residual,
 )
-from ..core.registry import FUSED_CHARACTERISTICS
 from ..data.record import Record
 from ..errors import DataError, ExpressionError, HevvalError, SpecError
 from ..results.diagnosis import SignalAbove, SignalDiagnosis, candidate_unit
