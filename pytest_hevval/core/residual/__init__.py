@@ -25,7 +25,15 @@ Pure numpy/scipy, no wording: the layers above word the findings.
 
 from ..stats import Whiteness, ljung_box
 from .diagnose import diagnose_residual
-from .findings import Candidate, CandidateFinding, Diagnosis, Effect, Localisation, Response
+from .findings import (
+    Candidate,
+    CandidateFinding,
+    Diagnosis,
+    Effect,
+    Localisation,
+    Note,
+    Response,
+)
 from .thresholds import (
     GENERIC_KINDS,
     MIN_EXPLAINED_INCREASE,
@@ -45,6 +53,7 @@ __all__ = [
     "Diagnosis",
     "Effect",
     "Localisation",
+    "Note",
     "Response",
     "Whiteness",
     "diagnose_residual",

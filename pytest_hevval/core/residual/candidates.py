@@ -11,12 +11,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..stats import (
-    FloatArray,
-    ar_order,
-    block_means,
-    dot,
-)
+from ..stats import FloatArray, ar_order, block_means, dot
+from .findings import Note
 from .inputs import _free_name, _UserSeries
 from .thresholds import (
     _COLLINEAR,
@@ -89,14 +85,14 @@ def _delay_slope(sim: FloatArray, lag: int, dt: float) -> FloatArray:
 
 
 def _independent(
-    series: list[_Series], ng: int, notes: list[str]
+    series: list[_Series], ng: int, notes: list[Note]
 ) -> tuple[list[_Series], FloatArray]:
     """Candidates that are neither constant nor collinear, and their standardised rows."""
     usable: list[_Series] = []
     for s in series:
         scale = max(float(np.max(np.abs(s.grid))), 1e-300)
         if s.std <= 1e-12 * scale:
-            notes.append(f"candidate {s.name!r} is constant and was dropped")
+            notes.append(Note("constant", candidate=s.name))
         else:
             usable.append(s)
     # Sequential Cholesky of the Gram matrix of [1, z₁, z₂, …]: the pivot of z_j is the part
@@ -128,12 +124,9 @@ def _independent(
         corr = np.abs(gram[kept_rows[1:], i]) / ng
         best = int(np.argmax(corr)) if kept else -1
         if best >= 0 and corr[best] ** 2 >= 1.0 - _COLLINEAR:
-            notes.append(f"candidate {s.name!r} duplicates {kept[best].name!r} and was dropped")
+            notes.append(Note("duplicate", candidate=s.name, other=kept[best].name))
         else:
-            notes.append(
-                f"candidate {s.name!r} is (nearly) a linear combination of the candidates "
-                "before it and was dropped"
-            )
+            notes.append(Note("collinear", candidate=s.name))
     rows = kept_rows[1:]
     z_rows = np.ascontiguousarray(standardised[rows]) if kept else np.zeros((0, ng))
     return kept, z_rows

@@ -43,7 +43,7 @@ from ..stats import (
 )
 from .candidates import _candidate_series, _grouped, _independent, _Scale, _slow_scale
 from .effects import _effects
-from .findings import Candidate, CandidateFinding, Diagnosis
+from .findings import Candidate, CandidateFinding, Diagnosis, Note
 from .headline import _gain_and_offset, _timing
 from .inference import _scaled
 from .inputs import (
@@ -215,7 +215,7 @@ def diagnose_residual(
     ref = ref * s_sig
     sim = sim * s_sig
     user, units = _rescaled_candidates(user, s_sig)
-    notes: list[str] = []
+    notes: list[Note] = []
     sim_varies = _varies(sim)
 
     lag, max_lag = _timing(ref, sim, dt, max_lag_s, sim_varies)
@@ -231,7 +231,7 @@ def diagnose_residual(
 
     head = _gain_and_offset(ref, sim, lag, order, alpha, max_samples, sim_varies)
     if not sim_varies:
-        notes.append("the simulated signal is constant: gain and lag cannot be estimated")
+        notes.append(Note("constant_simulation"))
 
     user, echoes = _split_responses(ref, sim, dt, user, responses, causes, exogenous)
     series = _grouped(
@@ -289,7 +289,7 @@ def diagnose_residual(
     frequencies = dominant_frequencies(remaining_full - float(np.mean(remaining_full)), dt)
     effective = effective_samples(r_g, order)
     if factor > 1:
-        notes.append(f"regressions use block means of {factor} samples ({dt * factor:g} s)")
+        notes.append(Note("decimated", samples=factor, seconds=dt * factor))
 
     effects, lambdas, predicted, where = _effects(
         ref[window],

@@ -12,10 +12,7 @@ import numpy.typing as npt
 
 from ..importance import explained_sums
 from ..local import concentration, fixed_windows, group_lambdas, segment_sums
-from ..stats import (
-    FloatArray,
-    dot,
-)
+from ..stats import FloatArray, dot
 from .candidates import _Scale, _Series
 from .findings import Effect, Localisation
 from .inference import _interval, _p_value, _scaled

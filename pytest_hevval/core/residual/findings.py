@@ -13,12 +13,11 @@ from typing import Any, Literal
 
 import numpy.typing as npt
 
-from ..stats import (
-    Whiteness,
-)
+from ..stats import Whiteness
 from .thresholds import MIN_SHARE
 
 CandidateKind = Literal["declared", "channel", "derivative", "lag", "gain", "offset"]
+NoteKind = Literal["constant_simulation", "decimated", "constant", "duplicate", "collinear"]
 
 
 @dataclass(frozen=True)
@@ -225,6 +224,28 @@ class Localisation:
 
 
 @dataclass(frozen=True)
+class Note:
+    """Something the diagnosis dropped or changed, and why: what happened and the names and
+    numbers it concerns, for the report to word (:func:`pytest_hevval.report.diagnosis.note_text`).
+
+    Attributes
+    ----------
+    kind:
+        ``"constant_simulation"``: the simulated signal is constant, so gain and lag cannot be
+        estimated. ``"decimated"``: the regressions use block means of ``samples`` samples
+        (``seconds`` long). What became of ``candidate``: ``"constant"``, ``"duplicate"`` (of
+        ``other``) or ``"collinear"`` (a linear combination of the candidates before it), each
+        dropped.
+    """
+
+    kind: NoteKind
+    candidate: str = ""
+    other: str = ""
+    samples: int = 0
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Where a residual comes from. Every field is explained in ``docs/diagnosis.md``."""
 
@@ -241,7 +262,7 @@ class Diagnosis:
     remaining: Whiteness
     dominant_frequencies_hz: tuple[float, ...]
     effective_samples: float
-    notes: tuple[str, ...] = ()
+    notes: tuple[Note, ...] = ()
     effects: tuple[Effect, ...] = ()
     responses: tuple[Response, ...] = ()
     min_share: float = MIN_SHARE

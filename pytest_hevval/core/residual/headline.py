@@ -10,11 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lag import search_lag
-from ..stats import (
-    FloatArray,
-    ar_model_fit,
-    block_means,
-)
+from ..stats import FloatArray, ar_model_fit, block_means
 from .inference import _interval, _p_value
 from .inputs import _varies
 from .thresholds import _DEFAULT_MAX_LAG_S, GAIN_MATERIALITY, OFFSET_MATERIALITY

@@ -9,11 +9,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..stats import (
-    RCOND,
-    FloatArray,
-    dot,
-)
+from ..stats import RCOND, FloatArray, dot
 
 
 def _excludes_zero(interval: tuple[float, float]) -> bool:

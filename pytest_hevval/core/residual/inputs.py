@@ -14,9 +14,7 @@ import numpy.typing as npt
 
 from ...errors import DegenerateSignalError, SpecError
 from ..importance import MAX_TERMS
-from ..stats import (
-    FloatArray,
-)
+from ..stats import FloatArray
 from .findings import Candidate
 from .thresholds import _KINDS
 

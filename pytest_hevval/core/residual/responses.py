@@ -9,11 +9,7 @@ from collections.abc import Collection
 import numpy as np
 
 from ..lag import search_lag
-from ..stats import (
-    FloatArray,
-    block_means,
-    dot,
-)
+from ..stats import FloatArray, block_means, dot
 from .findings import Response
 from .inference import _full_rate_r2
 from .inputs import _UserSeries, _varies

@@ -10,16 +10,7 @@ from dataclasses import replace
 import numpy as np
 import numpy.typing as npt
 
-from ..stats import (
-    FloatArray,
-    Screen,
-    ar_model_fit,
-    dot,
-    hac_fit,
-    orthonormal,
-    project_out,
-    screen,
-)
+from ..stats import FloatArray, Screen, ar_model_fit, dot, hac_fit, orthonormal, project_out, screen
 from .candidates import _Scale, _Series
 from .findings import CandidateFinding
 from .inference import _excludes_zero, _full_rate_r2, _interval, _p_value, _scaled

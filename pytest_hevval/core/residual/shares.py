@@ -9,9 +9,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..importance import shapley_from_sums
-from ..stats import (
-    FloatArray,
-)
+from ..stats import FloatArray
 from .thresholds import INTERCHANGEABLE_OVERLAP
 
 

@@ -10,15 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..stats import (
-    RCOND,
-    FloatArray,
-    HacFit,
-    ar_model_fit,
-    block_means,
-    dot,
-    hac_fit,
-)
+from ..stats import RCOND, FloatArray, HacFit, ar_model_fit, block_means, dot, hac_fit
 from .candidates import _Scale, _Series
 from .inference import _excludes_zero, _interval, _p_value, _scaled
 
