@@ -33,10 +33,9 @@ from ..errors import DataError, ExpressionError, HevvalError, SpecError
 from ..results.diagnosis import SignalAbove, SignalDiagnosis, candidate_unit
 from ..results.spec_result import SignalResult
 from ..spec.expressions import Expression, parse_signal
-from .engine import Evaluation, per_item, scoring_threads
+from .engine import DataCache, Evaluation, per_item, scoring_threads
 
 __all__ = [
-    "DIAGNOSE_MODES",
     "INTEGRAL_TOLERANCE",
     "TriedAbove",
     "TriedTerm",
@@ -85,21 +84,16 @@ def _smoothed(values: FloatArray, window: int) -> FloatArray:
 
 
 def _full_reference(evaluation: Evaluation) -> Record:
-    """Every numeric channel of the reference file (read once more, only for diagnosis)."""
-    cached = getattr(evaluation, "_full_reference", None)
-    if isinstance(cached, Record):
-        return cached
+    """Every numeric channel of the reference file, read through the spec's data cache (once,
+    and let go with the file's other data: :meth:`DataCache.read_whole`)."""
     spec = evaluation.spec
     assert evaluation.aligned is not None
-    record = evaluation.aligned.reference
     if spec.reference.kind == "file" and spec.reference.path:
-        from ..data.readers import read_record
-
+        cache = evaluation.cache or DataCache()
         # If the whole file cannot be read, diagnose with the channels already read.
         with contextlib.suppress(DataError):
-            record = read_record(str(spec.reference.path), None, spec.reference.options)
-    evaluation._full_reference = record  # type: ignore[attr-defined]
-    return record
+            return cache.read_whole(spec.reference)
+    return evaluation.aligned.reference
 
 
 def candidates_for(evaluation: Evaluation, *, channels: bool = True) -> list[Candidate]:
@@ -587,10 +581,6 @@ def _chosen(
     ):
         return replace(below, asked=path)
     return found
-
-
-#: Which signals a run diagnoses: none, the failing ones, or every one.
-DIAGNOSE_MODES = ("off", "failed", "all")
 
 
 def diagnosis_target(signal: SignalResult) -> str:
