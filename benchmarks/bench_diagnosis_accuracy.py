@@ -94,7 +94,7 @@ class Trip:
     """One scored trip: the model output, the real residual and the candidates."""
 
     def __init__(self, spec: str) -> None:
-        from pytest_hevval.scoring.diagnosis import candidates_for
+        from pytest_hevval.scoring.candidates import candidates_for
         from pytest_hevval.scoring.run import RunOptions, run_specs
         from pytest_hevval.spec.load import load_spec
 

@@ -257,7 +257,7 @@ def test_a_state_of_charge_and_its_rate_are_echoes_never_causes() -> None:
     them, while the missing load stays a cause."""
     ref, sim, load, _ = _case(5)
     soc = np.round(80 - np.cumsum(ref) * DT / 3600 / 20 * 100, 1)
-    from pytest_hevval.scoring.diagnosis import _smoothed, derivative_window
+    from pytest_hevval.scoring.candidates import _smoothed, derivative_window
 
     window = derivative_window(soc, 10, soc.shape[0])
     # Quantised: averaged over several of its steps, more than the default window.
@@ -276,7 +276,7 @@ def test_a_state_of_charge_and_its_rate_are_echoes_never_causes() -> None:
 
 
 def test_a_channel_with_few_steps_has_no_derivative() -> None:
-    from pytest_hevval.scoring.diagnosis import derivative_window
+    from pytest_hevval.scoring.candidates import derivative_window
 
     n = 6000
     few = np.repeat(np.arange(10.0), n // 10)
