@@ -14,7 +14,7 @@ import time
 import numpy as np
 from scipy import signal as sps
 
-from pytest_hevval.core.diagnosis import Candidate, diagnose_residual
+from pytest_hevval.core.residual import Candidate, diagnose_residual
 
 DT = 0.01
 

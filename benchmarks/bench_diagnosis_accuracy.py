@@ -94,7 +94,7 @@ class Trip:
     """One scored trip: the model output, the real residual and the candidates."""
 
     def __init__(self, spec: str) -> None:
-        from pytest_hevval.scoring.diagnosis import candidates_for
+        from pytest_hevval.scoring.candidates import candidates_for
         from pytest_hevval.scoring.run import RunOptions, run_specs
         from pytest_hevval.spec.load import load_spec
 
@@ -244,7 +244,7 @@ def _condition(
 ) -> tuple[FloatArray, FloatArray, list[Any]]:
     """(reference, simulated, candidates) of one draw under ``condition``; ``effect`` is the
     injected load series (zeros for a control)."""
-    from pytest_hevval.core.diagnosis import Candidate
+    from pytest_hevval.core.residual import Candidate
 
     values = trip.series[load]
     sim = trip.simulated

@@ -60,12 +60,9 @@ import numpy as np
 import yaml
 
 from pytest_hevval.report.diagnosis import fix_expression, payload
-from pytest_hevval.scoring.diagnosis import (
-    candidates_for,
-    diagnose_origin,
-    diagnose_signal,
-    term_values,
-)
+from pytest_hevval.scoring.candidates import candidates_for
+from pytest_hevval.scoring.diagnosis import diagnose_origin, diagnose_signal
+from pytest_hevval.scoring.fixes import term_values
 from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import parse_spec_text
 

@@ -212,7 +212,9 @@ def _diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .errors import SpecError
     from .report.diagnosis import describe, payload, tried_lines, tried_payload
-    from .scoring.diagnosis import candidates_for, diagnose_signal, try_term
+    from .scoring.candidates import candidates_for
+    from .scoring.diagnosis import diagnose_signal
+    from .scoring.fixes import try_term
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
 

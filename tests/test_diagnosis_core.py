@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from scipy import signal as sps
 from scipy import stats
 
-from pytest_hevval.core.diagnosis import (
+from pytest_hevval.core.residual import (
     Candidate,
     CandidateFinding,
     Diagnosis,
@@ -22,7 +22,7 @@ from pytest_hevval.core.diagnosis import (
     ljung_box,
 )
 from pytest_hevval.errors import DegenerateSignalError, SpecError
-from pytest_hevval.report.diagnosis import summary
+from pytest_hevval.report.diagnosis import note_text, summary
 from pytest_hevval.results.codec import plain_json
 
 DT = 0.01
@@ -235,7 +235,7 @@ def test_a_declared_candidate_with_a_constant_is_still_found_after_decimation() 
     top = d.candidates[0]
     assert top.name == "grade"
     assert top.interval[0] <= 0.7 <= top.interval[1]
-    assert any("block means of 12 samples" in note for note in d.notes)
+    assert any("block means of 12 samples" in note_text(note) for note in d.notes)
 
 
 # --------------------------------------------------------------------------------------------
@@ -488,7 +488,7 @@ def test_constant_and_collinear_candidates_are_dropped_with_a_note() -> None:
     names = [f.name for f in d.candidates]
     assert "flat" not in names
     assert "elevation in cm" not in names
-    assert any("'flat' is constant" in note for note in d.notes)
+    assert any("'flat' is constant" in note_text(note) for note in d.notes)
     # The same channel in another unit measures the same thing: one effect, named by the
     # first, the other listed as its member.
     assert d.candidates[0].name == "elevation"
@@ -515,7 +515,7 @@ def test_constant_simulation_has_no_lag_and_no_gain() -> None:
     assert (d.gain, d.gain_significant) == (1.0, False)
     assert d.offset_significant
     assert d.offset_interval[0] <= 0.5 <= d.offset_interval[1]
-    assert any("simulated signal is constant" in note for note in d.notes)
+    assert any("simulated signal is constant" in note_text(note) for note in d.notes)
     assert [f.kind for f in d.candidates] == ["offset"]
 
 

@@ -31,9 +31,10 @@ _DRIVER = r"""
 import json, re, sys
 from pathlib import Path
 import numpy as np
-from pytest_hevval.core.diagnosis import diagnose_residual
+from pytest_hevval.core.residual import diagnose_residual
+from pytest_hevval.scoring.candidates import candidates_for
 from pytest_hevval.scoring.diagnosis import (
-    candidates_for, diagnose_failures, diagnose_origin, diagnose_signal,
+    diagnose_failures, diagnose_origin, diagnose_signal,
 )
 from pytest_hevval.report.diagnosis import payload, summary
 from pytest_hevval.results.codec import plain_json

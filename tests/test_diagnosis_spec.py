@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from pytest_hevval.core.diagnosis import MIN_SHARE, Candidate, diagnose_residual
+from pytest_hevval.core.residual import MIN_SHARE, Candidate, diagnose_residual
 from pytest_hevval.errors import SpecError
 from pytest_hevval.report.diagnosis import summary
 from pytest_hevval.spec.load import parse_spec_text
@@ -257,7 +257,7 @@ def test_a_state_of_charge_and_its_rate_are_echoes_never_causes() -> None:
     them, while the missing load stays a cause."""
     ref, sim, load, _ = _case(5)
     soc = np.round(80 - np.cumsum(ref) * DT / 3600 / 20 * 100, 1)
-    from pytest_hevval.scoring.diagnosis import _smoothed, derivative_window
+    from pytest_hevval.scoring.candidates import _smoothed, derivative_window
 
     window = derivative_window(soc, 10, soc.shape[0])
     # Quantised: averaged over several of its steps, more than the default window.
@@ -276,7 +276,7 @@ def test_a_state_of_charge_and_its_rate_are_echoes_never_causes() -> None:
 
 
 def test_a_channel_with_few_steps_has_no_derivative() -> None:
-    from pytest_hevval.scoring.diagnosis import derivative_window
+    from pytest_hevval.scoring.candidates import derivative_window
 
     n = 6000
     few = np.repeat(np.arange(10.0), n // 10)
@@ -303,3 +303,38 @@ def test_a_lag_on_the_edge_of_the_search_says_so() -> None:
     assert "alignment: {max_lag_s: 6}" in timing
     within = diagnose_residual(ref, sim, dt=DT, max_lag_s=10.0)
     assert not within.lag_at_bound
+
+
+def test_the_diagnosis_reads_the_references_other_channels_through_the_data_cache(
+    tmp_path: Path,
+) -> None:
+    """A channel no spec scores reaches the diagnosis through the spec's data cache: read once
+    for every signal, and let go with the file's other data once the spec is done."""
+    import pandas as pd
+
+    from pytest_hevval.results.diagnosis import SignalDiagnosis
+    from pytest_hevval.scoring.engine import DataCache, Evaluation
+    from pytest_hevval.scoring.run import RunOptions, run_specs
+    from pytest_hevval.spec.load import load_specs
+
+    t = np.arange(0.0, 120.0, DT)
+    v = 10.0 + 3.0 * np.sin(t / 5.0)
+    heater = 2.0 * (np.sin(t / 17.0) > 0.0)
+    pd.DataFrame({"time": t, "v": v + heater, "heater_kw": heater}).to_csv(
+        tmp_path / "ref.csv", index=False
+    )
+    pd.DataFrame({"time": t, "v": v}).to_csv(tmp_path / "sim.csv", index=False)
+    (tmp_path / "t.hevval.yaml").write_text(MINIMAL)
+    specs = load_specs(tmp_path / "t.hevval.yaml")
+    cache = DataCache()
+    (outcome,) = run_specs(specs, RunOptions(rootdir=tmp_path, diagnose="all"), cache=cache)
+    assert isinstance(outcome, Evaluation)
+    found = outcome.diagnoses["v"]
+    assert isinstance(found, SignalDiagnosis)
+    assert found.diagnosis.relevant[0].name == "heater_kw"
+    reference = str(specs[0].reference.path)
+    # Once to score the spec, once for every channel the diagnosis tries.
+    assert cache.reads[reference] == 2
+    assert cache.held() == []
+    cache.read_whole(specs[0].reference)
+    assert cache.reads[reference] == 3

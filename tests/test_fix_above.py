@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from pytest_hevval.scoring.diagnosis import running_integral
+from pytest_hevval.scoring.fixes import running_integral
 from tests.example_cli import EXAMPLE, run_in_example
 
 B03_V1 = EXAMPLE / "specs" / "i3-B03-winter-v1.hevval.yaml"

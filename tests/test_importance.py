@@ -117,7 +117,7 @@ def test_too_many_terms_or_a_bad_gram_are_refused() -> None:
 def test_shares_in_the_gatekeeping_order_credit_the_first_family_first() -> None:
     """The first family shares what it explains together; the others share what they add to
     it; with every term in one family, the plain Shapley shares."""
-    from pytest_hevval.core.diagnosis import _ordered_shares
+    from pytest_hevval.core.residual.shares import _ordered_shares
 
     rng = np.random.default_rng(7)
     n = 400

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pytest_hevval.core.diagnosis import Candidate, diagnose_residual
+from pytest_hevval.core.residual import Candidate, diagnose_residual
 from pytest_hevval.core.stats import (
     effective_samples,
     hac_fit,

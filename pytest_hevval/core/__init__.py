@@ -21,7 +21,7 @@ from .tree import (
 )
 
 if TYPE_CHECKING:
-    from .diagnosis import *  # noqa: F403
+    from .residual import *  # noqa: F403
 
 # Diagnosis needs scipy.signal and scipy.stats (over a second to import); scoring does not.
 _DIAGNOSIS = {
@@ -36,9 +36,9 @@ _DIAGNOSIS = {
 
 def __getattr__(name: str) -> Any:
     if name in _DIAGNOSIS:
-        from . import diagnosis
+        from . import residual
 
-        return getattr(diagnosis, name)
+        return getattr(residual, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

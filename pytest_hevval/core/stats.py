@@ -4,7 +4,7 @@ Feasible GLS: the data filtered by an AR model of the residual chosen by BIC (Co
 then heteroscedasticity- and autocorrelation-consistent (Newey–West) covariances with the
 Andrews plug-in bandwidth on the filtered regression; effective sample sizes and degrees of
 freedom, the Ljung–Box test, Politis–White block lengths and the dominant frequencies of a
-spectrum. Used by :mod:`pytest_hevval.core.diagnosis`; pure numpy and scipy.
+spectrum. Used by :mod:`pytest_hevval.core.residual`; pure numpy and scipy.
 ``tests/test_stats_reference.py`` checks each against statsmodels or arch.
 """
 

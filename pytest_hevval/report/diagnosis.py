@@ -1,6 +1,6 @@
 """The diagnosis in words: the one-line summary, each effect in physical units, and the
 full description ``hevval diagnose`` prints. The numbers come from
-:mod:`pytest_hevval.core.diagnosis`; only sentences are made here.
+:mod:`pytest_hevval.core.residual`; only sentences are made here.
 """
 
 from __future__ import annotations
@@ -9,16 +9,17 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..core.diagnosis import (
+from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
+from ..core.residual import (
     GENERIC_KINDS,
     MIN_EXPLAINED_INCREASE,
     MIN_SHARE,
     SLOW_SCALE_S,
     Diagnosis,
     Effect,
+    Note,
     Response,
 )
-from ..core.registry import FUSED_CHARACTERISTICS, get_characteristic
 from ..errors import HevvalError
 from ..results.diagnosis import SignalDiagnosis, candidate_unit
 from .sentences import lag_bound_text
@@ -29,6 +30,7 @@ __all__ = [
     "effect_text",
     "fix_expression",
     "fix_text",
+    "note_text",
     "payload",
     "summary",
     "target_payload",
@@ -42,6 +44,7 @@ EXACT_MATCH = "the model matches the reference exactly: the residual is zero"
 def payload(found: SignalDiagnosis) -> dict[str, Any]:
     """The JSON form of a diagnosis with its sentences: the summary and each effect's text."""
     out = found.to_dict()
+    out["notes"] = [note_text(note) for note in found.diagnosis.notes]
     out["summary"] = summary(found)
     name = found.signal.rsplit("/", 1)[-1]
     for effect in out["effects"]:
@@ -56,6 +59,22 @@ def payload(found: SignalDiagnosis) -> dict[str, Any]:
         ]
         effect["then"] = then_text(effect, out)
     return out
+
+
+def note_text(note: Note) -> str:
+    """What the diagnosis dropped or changed, and why, in words."""
+    if note.kind == "constant_simulation":
+        return "the simulated signal is constant: gain and lag cannot be estimated"
+    if note.kind == "decimated":
+        return f"regressions use block means of {note.samples} samples ({note.seconds:g} s)"
+    if note.kind == "constant":
+        return f"candidate {note.candidate!r} is constant and was dropped"
+    if note.kind == "duplicate":
+        return f"candidate {note.candidate!r} duplicates {note.other!r} and was dropped"
+    return (
+        f"candidate {note.candidate!r} is (nearly) a linear combination of the candidates "
+        "before it and was dropped"
+    )
 
 
 def then_text(effect: Mapping[str, Any], found: Mapping[str, Any]) -> str | None:

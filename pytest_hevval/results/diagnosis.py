@@ -1,5 +1,5 @@
 """The diagnosis of one scored signal, as a result: where its error appears and what the
-residual holds (:class:`~pytest_hevval.core.diagnosis.Diagnosis`)."""
+residual holds (:class:`~pytest_hevval.core.residual.Diagnosis`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from ..core.diagnosis import Diagnosis
+from ..core.residual import Diagnosis
 from .codec import plain_json
 
 __all__ = ["SignalAbove", "SignalDiagnosis", "candidate_unit"]

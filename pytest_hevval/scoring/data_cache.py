@@ -48,6 +48,8 @@ class DataCache:
         self.data_hash = data_hash
         self._lock = threading.Lock()
         self._records: dict[tuple[str, str], Record] = {}
+        #: Every numeric column of a file, for the diagnosis's candidates (:meth:`read_whole`).
+        self._whole: dict[tuple[str, str], Record] = {}
         self._declared: dict[tuple[str, str], set[str]] = {}
         #: Declarations not yet released, by file: the record is kept while any is left.
         self._users: dict[tuple[str, str], int] = {}
@@ -95,6 +97,7 @@ class DataCache:
             else:
                 self._users.pop(key, None)
                 self._records.pop(key, None)
+                self._whole.pop(key, None)
 
     def held(self) -> list[str]:
         """The files whose data this cache holds now."""
@@ -136,6 +139,15 @@ class DataCache:
             self._records[key] = record
             self._start_digest(key[0])
             return record
+
+    def read_whole(self, source: SourceSpec) -> Record:
+        """Every numeric column of ``source``, read once and let go with its other data."""
+        key = self._key(source)
+        with self._lock:
+            if key not in self._whole:
+                self._whole[key] = _reader()(str(source.path), None, source.options)
+                self.reads[key[0]] = self.reads.get(key[0], 0) + 1
+            return self._whole[key]
 
     def _start_digest(self, path: str) -> Future[dict[str, str]]:
         # hashlib and xxhash release the GIL, so hashing overlaps with reading and scoring.

@@ -38,9 +38,8 @@ from .result_assembly import (
 )
 from .signal_arrays import signal_arrays, signature_of
 from .signal_pass import fused_characteristics, interval_block_sums, registered_characteristics
-from .threads import per_item, scoring_threads
 
-__all__ = ["DataCache", "Evaluation", "evaluate_spec", "per_item", "scoring_threads"]
+__all__ = ["DataCache", "Evaluation", "evaluate_spec"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -58,6 +57,8 @@ class Evaluation:
     #: Diagnoses of the failing signals, by the signal diagnosed for them
     #: (:func:`pytest_hevval.scoring.diagnosis.diagnose_failures`), or why one failed.
     diagnoses: dict[str, SignalDiagnosis | HevvalError] = field(default_factory=dict)
+    #: The cache the spec's data were read through; the diagnosis reads its candidates there.
+    cache: DataCache | None = None
 
 
 def evaluate_spec(
@@ -157,4 +158,5 @@ def _evaluate(
         aligned=aligned,
         arrays=arrays,
         characteristics=characteristics,
+        cache=cache,
     )

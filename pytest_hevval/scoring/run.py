@@ -87,9 +87,10 @@ def run_specs(
     outcomes = []
     for done, spec in enumerate(specs, start=1):
         outcome = _evaluate(spec, options, shared)
-        shared.release_spec(spec)
-        # Right away: the aligned data are let go before the next spec is read.
+        # Right away: the aligned data are let go before the next spec is read. Diagnosed
+        # first: the diagnosis reads the reference's other channels through the cache.
         _finish(outcome, options)
+        shared.release_spec(spec)
         outcomes.append(outcome)
         if progress is not None:
             progress(done)

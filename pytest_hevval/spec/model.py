@@ -99,7 +99,7 @@ class DiagnosisSpec:
     """The spec's ``diagnosis:`` settings (docs/spec.md, docs/diagnosis.md)."""
 
     #: A significant effect is relevant when it removes at least this share of the residual;
-    #: None: the diagnosis default (``core.diagnosis.MIN_SHARE``).
+    #: None: the diagnosis default (``core.residual.MIN_SHARE``).
     min_share: float | None = None
     #: Candidate names that echo the scored signal and are never offered as the missing effect.
     responses: tuple[str, ...] = ()
