@@ -66,6 +66,7 @@ def _run(args: argparse.Namespace) -> int:
     from . import __version__
     from .core.kernel import compile_note, finish_run
     from .data.remote import relative_to
+    from .flags import COMMAND
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
@@ -76,7 +77,9 @@ def _run(args: argparse.Namespace) -> int:
     from .spec.load import load_specs
 
     rootdir = project_root(args.specs)
-    publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
+    publisher = Publisher(
+        PublishOptions.from_options(lambda name: _arg(args, name), rootdir, COMMAND)
+    )
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
@@ -339,6 +342,7 @@ def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
 
 def _compare(args: argparse.Namespace) -> int:
     """``hevval compare``: two runs signal by signal, then Φ per spec."""
+    from .flags import COMMAND
     from .history import compare, load_side, parse_compare_fail, regressions
     from .history.compare import campaign_change_lines
     from .history.render import render
@@ -346,7 +350,7 @@ def _compare(args: argparse.Namespace) -> int:
     from .results.codec import plain_json
 
     rules = (
-        parse_compare_fail(args.compare_fail, option="--compare-fail")
+        parse_compare_fail(args.compare_fail, front_end=COMMAND)
         if args.compare_fail is not None
         else None
     )

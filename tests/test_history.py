@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from pytest_hevval import history as h
 from pytest_hevval.cli import main as cli_main
 from pytest_hevval.errors import SpecError
+from pytest_hevval.flags import COMMAND
 from pytest_hevval.results.codec import dumps, json_number, json_numbers, plain_json
 from pytest_hevval.results.spec_result import SpecResult
 
@@ -1376,6 +1377,51 @@ def test_missing_baseline_decisions(tmp_path: Path) -> None:
     created = h.missing_baseline(ci=True, create_baseline=True, directory=tmp_path, wanted="v9")
     assert created.action == "record"
     assert "'v9'" in created.message
+
+
+def test_messages_name_the_flag_of_the_front_end_in_use(tmp_path: Path) -> None:
+    ci = h.missing_baseline(ci=True, create_baseline=False, directory=tmp_path, front_end=COMMAND)
+    assert "run once with --accept " in ci.message
+    assert "--hevval-accept" not in ci.message
+    local = h.missing_baseline(
+        ci=False, create_baseline=False, directory=tmp_path, recorded=False, front_end=COMMAND
+    )
+    assert "record one with --history," in local.message
+    created = h.missing_baseline(
+        ci=False, create_baseline=True, directory=tmp_path, front_end=COMMAND
+    )
+    assert "(--create-baseline or --accept)" in created.message
+    with pytest.raises(h.HistoryError) as rule:
+        h.parse_compare_fail("phi", front_end=COMMAND)
+    assert str(rule.value).startswith("--compare-fail: ")
+    with pytest.raises(h.HistoryError) as margin:
+        h.parse_margin("2", front_end=COMMAND)
+    assert str(margin.value).startswith("--ratchet: ")
+    with pytest.raises(h.HistoryError, match="pass --model-version or set HEVVAL_MODEL_VERSION"):
+        h.make_record([spec()], model_version=" ", started_utc=T0, front_end=COMMAND)
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    with pytest.raises(h.HistoryError, match="folder with --history-dir"):
+        h.HistoryStore(blocked / "history", front_end=COMMAND).append(record("v1", T0))
+    # pytest's spelling stays the default.
+    with pytest.raises(h.HistoryError) as under_pytest:
+        h.parse_compare_fail("phi")
+    assert str(under_pytest.value).startswith("--hevval-compare-fail: ")
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [(["--compare-fail", "phi"], "--compare-fail"), (["--ratchet", "2"], "--ratchet")],
+)
+def test_hevval_run_names_its_own_flags(
+    tmp_path: Path, argv: list[str], flag: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec_file = tmp_path / "x.hevval.yaml"
+    spec_file.write_text("name: x\n", encoding="utf-8")
+    assert cli_main(["run", str(spec_file), "--no-history", "--quiet", *argv]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {flag}: " in err
+    assert "--hevval-" not in err
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ from typing import Any
 
 from ..errors import did_you_mean
 from ..files import read_json
+from ..flags import COMMAND
 from ._base import HistoryError
 from .compare import specs_of
 from .records import migrate_record
@@ -58,7 +59,7 @@ def latest_results(directory: Path) -> list[dict[str, Any]]:
     if not records:
         raise HistoryError(
             f"no readable records in {directory}",
-            hint="point --history-dir at the history folder, or record runs first",
+            hint=f"point {COMMAND.flag('history-dir')} at the history folder, or record runs first",
         )
     newest: dict[str, dict[str, Any]] = {}
     for record in reversed(records):
@@ -119,7 +120,8 @@ def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
                 raise HistoryError(
                     f"no readable records in {directory}",
                     key=ref,
-                    hint="point --dir at the history folder, or record runs first",
+                    hint=f"point {COMMAND.flag('history-dir')} at the history folder, "
+                    "or record runs first",
                 )
             suggestion = did_you_mean(wanted, versions)
             raise HistoryError(

@@ -25,6 +25,7 @@ import yaml
 
 from ..core.registry import order_names
 from ..files import write_atomic
+from ..flags import PYTEST, FrontEnd
 from ..results.codec import json_number, keyed_lambdas
 from ..spec.sidecar import Thresholds, load_sidecar, sidecar_path
 from ._base import HistoryError
@@ -51,8 +52,10 @@ _DECIMALS = 4
 _SCALE = 10.0**_DECIMALS
 
 
-def parse_margin(text: str | float, *, option: str = "--hevval-ratchet") -> float:
-    """Validate a ratchet margin: a number in [0, 1)."""
+def parse_margin(text: str | float, *, front_end: FrontEnd = PYTEST) -> float:
+    """Validate a ratchet margin: a number in [0, 1); an error names the option as
+    ``front_end`` spells it."""
+    option = front_end.flag("ratchet")
     try:
         margin = float(text)
     except (TypeError, ValueError):

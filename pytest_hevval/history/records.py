@@ -26,6 +26,7 @@ from typing import Any
 
 from ..core.registry import PAPER_CHARACTERISTICS
 from ..defaults import UNKNOWN_MODEL_VERSION
+from ..flags import PYTEST, FrontEnd
 from ..results.codec import checked_number, plain_json
 from ..results.spec_result import ERROR_KEYS, MEASURED_NUMBERS
 from ._base import HistoryError
@@ -239,18 +240,20 @@ def make_record(
     acceptance: str = "not-compared",
     commit: str | None = None,
     baseline: Mapping[str, Any] | None = None,
+    front_end: FrontEnd = PYTEST,
 ) -> dict[str, Any]:
     """Build a history record from the run's spec results.
 
     ``tool_versions`` is laid over :func:`default_tool_versions`, so the versions of
     pytest-hevval, numpy and scipy are always present. Non-finite numbers become ``null``.
     ``acceptance`` is a key of :data:`ACCEPTANCE`; ``baseline`` the record the run was
-    compared with, if any.
+    compared with, if any. A missing model version is named as ``front_end`` spells its
+    option.
     """
     if not isinstance(model_version, str) or not model_version.strip():
         raise HistoryError(
             f"model_version must be a non-empty string (got {model_version!r})",
-            hint="pass --hevval-model-version or set HEVVAL_MODEL_VERSION",
+            hint=f"pass {front_end.flag('model-version')} or set {MODEL_VERSION_ENV}",
         )
     versions = default_tool_versions()
     versions.update({str(k): str(v) for k, v in (tool_versions or {}).items()})
