@@ -63,7 +63,6 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from . import __version__
     from .core.kernel import compile_note, finish_run
     from .data.remote import relative_to
     from .flags import COMMAND
@@ -71,6 +70,7 @@ def _run(args: argparse.Namespace) -> int:
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
     from .results.campaign import campaign_verdicts
+    from .results.envelope import run_document
     from .scoring.cluster import error_payload
     from .scoring.engine import Evaluation
     from .scoring.run import RunOptions, run_specs
@@ -137,20 +137,13 @@ def _run(args: argparse.Namespace) -> int:
     for line in run_summary(results, details=args.details, verdict=verdict):
         print(line)
     if args.json:
-        payload = {
-            "schema_version": 1,
-            "hevval_version": __version__,
-            # The run's facts, as a history record holds them (hevval evidence reads them).
-            "run": publisher.run_facts(),
-            "passed": verdict.passed,
-            "verdict": verdict.to_dict(),
-            "specs": dicts(),
-            **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
-            **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
-        }
-        # The common single-spec case also exposes the spec's own fields at the top level.
-        if len(results) == 1:
-            payload.update({k: v for k, v in dicts()[0].items() if k != "schema_version"})
+        payload = run_document(
+            dicts(),
+            facts=publisher.run_facts(),
+            verdict=verdict,
+            campaigns=verdicts,
+            errors=[error_payload(key, exc) for key, exc in errors],
+        )
         _write_json(args.json, payload)
     for line in published.annotations:
         _own_line(line)
@@ -411,10 +404,8 @@ def _evidence(args: argparse.Namespace) -> int:
     from .history import load_document
     from .report.evidence import render_evidence
 
-    document, source = load_document(args.run or "history:latest", Path(args.history_dir))
-    # A history record holds the run's facts at its top, a run's JSON under "run".
-    facts = document if source == "history record" else document.get("run") or {}
-    text = render_evidence(document["specs"], facts, source=source)
+    found = load_document(args.run or "history:latest", Path(args.history_dir))
+    text = render_evidence(found.specs, found.facts, source=found.source)
     _write(text, args.output)
     return EXIT_OK
 

@@ -288,7 +288,7 @@ class Publisher:
             comparison = compare(data(), self.baseline, after_label=self.run_label)
         self._write_reports(data, diagnoses, out, comparison)
         self._compare(comparison, out)
-        self._ratchet(data, specs, out)
+        self._ratchet(results, specs, out)
         self._record(data, self.acceptance(found), out)
         return out
 
@@ -380,13 +380,15 @@ class Publisher:
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))
 
-    def _ratchet(self, data: _Data, specs: Mapping[str, Spec], out: Publication) -> None:
+    def _ratchet(
+        self, results: Sequence[SpecResult], specs: Mapping[str, Spec], out: Publication
+    ) -> None:
         if self.margin is None:
             return
         from .history import ratchet_spec
 
-        for result in data():
-            spec = specs.get(result["spec"])
+        for result in results:
+            spec = specs.get(result.spec)
             if spec is None:
                 continue
             if spec.campaign is not None:

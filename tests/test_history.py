@@ -78,6 +78,11 @@ def spec(
     return result
 
 
+def scored(**kwargs: Any) -> SpecResult:
+    """A typed spec result, as scoring hands it on, from the plain data of :func:`spec`."""
+    return SpecResult.from_dict(spec(**kwargs))
+
+
 def record(
     version: str,
     when: datetime,
@@ -1442,7 +1447,7 @@ def test_is_ci(env: dict[str, str], expected: bool) -> None:
 
 
 def test_ratchet_tightens_and_never_loosens() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.95, 3: 0.85}), thresholds={})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.95, 3: 0.85}), thresholds={})])
     current = {"E_batt/P_batt": {"mae": 0.9, "rms": 0.9}}
     proposed = h.ratchet_thresholds(result, current, 0.01)
     assert proposed == {"E_batt/P_batt": {"mae": 0.94, "rms": 0.9}}
@@ -1450,21 +1455,21 @@ def test_ratchet_tightens_and_never_loosens() -> None:
 
 
 def test_ratchet_uses_the_stricter_of_given_and_as_run_thresholds() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.80}), thresholds={"mae": 0.85})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.80}), thresholds={"mae": 0.85})])
     assert h.ratchet_thresholds(result, {"E_batt/P_batt": {"mae": 0.5}}, 0.0) == {
         "E_batt/P_batt": {"mae": 0.85}
     }
 
 
 def test_ratchet_keeps_undefined_and_ungated() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: float("nan")}))])
+    result = scored(signals=[signal(lambdas=changed({2: float("nan")}))])
     assert h.ratchet_thresholds(result, {}, 0.01) == {"E_batt/P_batt": {"mae": 0.9}}
-    ungated = spec(signals=[signal(thresholds={})])
+    ungated = scored(signals=[signal(thresholds={})])
     assert h.ratchet_thresholds(ungated, {}, 0.01) == {}
 
 
 def test_ratchet_rounds_down_so_the_run_still_passes() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.93339}), thresholds={"mae": 0.1})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.93339}), thresholds={"mae": 0.1})])
     value = h.ratchet_thresholds(result, {}, 0.0)["E_batt/P_batt"]["mae"]
     assert value == 0.9333
 
@@ -1477,7 +1482,7 @@ def test_ratchet_rounds_down_so_the_run_still_passes() -> None:
 def test_ratchet_property_monotone_and_idempotent(
     achieved: list[float | None], current: float, margin: float
 ) -> None:
-    result = spec(signals=[signal(lambdas=achieved, thresholds={})])
+    result = scored(signals=[signal(lambdas=achieved, thresholds={})])
     start = {"E_batt/P_batt": dict.fromkeys(("mae", "emergent"), current)}
     once = h.ratchet_thresholds(result, start, margin)
     for name, value in once["E_batt/P_batt"].items():
@@ -1496,7 +1501,7 @@ def test_sidecar_path_names() -> None:
 def test_ratchet_spec_writes_reviewable_sidecar_and_is_idempotent(tmp_path: Path) -> None:
     spec_path = tmp_path / "trip.hevval.yaml"
     spec_path.write_text("name: trip\n")
-    result = spec(signals=[signal(lambdas=changed({2: 0.95}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.95}))])
     kwargs: dict[str, Any] = {"margin": 0.01, "model_version": "v7", "created_utc": T0}
     outcome = h.ratchet_spec(spec_path, result, {"E_batt/P_batt": {"mae": 0.9}}, **kwargs)
     assert outcome.written
@@ -1517,7 +1522,7 @@ def test_ratchet_spec_writes_reviewable_sidecar_and_is_idempotent(tmp_path: Path
 
 def test_ratchet_spec_without_gain_writes_nothing(tmp_path: Path) -> None:
     spec_path = tmp_path / "trip.hevval.yaml"
-    result = spec(signals=[signal(lambdas=changed({2: 0.905}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.905}))])
     outcome = h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
     assert not outcome.written
     assert not outcome.path.exists()
@@ -1528,7 +1533,7 @@ def test_ratchet_spec_keeps_entries_of_absent_signals(tmp_path: Path) -> None:
     h.write_sidecar(
         spec_path, {"old/sig": {"rms": 0.8}}, model_version="v0", created_utc=T0, margin=0.01
     )
-    result = spec(signals=[signal(lambdas=changed({2: 0.99}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.99}))])
     h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
     assert h.load_sidecar(spec_path) == {"old/sig": {"rms": 0.8}, "E_batt/P_batt": {"mae": 0.98}}
 

@@ -16,7 +16,13 @@ from typing import Any, Literal
 
 from ..core.registry import order_names
 from ..defaults import REGION_MIN_SAMPLES, split_key
-from ..results.codec import data_identity, json_number, keyed_lambdas
+from ..results.codec import (
+    data_identity,
+    interval_bounds,
+    interval_table,
+    json_number,
+    lambdas_or_none,
+)
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
@@ -483,44 +489,23 @@ def _signals(spec: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
     }
 
 
-def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
-    """λ values keyed by name; a result of schema 1 (a list in paper order) is read too."""
-    try:
-        return keyed_lambdas(signal.get("lambdas"))
-    except ValueError:
-        return {}
-
-
-def _lambda_deltas(
-    before: Mapping[str, float | None],
-    after: Mapping[str, float | None],
-    before_intervals: Mapping[str, Any] | None = None,
-    after_intervals: Mapping[str, Any] | None = None,
-) -> tuple[FieldDelta, ...]:
-    names = order_names([*before, *after])
+def _lambda_deltas(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[FieldDelta, ...]:
+    """λ before and after by name (a result of schema 1 held a list in paper order), with the
+    95 % intervals both runs recorded."""
+    values_before = lambdas_or_none(before.get("lambdas"))
+    values_after = lambdas_or_none(after.get("lambdas"))
+    intervals_before = interval_table(before.get("intervals"))
+    intervals_after = interval_table(after.get("intervals"))
     return tuple(
         FieldDelta(
             name,
-            before.get(name),
-            after.get(name),
-            _bounds((before_intervals or {}).get(name)),
-            _bounds((after_intervals or {}).get(name)),
+            values_before.get(name),
+            values_after.get(name),
+            intervals_before.get(name),
+            intervals_after.get(name),
         )
-        for name in names
+        for name in order_names([*values_before, *values_after])
     )
-
-
-def _bounds(raw: Any) -> tuple[float, float] | None:
-    """(low, high) of a recorded interval, or None where it is missing or not numeric."""
-    if not isinstance(raw, Mapping):
-        return None
-    low, high = json_number(raw.get("low")), json_number(raw.get("high"))
-    return None if low is None or high is None else (low, high)
-
-
-def _intervals_of(signal: Mapping[str, Any]) -> Mapping[str, Any]:
-    raw = signal.get("intervals")
-    return raw if isinstance(raw, Mapping) else {}
 
 
 def _compare_spec(
@@ -543,12 +528,7 @@ def _compare_spec(
                 path=path,
                 name=str(sig_after.get("name", path.rsplit("/", 1)[-1])),
                 unit=sig_after.get("unit") if isinstance(sig_after.get("unit"), str) else None,
-                lambdas=_lambda_deltas(
-                    _lambdas(sig_before),
-                    _lambdas(sig_after),
-                    _intervals_of(sig_before),
-                    _intervals_of(sig_after),
-                ),
+                lambdas=_lambda_deltas(sig_before, sig_after),
                 errors=tuple(
                     FieldDelta(
                         name, json_number(sig_before.get(name)), json_number(sig_after.get(name))
@@ -568,8 +548,8 @@ def _compare_spec(
             "phi",
             json_number(before.get("phi")),
             json_number(after.get("phi")),
-            _bounds(before.get("phi_interval")),
-            _bounds(after.get("phi_interval")),
+            interval_bounds(before.get("phi_interval")),
+            interval_bounds(after.get("phi_interval")),
         ),
         passed_before=_flag(before.get("passed")),
         passed_after=_flag(after.get("passed")),
