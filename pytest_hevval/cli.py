@@ -63,20 +63,23 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from . import __version__
     from .data.kernel_cache import compile_note, finish_run
     from .data.remote import relative_to
+    from .flags import COMMAND
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
     from .results.campaign import campaign_verdicts
+    from .results.envelope import run_document
     from .scoring.cluster import error_payload
     from .scoring.engine import Evaluation
     from .scoring.run import RunOptions, run_specs
     from .spec.load import load_specs
 
     rootdir = project_root(args.specs)
-    publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
+    publisher = Publisher(
+        PublishOptions.from_options(lambda name: _arg(args, name), rootdir, COMMAND)
+    )
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
@@ -134,20 +137,13 @@ def _run(args: argparse.Namespace) -> int:
     for line in run_summary(results, details=args.details, verdict=verdict):
         print(line)
     if args.json:
-        payload = {
-            "schema_version": 1,
-            "hevval_version": __version__,
-            # The run's facts, as a history record holds them (hevval evidence reads them).
-            "run": publisher.run_facts(),
-            "passed": verdict.passed,
-            "verdict": verdict.to_dict(),
-            "specs": dicts(),
-            **({"campaigns": [v.to_dict() for v in verdicts]} if verdicts else {}),
-            **({"errors": [error_payload(key, exc) for key, exc in errors]} if errors else {}),
-        }
-        # The common single-spec case also exposes the spec's own fields at the top level.
-        if len(results) == 1:
-            payload.update({k: v for k, v in dicts()[0].items() if k != "schema_version"})
+        payload = run_document(
+            dicts(),
+            facts=publisher.run_facts(),
+            verdict=verdict,
+            campaigns=verdicts,
+            errors=[error_payload(key, exc) for key, exc in errors],
+        )
         _write_json(args.json, payload)
     for line in published.annotations:
         _own_line(line)
@@ -341,6 +337,7 @@ def _step_report(rows: Sequence[HistoryRow], min_size: float) -> list[str]:
 
 def _compare(args: argparse.Namespace) -> int:
     """``hevval compare``: two runs signal by signal, then Φ per spec."""
+    from .flags import COMMAND
     from .history import compare, load_side, parse_compare_fail, regressions
     from .history.compare import campaign_change_lines
     from .history.render import render
@@ -348,7 +345,7 @@ def _compare(args: argparse.Namespace) -> int:
     from .results.codec import plain_json
 
     rules = (
-        parse_compare_fail(args.compare_fail, option="--compare-fail")
+        parse_compare_fail(args.compare_fail, front_end=COMMAND)
         if args.compare_fail is not None
         else None
     )
@@ -409,10 +406,8 @@ def _evidence(args: argparse.Namespace) -> int:
     from .history import load_document
     from .report.evidence import render_evidence
 
-    document, source = load_document(args.run or "history:latest", Path(args.history_dir))
-    # A history record holds the run's facts at its top, a run's JSON under "run".
-    facts = document if source == "history record" else document.get("run") or {}
-    text = render_evidence(document["specs"], facts, source=source)
+    found = load_document(args.run or "history:latest", Path(args.history_dir))
+    text = render_evidence(found.specs, found.facts, source=found.source)
     _write(text, args.output)
     return EXIT_OK
 

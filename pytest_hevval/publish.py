@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
+from .flags import PYTEST, FrontEnd
 from .results.spec_result import SpecResult
 from .results.verdict import RegressedItem, RunVerdict
 from .spec.model import Spec
@@ -64,9 +65,13 @@ class PublishOptions:
     accept: bool = False
     #: The ratchet margin as given, or ``None`` for no ratchet.
     ratchet: str | None = None
+    #: The front end the options came from: messages name its flags.
+    front_end: FrontEnd = PYTEST
 
     @classmethod
-    def from_options(cls, option: Callable[[str], Any], rootdir: Path) -> PublishOptions:
+    def from_options(
+        cls, option: Callable[[str], Any], rootdir: Path, front_end: FrontEnd = PYTEST
+    ) -> PublishOptions:
         """From an option getter that takes the names of :data:`~pytest_hevval.options.OPTIONS`
         (pytest's ``--hevval-NAME`` and ``hevval run --NAME`` share them)."""
 
@@ -93,6 +98,7 @@ class PublishOptions:
             create_baseline=bool(option("create-baseline")),
             accept=bool(option("accept")),
             ratchet=text("ratchet"),
+            front_end=front_end,
         )
 
 
@@ -122,8 +128,15 @@ class Publisher:
 
         self.options = options
         self.formats = parse_formats(options.report) if options.report else set()
-        self.rules = parse_compare_fail(options.compare_fail) if options.compare_fail else []
-        self.margin = parse_margin(options.ratchet) if options.ratchet else None
+        front_end = options.front_end
+        self.rules = (
+            parse_compare_fail(options.compare_fail, front_end=front_end)
+            if options.compare_fail
+            else []
+        )
+        self.margin = (
+            parse_margin(options.ratchet, front_end=front_end) if options.ratchet else None
+        )
         self.baseline: dict[str, Any] | None = None
         self._regressions: dict[str, list[Regression]] = {}
         self.model_version = UNKNOWN_MODEL_VERSION
@@ -182,6 +195,7 @@ class Publisher:
             directory=self.options.history_dir,
             wanted=wanted,
             recorded=self.options.record,
+            front_end=self.options.front_end,
         )
         if decision.fails:
             raise HevvalError(decision.message)
@@ -274,7 +288,7 @@ class Publisher:
             comparison = compare(data(), self.baseline, after_label=self.run_label)
         self._write_reports(data, diagnoses, out, comparison)
         self._compare(comparison, out)
-        self._ratchet(data, specs, out)
+        self._ratchet(results, specs, out)
         self._record(data, self.acceptance(found), out)
         return out
 
@@ -366,13 +380,15 @@ class Publisher:
         out.notes.append(comparison_table(comparison, found))
         out.notes.extend(campaign_change_lines(comparison))
 
-    def _ratchet(self, data: _Data, specs: Mapping[str, Spec], out: Publication) -> None:
+    def _ratchet(
+        self, results: Sequence[SpecResult], specs: Mapping[str, Spec], out: Publication
+    ) -> None:
         if self.margin is None:
             return
         from .history import ratchet_spec
 
-        for result in data():
-            spec = specs.get(result["spec"])
+        for result in results:
+            spec = specs.get(result.spec)
             if spec is None:
                 continue
             if spec.campaign is not None:
@@ -408,7 +424,7 @@ class Publisher:
         from .history import ACCEPTANCE, HistoryStore, make_record, resolve_commit
 
         try:
-            path = HistoryStore(self.options.history_dir).append(
+            path = HistoryStore(self.options.history_dir, front_end=self.options.front_end).append(
                 make_record(
                     data(),
                     model_version=self.model_version,
@@ -416,6 +432,7 @@ class Publisher:
                     acceptance=acceptance,
                     commit=resolve_commit(self.options.rootdir),
                     baseline=self.baseline,
+                    front_end=self.options.front_end,
                 )
             )
         except (HevvalError, OSError) as exc:

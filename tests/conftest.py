@@ -19,7 +19,7 @@ import pytest
 from hypothesis import settings
 
 from pytest_hevval.data import kernel_cache
-from pytest_hevval.history.compare import CI_VARIABLES, is_ci
+from pytest_hevval.history.policy import CI_VARIABLES, is_ci
 from pytest_hevval.plugin import session
 from pytest_hevval.scoring import engine
 

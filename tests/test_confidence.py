@@ -23,7 +23,9 @@ from pytest_hevval.core.tree import (
 )
 from pytest_hevval.core.uncertainty import SHARED_BLOCK_FACTOR, block_sums, signal_intervals
 from pytest_hevval.errors import SpecError
-from pytest_hevval.history.compare import compare, parse_compare_fail, regressions
+from pytest_hevval.history.compare import compare
+from pytest_hevval.history.compare_fail import parse_compare_fail
+from pytest_hevval.history.regressions import regressions
 from pytest_hevval.history.trends import detect_steps
 from pytest_hevval.results.spec_result import SpecResult
 from pytest_hevval.scoring.confidence import _phi_replicates, resampled_blocks

@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from pytest_hevval import history as h
 from pytest_hevval.cli import main as cli_main
 from pytest_hevval.errors import SpecError
+from pytest_hevval.flags import COMMAND
 from pytest_hevval.results.codec import dumps, json_number, json_numbers, plain_json
 from pytest_hevval.results.spec_result import SpecResult
 
@@ -75,6 +76,11 @@ def spec(
     if path is not None:
         result["spec"] = path
     return result
+
+
+def scored(**kwargs: Any) -> SpecResult:
+    """A typed spec result, as scoring hands it on, from the plain data of :func:`spec`."""
+    return SpecResult.from_dict(spec(**kwargs))
 
 
 def record(
@@ -1378,6 +1384,51 @@ def test_missing_baseline_decisions(tmp_path: Path) -> None:
     assert "'v9'" in created.message
 
 
+def test_messages_name_the_flag_of_the_front_end_in_use(tmp_path: Path) -> None:
+    ci = h.missing_baseline(ci=True, create_baseline=False, directory=tmp_path, front_end=COMMAND)
+    assert "run once with --accept " in ci.message
+    assert "--hevval-accept" not in ci.message
+    local = h.missing_baseline(
+        ci=False, create_baseline=False, directory=tmp_path, recorded=False, front_end=COMMAND
+    )
+    assert "record one with --history," in local.message
+    created = h.missing_baseline(
+        ci=False, create_baseline=True, directory=tmp_path, front_end=COMMAND
+    )
+    assert "(--create-baseline or --accept)" in created.message
+    with pytest.raises(h.HistoryError) as rule:
+        h.parse_compare_fail("phi", front_end=COMMAND)
+    assert str(rule.value).startswith("--compare-fail: ")
+    with pytest.raises(h.HistoryError) as margin:
+        h.parse_margin("2", front_end=COMMAND)
+    assert str(margin.value).startswith("--ratchet: ")
+    with pytest.raises(h.HistoryError, match="pass --model-version or set HEVVAL_MODEL_VERSION"):
+        h.make_record([spec()], model_version=" ", started_utc=T0, front_end=COMMAND)
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    with pytest.raises(h.HistoryError, match="folder with --history-dir"):
+        h.HistoryStore(blocked / "history", front_end=COMMAND).append(record("v1", T0))
+    # pytest's spelling stays the default.
+    with pytest.raises(h.HistoryError) as under_pytest:
+        h.parse_compare_fail("phi")
+    assert str(under_pytest.value).startswith("--hevval-compare-fail: ")
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [(["--compare-fail", "phi"], "--compare-fail"), (["--ratchet", "2"], "--ratchet")],
+)
+def test_hevval_run_names_its_own_flags(
+    tmp_path: Path, argv: list[str], flag: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    spec_file = tmp_path / "x.hevval.yaml"
+    spec_file.write_text("name: x\n", encoding="utf-8")
+    assert cli_main(["run", str(spec_file), "--no-history", "--quiet", *argv]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {flag}: " in err
+    assert "--hevval-" not in err
+
+
 @pytest.mark.parametrize(
     ("env", "expected"),
     [
@@ -1396,7 +1447,7 @@ def test_is_ci(env: dict[str, str], expected: bool) -> None:
 
 
 def test_ratchet_tightens_and_never_loosens() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.95, 3: 0.85}), thresholds={})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.95, 3: 0.85}), thresholds={})])
     current = {"E_batt/P_batt": {"mae": 0.9, "rms": 0.9}}
     proposed = h.ratchet_thresholds(result, current, 0.01)
     assert proposed == {"E_batt/P_batt": {"mae": 0.94, "rms": 0.9}}
@@ -1404,21 +1455,21 @@ def test_ratchet_tightens_and_never_loosens() -> None:
 
 
 def test_ratchet_uses_the_stricter_of_given_and_as_run_thresholds() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.80}), thresholds={"mae": 0.85})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.80}), thresholds={"mae": 0.85})])
     assert h.ratchet_thresholds(result, {"E_batt/P_batt": {"mae": 0.5}}, 0.0) == {
         "E_batt/P_batt": {"mae": 0.85}
     }
 
 
 def test_ratchet_keeps_undefined_and_ungated() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: float("nan")}))])
+    result = scored(signals=[signal(lambdas=changed({2: float("nan")}))])
     assert h.ratchet_thresholds(result, {}, 0.01) == {"E_batt/P_batt": {"mae": 0.9}}
-    ungated = spec(signals=[signal(thresholds={})])
+    ungated = scored(signals=[signal(thresholds={})])
     assert h.ratchet_thresholds(ungated, {}, 0.01) == {}
 
 
 def test_ratchet_rounds_down_so_the_run_still_passes() -> None:
-    result = spec(signals=[signal(lambdas=changed({2: 0.93339}), thresholds={"mae": 0.1})])
+    result = scored(signals=[signal(lambdas=changed({2: 0.93339}), thresholds={"mae": 0.1})])
     value = h.ratchet_thresholds(result, {}, 0.0)["E_batt/P_batt"]["mae"]
     assert value == 0.9333
 
@@ -1431,7 +1482,7 @@ def test_ratchet_rounds_down_so_the_run_still_passes() -> None:
 def test_ratchet_property_monotone_and_idempotent(
     achieved: list[float | None], current: float, margin: float
 ) -> None:
-    result = spec(signals=[signal(lambdas=achieved, thresholds={})])
+    result = scored(signals=[signal(lambdas=achieved, thresholds={})])
     start = {"E_batt/P_batt": dict.fromkeys(("mae", "emergent"), current)}
     once = h.ratchet_thresholds(result, start, margin)
     for name, value in once["E_batt/P_batt"].items():
@@ -1450,7 +1501,7 @@ def test_sidecar_path_names() -> None:
 def test_ratchet_spec_writes_reviewable_sidecar_and_is_idempotent(tmp_path: Path) -> None:
     spec_path = tmp_path / "trip.hevval.yaml"
     spec_path.write_text("name: trip\n")
-    result = spec(signals=[signal(lambdas=changed({2: 0.95}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.95}))])
     kwargs: dict[str, Any] = {"margin": 0.01, "model_version": "v7", "created_utc": T0}
     outcome = h.ratchet_spec(spec_path, result, {"E_batt/P_batt": {"mae": 0.9}}, **kwargs)
     assert outcome.written
@@ -1471,7 +1522,7 @@ def test_ratchet_spec_writes_reviewable_sidecar_and_is_idempotent(tmp_path: Path
 
 def test_ratchet_spec_without_gain_writes_nothing(tmp_path: Path) -> None:
     spec_path = tmp_path / "trip.hevval.yaml"
-    result = spec(signals=[signal(lambdas=changed({2: 0.905}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.905}))])
     outcome = h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
     assert not outcome.written
     assert not outcome.path.exists()
@@ -1482,7 +1533,7 @@ def test_ratchet_spec_keeps_entries_of_absent_signals(tmp_path: Path) -> None:
     h.write_sidecar(
         spec_path, {"old/sig": {"rms": 0.8}}, model_version="v0", created_utc=T0, margin=0.01
     )
-    result = spec(signals=[signal(lambdas=changed({2: 0.99}))])
+    result = scored(signals=[signal(lambdas=changed({2: 0.99}))])
     h.ratchet_spec(spec_path, result, {}, margin=0.01, model_version="v", created_utc=T0)
     assert h.load_sidecar(spec_path) == {"old/sig": {"rms": 0.8}, "E_batt/P_batt": {"mae": 0.98}}
 

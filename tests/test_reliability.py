@@ -491,12 +491,18 @@ def test_history_survives_sigkill_mid_write(tmp_path: Path, mode: str) -> None:
 @pytest.mark.parametrize("achieved", [0.9999999999999999, 0.9299999999999999, 0.93, 1.0])
 def test_ratchet_never_sets_a_threshold_above_what_the_run_achieved(achieved: float) -> None:
     from pytest_hevval.history import ratchet_thresholds
+    from pytest_hevval.results.spec_result import SpecResult
 
-    result = {
-        "name": "s",
-        "phi": 0.5,
-        "signals": [{"path": "a", "lambdas": [achieved] * 7, "thresholds": {"mae": 0.0}}],
-    }
+    signal = {"path": "a", "set": 1, "level": 1, "alpha": 1.0, "lambdas": [achieved] * 7}
+    errors = {"lag_s": 0.0, "peak_correlation": 1.0, "mae": 0.0, "rms": 0.0}
+    result = SpecResult.from_dict(
+        {
+            "name": "s",
+            "spec": "s.hevval.yaml",
+            "phi": 0.5,
+            "signals": [{**signal, **errors, "thresholds": {"mae": 0.0}}],
+        }
+    )
     proposed = ratchet_thresholds(result, {"a": {"mae": 0.0}}, 0.0)["a"]["mae"]
     assert proposed <= achieved
     assert proposed >= achieved - 1e-4

@@ -7,25 +7,23 @@ time. See ``docs/history.md`` for the record format and the option names.
 
 from ._base import ERROR_FIELDS, HistoryError
 from .compare import (
-    RULE_FIELDS,
-    BaselineDecision,
     Comparison,
     FieldDelta,
-    Regression,
-    Rule,
     SignalComparison,
     SpecComparison,
-    acceptance,
     compare,
-    is_ci,
-    missing_baseline,
-    parse_compare_fail,
-    records_this_run,
-    regressions,
     specs_of,
 )
+from .compare_fail import RULE_FIELDS, Rule, parse_compare_fail
 from .index import TREND_RUNS
 from .load import latest_results, load_document, load_side, report_problems
+from .policy import (
+    BaselineDecision,
+    acceptance,
+    is_ci,
+    missing_baseline,
+    records_this_run,
+)
 from .ratchet import (
     DEFAULT_MARGIN,
     RatchetOutcome,
@@ -53,6 +51,7 @@ from .records import (
     resolve_model_version,
     validate_record,
 )
+from .regressions import Regression, regressions
 from .render import comparison_json, comparison_markdown, comparison_table
 from .store import DEFAULT_HISTORY_DIR, HistoryStore, StoredRecord, StoreProblem, slugify
 from .trends import (

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..core.characteristics import CHARACTERISTICS
-from ..errors import HevvalError
+from ..results.record_schema import HistoryError
 from ..results.spec_result import PHYSICAL_ERRORS
 
 __all__ = [
@@ -18,10 +18,6 @@ __all__ = [
 
 #: Physical error quantities carried by every signal result (the results' own list).
 ERROR_FIELDS: tuple[str, ...] = PHYSICAL_ERRORS
-
-
-class HistoryError(HevvalError, ValueError):
-    """A history record, history folder, comparison rule or threshold sidecar is unusable."""
 
 
 def spec_key(spec: Mapping[str, Any]) -> str:

@@ -1,161 +1,44 @@
-"""Compare a run with a baseline record, and decide which differences are regressions.
+"""Compare a run with a baseline record, spec by spec and signal by signal.
 
-``parse_compare_fail`` implements the ``--hevval-compare-fail`` grammar::
-
-    expr   := rule ("," rule)*
-    rule   := field ":" amount
-    field  := "phi" | "lambda" | "lag" | <characteristic> | "lambda1" … "lambda7"
-    amount := drop ["+noise"] | "noise"
-    drop   := number          an absolute drop, in the field's own unit
-            | number "%"      a drop relative to the baseline value
-
-``phi:0.01,lambda:0.02`` fails when any Φ drops by more than 0.01 or any λ of any signal by
-more than 0.02; ``mae:1%`` fails when λ3 drops by more than 1 % of its baseline value.
-``+noise`` also asks the drop to be beyond noise: the two runs' 95 % intervals do not overlap
-(``phi:0.005+noise``); ``phi:noise`` fails on any drop beyond noise. Where either run has no
-interval (the lag; records made before intervals existed) the drop alone decides.
+:func:`compare` pairs the specs of two runs and says what changed: Φ, every λ and physical
+error of every signal present in both, the windows and cells whose error rose or fell, the
+data files that changed, and per campaign the recordings that got better or worse. Which of
+these changes are regressions is the rules' business (:mod:`.compare_fail`,
+:mod:`.regressions`).
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Literal
 
-from ..core.registry import (
-    LAMBDA_ALIASES,
-    PAPER_CHARACTERISTICS,
-    describe,
-    is_registered,
-    order_names,
-)
+from ..core.registry import order_names
 from ..defaults import REGION_MIN_SAMPLES, split_key
-from ..errors import did_you_mean
-from ..results.codec import data_identity, json_number, keyed_lambdas
+from ..results.codec import (
+    data_identity,
+    interval_bounds,
+    interval_table,
+    json_number,
+    lambdas_or_none,
+)
 from ._base import ERROR_FIELDS, HistoryError, spec_key
 
 __all__ = [
-    "CI_VARIABLES",
-    "BaselineDecision",
     "CampaignChange",
     "Comparison",
     "FieldDelta",
+    "GroupChange",
     "MatchedBy",
-    "Regression",
-    "Rule",
     "SignalComparison",
     "SpecComparison",
-    "acceptance",
     "campaign_change_lines",
     "campaign_changes",
     "compare",
-    "is_ci",
-    "missing_baseline",
-    "parse_compare_fail",
-    "records_this_run",
-    "regressions",
+    "local_changes",
     "specs_of",
 ]
-
-#: Names accepted on the left of ``:`` and what each one checks.
-RULE_FIELDS: dict[str, str] = {
-    "phi": "Φ of each spec",
-    "lambda": "every λ1–λ7 of every signal",
-    "lag": "|lag| of every signal, in seconds (a growth is a regression)",
-    **{name: f"{describe(name).symbol} of every signal" for name in PAPER_CHARACTERISTICS},
-    **{alias: f"{describe(name).symbol} ({name})" for alias, name in LAMBDA_ALIASES.items()},
-}
-_ALIASES = LAMBDA_ALIASES
-_AMOUNT = re.compile(r"^(?P<number>[0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(?P<percent>%?)$")
-_EXAMPLE = "phi:0.01,lambda:0.02, mae:1% or phi:0.005+noise"
-_NOISE = "noise"
-# Float noise from re-running the same model must never count as a drop.
-_TOLERANCE = 1e-12
-
-
-@dataclass(frozen=True)
-class Rule:
-    """One ``field:amount`` clause: how far ``field`` may get worse before the run fails."""
-
-    field: str
-    amount: float
-    relative: bool
-    text: str
-    #: Also require the change to be beyond noise (the runs' intervals do not overlap).
-    beyond_noise: bool = False
-
-    def allowed(self, before: float) -> float:
-        """The largest acceptable worsening from ``before``."""
-        return abs(before) * self.amount / 100.0 if self.relative else self.amount
-
-    def applies_to(self, field: str) -> bool:
-        if self.field == "lambda":
-            # Called with Φ, lag and λ fields only; every other field is a characteristic.
-            return field not in ("phi", "lag")
-        return self.field == field
-
-
-def parse_compare_fail(expr: str, *, option: str = "--hevval-compare-fail") -> list[Rule]:
-    """Parse a compare-fail expression into rules; a bad one raises :class:`HistoryError`."""
-    clauses = [clause.strip() for clause in expr.split(",")]
-    if not expr.strip() or any(not clause for clause in clauses):
-        raise HistoryError(
-            f"empty rule in {expr!r}",
-            key=option,
-            hint=f"write comma-separated field:amount rules, e.g. {_EXAMPLE}",
-        )
-    rules = []
-    for clause in clauses:
-        name, sep, amount_text = clause.partition(":")
-        name = name.strip().lower()
-        if not sep:
-            raise HistoryError(
-                f"rule {clause!r} has no ':amount'",
-                key=option,
-                hint=f"write field:amount, e.g. {_EXAMPLE}",
-            )
-        if name not in RULE_FIELDS and not is_registered(name):
-            suggestion = did_you_mean(name, RULE_FIELDS)
-            raise HistoryError(
-                f"unknown field {name!r} in {clause!r}" + (f"; {suggestion}" if suggestion else ""),
-                key=option,
-                hint="valid fields: " + ", ".join(RULE_FIELDS),
-            )
-        amount_text = amount_text.strip()
-        beyond_noise = amount_text.lower() == _NOISE or amount_text.lower().endswith("+" + _NOISE)
-        if amount_text.lower() == _NOISE:
-            amount_text = "0"
-        elif beyond_noise:
-            amount_text = amount_text[: -len(_NOISE) - 1].strip()
-        match = _AMOUNT.match(amount_text)
-        if match is None:
-            raise HistoryError(
-                f"amount {amount_text.strip()!r} in {clause!r} is not a non-negative number "
-                "or percentage",
-                key=option,
-                hint=f"write e.g. {_EXAMPLE}",
-            )
-        amount = float(match["number"])
-        if not math.isfinite(amount):
-            raise HistoryError(
-                f"amount in {clause!r} is not finite", key=option, hint=f"write e.g. {_EXAMPLE}"
-            )
-        rules.append(
-            Rule(
-                field=_ALIASES.get(name, name),
-                amount=amount,
-                relative=bool(match["percent"]),
-                text=clause,
-                beyond_noise=beyond_noise,
-            )
-        )
-    return rules
-
-
-# -- comparison -----------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -606,44 +489,23 @@ def _signals(spec: Mapping[str, Any]) -> dict[str, Mapping[str, Any]]:
     }
 
 
-def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
-    """λ values keyed by name; a result of schema 1 (a list in paper order) is read too."""
-    try:
-        return keyed_lambdas(signal.get("lambdas"))
-    except ValueError:
-        return {}
-
-
-def _lambda_deltas(
-    before: Mapping[str, float | None],
-    after: Mapping[str, float | None],
-    before_intervals: Mapping[str, Any] | None = None,
-    after_intervals: Mapping[str, Any] | None = None,
-) -> tuple[FieldDelta, ...]:
-    names = order_names([*before, *after])
+def _lambda_deltas(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[FieldDelta, ...]:
+    """λ before and after by name (a result of schema 1 held a list in paper order), with the
+    95 % intervals both runs recorded."""
+    values_before = lambdas_or_none(before.get("lambdas"))
+    values_after = lambdas_or_none(after.get("lambdas"))
+    intervals_before = interval_table(before.get("intervals"))
+    intervals_after = interval_table(after.get("intervals"))
     return tuple(
         FieldDelta(
             name,
-            before.get(name),
-            after.get(name),
-            _bounds((before_intervals or {}).get(name)),
-            _bounds((after_intervals or {}).get(name)),
+            values_before.get(name),
+            values_after.get(name),
+            intervals_before.get(name),
+            intervals_after.get(name),
         )
-        for name in names
+        for name in order_names([*values_before, *values_after])
     )
-
-
-def _bounds(raw: Any) -> tuple[float, float] | None:
-    """(low, high) of a recorded interval, or None where it is missing or not numeric."""
-    if not isinstance(raw, Mapping):
-        return None
-    low, high = json_number(raw.get("low")), json_number(raw.get("high"))
-    return None if low is None or high is None else (low, high)
-
-
-def _intervals_of(signal: Mapping[str, Any]) -> Mapping[str, Any]:
-    raw = signal.get("intervals")
-    return raw if isinstance(raw, Mapping) else {}
 
 
 def _compare_spec(
@@ -666,12 +528,7 @@ def _compare_spec(
                 path=path,
                 name=str(sig_after.get("name", path.rsplit("/", 1)[-1])),
                 unit=sig_after.get("unit") if isinstance(sig_after.get("unit"), str) else None,
-                lambdas=_lambda_deltas(
-                    _lambdas(sig_before),
-                    _lambdas(sig_after),
-                    _intervals_of(sig_before),
-                    _intervals_of(sig_after),
-                ),
+                lambdas=_lambda_deltas(sig_before, sig_after),
                 errors=tuple(
                     FieldDelta(
                         name, json_number(sig_before.get(name)), json_number(sig_after.get(name))
@@ -691,8 +548,8 @@ def _compare_spec(
             "phi",
             json_number(before.get("phi")),
             json_number(after.get("phi")),
-            _bounds(before.get("phi_interval")),
-            _bounds(after.get("phi_interval")),
+            interval_bounds(before.get("phi_interval")),
+            interval_bounds(after.get("phi_interval")),
         ),
         passed_before=_flag(before.get("passed")),
         passed_after=_flag(after.get("passed")),
@@ -723,255 +580,3 @@ def _data_changed(before: Mapping[str, Any], after: Mapping[str, Any]) -> tuple[
         if same_hash and old_id != new_id:
             changed.append(side)
     return tuple(changed)
-
-
-# -- regressions ----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Regression:
-    """A quantity that got worse by more than a rule allows."""
-
-    spec: str
-    signal: str | None
-    field: str
-    before: float
-    after: float | None
-    allowed: float
-    rule: str
-    #: Both runs' 95 % intervals, when the rule asked for a change beyond noise.
-    intervals: tuple[tuple[float, float], tuple[float, float]] | None = None
-
-    def _noise_text(self) -> str:
-        if self.intervals is None:
-            return ""
-        (a, b), (c, d) = self.intervals
-        return f"; 95 % intervals [{a:.4g}, {b:.4g}] → [{c:.4g}, {d:.4g}] do not overlap"
-
-    def __str__(self) -> str:
-        where = self.spec if self.signal is None else f"{self.spec}::{self.signal}"
-        after = "undefined" if self.after is None else f"{self.after:.4g}"
-        if self.field == "lag":
-            change = "grew" if self.after is not None else "became undefined"
-            return (
-                f"{where}: |lag| {change} {self.before:.4g} s → {after} s "
-                f"(allowed growth {self.allowed:.4g} s, rule {self.rule!r})"
-            )
-        if self.field == "phi":
-            label = "Φ"
-        else:
-            symbol = describe(self.field).symbol
-            label = self.field if symbol == self.field else f"{symbol} {self.field}"
-        return (
-            f"{where}: {label} dropped {self.before:.4g} → {after} "
-            f"(allowed drop {self.allowed:.4g}, rule {self.rule!r}{self._noise_text()})"
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "spec": self.spec,
-            "signal": self.signal,
-            "field": self.field,
-            "before": self.before,
-            "after": self.after,
-            "allowed": self.allowed,
-            "rule": self.rule,
-            **({"intervals": [list(i) for i in self.intervals]} if self.intervals else {}),
-        }
-
-
-def regressions(comparison: Comparison, rules: Sequence[Rule]) -> list[Regression]:
-    """Every quantity that worsened by more than a matching rule allows.
-
-    Φ and λ are "higher is better": a drop larger than allowed is a regression, and so is a
-    value that was defined before and is undefined (NaN) now. ``lag`` compares |lag_s|, where
-    growth is the regression. Nothing that was undefined before can regress.
-    """
-    found: list[Regression] = []
-    for spec in comparison.specs:
-        for rule in rules:
-            if rule.applies_to("phi"):
-                hit = _worsened(
-                    spec.phi.before,
-                    spec.phi.after,
-                    rule,
-                    higher_is_better=True,
-                    beyond_noise=spec.phi.beyond_noise,
-                )
-                if hit is not None:
-                    found.append(
-                        Regression(
-                            spec.key,
-                            None,
-                            "phi",
-                            spec.phi.before or 0.0,
-                            *hit,
-                            rule.text,
-                            _noise_intervals(spec.phi, rule),
-                        )
-                    )
-        for signal in spec.signals:
-            for rule in rules:
-                for delta in signal.lambdas:
-                    if not rule.applies_to(delta.field):
-                        continue
-                    hit = _worsened(
-                        delta.before,
-                        delta.after,
-                        rule,
-                        higher_is_better=True,
-                        beyond_noise=delta.beyond_noise,
-                    )
-                    if hit is not None:
-                        found.append(
-                            Regression(
-                                spec.key,
-                                signal.path,
-                                delta.field,
-                                delta.before or 0.0,
-                                *hit,
-                                rule.text,
-                                _noise_intervals(delta, rule),
-                            )
-                        )
-                if rule.applies_to("lag"):
-                    lag = signal.field("lag_s")
-                    before = None if lag.before is None else abs(lag.before)
-                    after = None if lag.after is None else abs(lag.after)
-                    hit = _worsened(before, after, rule, higher_is_better=False)
-                    if hit is not None:
-                        found.append(
-                            Regression(spec.key, signal.path, "lag", before or 0.0, *hit, rule.text)
-                        )
-    return found
-
-
-def _noise_intervals(
-    delta: FieldDelta, rule: Rule
-) -> tuple[tuple[float, float], tuple[float, float]] | None:
-    """The intervals that showed a change beyond noise, for a rule that asked."""
-    if not rule.beyond_noise or delta.before_interval is None or delta.after_interval is None:
-        return None
-    return (delta.before_interval, delta.after_interval)
-
-
-def _worsened(
-    before: float | None,
-    after: float | None,
-    rule: Rule,
-    *,
-    higher_is_better: bool,
-    beyond_noise: bool | None = None,
-) -> tuple[float | None, float] | None:
-    if before is None:
-        return None
-    allowed = rule.allowed(before)
-    if after is None:
-        return (None, allowed)
-    change = (before - after) if higher_is_better else (after - before)
-    if rule.beyond_noise and beyond_noise is False:
-        return None  # within noise: the intervals overlap
-    if change > allowed + _TOLERANCE:
-        return (after, allowed)
-    return None
-
-
-# -- missing baseline -----------------------------------------------------------------------
-
-#: Environment variables that mark a CI runner.
-CI_VARIABLES = ("CI", "GITHUB_ACTIONS", "GITLAB_CI", "BUILDKITE", "JENKINS_URL", "TF_BUILD")
-
-
-def is_ci(env: Mapping[str, str]) -> bool:
-    """Whether the environment looks like a CI runner (``CI=true`` and common vendor variables)."""
-    for name in CI_VARIABLES:
-        value = env.get(name, "").strip().lower()
-        if value and value not in ("0", "false", "no", "off"):
-            return True
-    return False
-
-
-def records_this_run(*, asked: bool, refused: bool, environ: Mapping[str, str]) -> bool:
-    """Whether a run writes its history record: in CI (:func:`is_ci`) or when asked, never
-    when refused. A laptop's runs of half-finished work stay out of the trends and baselines
-    a team reads, as pytest-benchmark saves only when asked."""
-    return not refused and (asked or is_ci(environ))
-
-
-@dataclass(frozen=True)
-class BaselineDecision:
-    """What to do when the requested baseline record does not exist.
-
-    ``action`` is ``"fail"`` (end the session with ``message`` as the error), ``"record"``
-    (this run becomes the baseline) or ``"note"`` (say so and carry on).
-    """
-
-    action: Literal["fail", "record", "note"]
-    message: str
-
-    @property
-    def fails(self) -> bool:
-        return self.action == "fail"
-
-
-def missing_baseline(
-    *,
-    ci: bool,
-    create_baseline: bool,
-    directory: Path | str,
-    wanted: str = "latest",
-    recorded: bool = True,
-) -> BaselineDecision:
-    """Decide what a missing baseline means: a failure in CI, a note locally.
-
-    ``--hevval-create-baseline`` (and ``--hevval-accept``) turns both into "record this run
-    as the baseline".
-    """
-    what = {
-        "latest": "no baseline record",
-        "accepted": "no accepted baseline record",
-    }.get(wanted, f"no record of model version {wanted!r}")
-    where = f"{what} in {directory}"
-    if create_baseline:
-        return BaselineDecision(
-            "record",
-            f"{where}; this run is recorded as the baseline "
-            "(--hevval-create-baseline or --hevval-accept)",
-        )
-    if ci:
-        return BaselineDecision(
-            "fail",
-            f"{where}; comparison needs one. Record one on purpose: run once with "
-            "--hevval-accept (with the shipped GitHub workflow: run it by hand on main with "
-            "'accept'), or bring the history folder to the job (the workflow's branch "
-            f"hevval-history, or commit the history folder {directory})",
-        )
-    if not recorded:
-        return BaselineDecision(
-            "note",
-            f"{where}; nothing to compare against yet (this run is not recorded: record one "
-            "with --hevval-history, or compare in CI, where runs are recorded)",
-        )
-    return BaselineDecision(
-        "note",
-        f"{where}; nothing to compare against yet (the next run compares against this one)",
-    )
-
-
-def acceptance(
-    *, compared: bool, baseline_found: bool, regressed: bool, create_baseline: bool, accept: bool
-) -> str:
-    """Why a run's record is, or is not, an accepted baseline (a key of ``ACCEPTANCE``).
-
-    ``--hevval-accept`` accepts whatever the comparison found; a run that compared nothing is
-    accepted, as every run was before records carried acceptance. A run that asked for a
-    comparison is accepted when it found a baseline and broke no rule of compare-fail, or when
-    it found none and ``--hevval-create-baseline`` made it the first.
-    """
-    if accept:
-        return "manual"
-    if not compared:
-        return "not-compared"
-    if not baseline_found:
-        return "first-baseline" if create_baseline else "no-baseline"
-    return "regressed" if regressed else "no-regression"

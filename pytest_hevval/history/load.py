@@ -5,15 +5,15 @@ from __future__ import annotations
 
 import json
 import sys
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from ..errors import did_you_mean
 from ..files import read_json
+from ..flags import COMMAND
+from ..results.envelope import RunDocument, read_document
 from ._base import HistoryError
 from .compare import specs_of
-from .records import migrate_record
 from .store import HistoryStore
 
 __all__ = [
@@ -58,7 +58,7 @@ def latest_results(directory: Path) -> list[dict[str, Any]]:
     if not records:
         raise HistoryError(
             f"no readable records in {directory}",
-            hint="point --history-dir at the history folder, or record runs first",
+            hint=f"point {COMMAND.flag('history-dir')} at the history folder, or record runs first",
         )
     newest: dict[str, dict[str, Any]] = {}
     for record in reversed(records):
@@ -73,7 +73,7 @@ def latest_results(directory: Path) -> list[dict[str, Any]]:
     return list(newest.values())
 
 
-def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
+def load_side(ref: str, directory: Path) -> tuple[list[dict[str, Any]], str]:
     """Resolve a compare operand to (spec results, label).
 
     ``ref`` is ``history:latest``, ``history:previous`` (the record before the latest),
@@ -81,16 +81,17 @@ def load_side(ref: str, directory: Path) -> tuple[list[Mapping[str, Any]], str]:
     ``history:<model version>`` (looked up in ``directory``),
     a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
     """
-    document, source = load_document(ref, directory)
-    version = document.get("model_version")
-    if source == "hevval run" and not (isinstance(version, str) and version):
+    found = load_document(ref, directory)
+    version = found.content.get("model_version")
+    if found.kind != "record" and not (isinstance(version, str) and version):
         version = Path(ref).name
-    return document["specs"], str(version)
+    return found.specs, str(version)
 
 
-def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
-    """The whole run ``ref`` names (the forms of :func:`load_side`), and where it comes from:
-    ``history record`` (migrated to the current schema) or ``hevval run`` (its JSON output)."""
+def load_document(ref: str, directory: Path) -> RunDocument:
+    """The whole run ``ref`` names (the forms of :func:`load_side`), read through the run
+    envelope: a history record (migrated to the current schema), a ``hevval run --json``
+    document or a report.json."""
     if ref.startswith(HISTORY_PREFIX):
         wanted = ref[len(HISTORY_PREFIX) :]
         store = HistoryStore(directory)
@@ -119,7 +120,8 @@ def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
                 raise HistoryError(
                     f"no readable records in {directory}",
                     key=ref,
-                    hint="point --dir at the history folder, or record runs first",
+                    hint=f"point {COMMAND.flag('history-dir')} at the history folder, "
+                    "or record runs first",
                 )
             suggestion = did_you_mean(wanted, versions)
             raise HistoryError(
@@ -128,7 +130,7 @@ def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
                 key=ref,
                 hint="recorded versions: " + ", ".join(versions[-10:]),
             )
-        return dict(record), "history record"
+        return RunDocument("record", dict(record))
     path = Path(ref)
     try:
         document = read_json(path)
@@ -152,16 +154,4 @@ def load_document(ref: str, directory: Path) -> tuple[dict[str, Any], str]:
             file=ref,
             hint="pass the output of `hevval run --json` or a history record",
         ) from None
-    if (
-        isinstance(document, dict)
-        and "schema_version" in document
-        and ("model_version" in document or "results" in document)
-    ):
-        return migrate_record(document, file=ref), "history record"
-    if isinstance(document, dict) and isinstance(document.get("specs"), list):
-        return {**document, "specs": specs_of(document)}, "hevval run"
-    raise HistoryError(
-        "neither a history record nor a run result (no 'specs' list)",
-        file=ref,
-        hint="pass the output of `hevval run --json` or a history record",
-    )
+    return read_document(document, file=ref)

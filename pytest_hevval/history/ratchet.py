@@ -19,13 +19,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Any
 
 import yaml
 
 from ..core.registry import order_names
 from ..files import write_atomic
-from ..results.codec import json_number, keyed_lambdas
+from ..flags import PYTEST, FrontEnd
+from ..results.codec import json_number
+from ..results.spec_result import SpecResult
 from ..spec.sidecar import Thresholds, load_sidecar, sidecar_path
 from ._base import HistoryError
 from .records import format_utc
@@ -51,8 +52,10 @@ _DECIMALS = 4
 _SCALE = 10.0**_DECIMALS
 
 
-def parse_margin(text: str | float, *, option: str = "--hevval-ratchet") -> float:
-    """Validate a ratchet margin: a number in [0, 1)."""
+def parse_margin(text: str | float, *, front_end: FrontEnd = PYTEST) -> float:
+    """Validate a ratchet margin: a number in [0, 1); an error names the option as
+    ``front_end`` spells it."""
+    option = front_end.flag("ratchet")
     try:
         margin = float(text)
     except (TypeError, ValueError):
@@ -96,7 +99,7 @@ def merge_thresholds(spec: Mapping[str, Mapping[str, float]], sidecar: Threshold
 
 
 def ratchet_thresholds(
-    spec_result: Mapping[str, Any],
+    spec_result: SpecResult,
     current_thresholds: Mapping[str, Mapping[str, float]],
     margin: float,
 ) -> Thresholds:
@@ -109,38 +112,25 @@ def ratchet_thresholds(
     """
     margin = parse_margin(margin)
     proposed: Thresholds = {}
-    signals = spec_result.get("signals", [])
-    by_path = {
-        str(sig["path"]): sig
-        for sig in (signals if isinstance(signals, list) else [])
-        if isinstance(sig, Mapping) and isinstance(sig.get("path"), str)
-    }
+    by_path = {signal.path: signal for signal in spec_result.signals}
     for path in sorted(set(by_path) | set(current_thresholds)):
-        signal = by_path.get(path, {})
-        own = signal.get("thresholds")
+        signal = by_path.get(path)
         current = _stricter(
             dict(current_thresholds.get(path, {})),
-            {k: float(v) for k, v in own.items()} if isinstance(own, Mapping) else {},
+            {} if signal is None else {k: float(v) for k, v in signal.thresholds.items()},
         )
         if not current:
             continue
-        lambdas = signal.get("lambdas")
         out = {}
         for name in order_names(current):
-            achieved = _achieved(lambdas, name)
+            # An undefined (NaN) λ, or one the signal does not score, keeps the threshold.
+            achieved = None if signal is None else json_number(signal.lambdas.get(name))
             value = current[name]
             if achieved is not None:
                 value = max(value, min(1.0, max(0.0, _floor(achieved - margin))))
             out[name] = value
         proposed[path] = out
     return proposed
-
-
-def _achieved(lambdas: Any, name: str) -> float | None:
-    try:
-        return keyed_lambdas(lambdas).get(name)
-    except ValueError:
-        return None
 
 
 def render_sidecar(
@@ -203,7 +193,7 @@ class RatchetOutcome:
 
 def ratchet_spec(
     spec_path: Path | str,
-    spec_result: Mapping[str, Any],
+    spec_result: SpecResult,
     spec_thresholds: Mapping[str, Mapping[str, float]],
     *,
     margin: float,
@@ -238,16 +228,11 @@ def ratchet_spec(
     return RatchetOutcome(written, True, tuple(tightened))
 
 
-def _effective(
-    current: Thresholds, spec_result: Mapping[str, Any], path: str, name: str
-) -> float | None:
+def _effective(current: Thresholds, spec_result: SpecResult, path: str, name: str) -> float | None:
     """The threshold in force before ratcheting: the stricter of merged and as-run values."""
     values = [current.get(path, {}).get(name)]
-    signals = spec_result.get("signals")
-    for sig in signals if isinstance(signals, list) else []:
-        if isinstance(sig, Mapping) and sig.get("path") == path:
-            own = sig.get("thresholds")
-            if isinstance(own, Mapping):
-                values.append(json_number(own.get(name)))
+    for signal in spec_result.signals:
+        if signal.path == path:
+            values.append(json_number(signal.thresholds.get(name)))
     present = [v for v in values if v is not None]
     return max(present) if present else None

@@ -8,7 +8,8 @@ from typing import Any
 
 from ..core.registry import describe
 from ..escape import markdown, markdown_code
-from .compare import Comparison, FieldDelta, Regression, SignalComparison
+from .compare import Comparison, FieldDelta, SignalComparison
+from .regressions import Regression
 
 __all__ = ["FORMATS", "comparison_json", "comparison_markdown", "comparison_table", "render"]
 

@@ -39,6 +39,7 @@ from ..files import (
     read_json,
     write_temporary,
 )
+from ..flags import PYTEST, FrontEnd
 from ._base import HistoryError
 from .index import (
     TREND_RUNS,
@@ -93,8 +94,16 @@ class HistoryStore:
     record), so that a bad file never hides the good ones and never raises.
     """
 
-    def __init__(self, directory: Path | str, *, trend_runs: int = TREND_RUNS) -> None:
+    def __init__(
+        self,
+        directory: Path | str,
+        *,
+        trend_runs: int = TREND_RUNS,
+        front_end: FrontEnd = PYTEST,
+    ) -> None:
         self.directory = Path(directory)
+        #: How the front end in use spells the options a message names.
+        self.front_end = front_end
         self.problems: list[StoreProblem] = []
         #: Recorded runs kept per signal for :meth:`trends`.
         self.trend_runs = trend_runs
@@ -115,7 +124,7 @@ class HistoryStore:
             raise HistoryError(
                 f"cannot create the history folder: {exc.strerror or exc}",
                 file=str(self.directory),
-                hint="choose a writable folder with --hevval-history-dir",
+                hint=f"choose a writable folder with {self.front_end.flag('history-dir')}",
             ) from None
         stem = f"{started.strftime('%Y%m%dT%H%M%S.%fZ')}_{slugify(checked['model_version'])}"
         temp = self._write_temp(payload)
@@ -131,7 +140,7 @@ class HistoryStore:
                     file=str(self.directory),
                 )
         except OSError as exc:
-            raise _write_error(self.directory, exc) from None
+            raise _write_error(self.directory, exc, self.front_end) from None
         finally:
             forget_temporary(temp)
         self._index_new(final, len(payload), checked)
@@ -152,7 +161,7 @@ class HistoryStore:
             raise HistoryError(
                 f"cannot write to the history folder: {exc.strerror or exc}",
                 file=str(self.directory),
-                hint="choose a writable folder with --hevval-history-dir",
+                hint=f"choose a writable folder with {self.front_end.flag('history-dir')}",
             ) from None
 
     # -- reading ---------------------------------------------------------------------------
@@ -527,10 +536,10 @@ def record_text(record: Mapping[str, Any]) -> str:
     return "{\n" + ",\n".join(lines) + "\n}\n"
 
 
-def _write_error(directory: Path, exc: OSError) -> HistoryError:
+def _write_error(directory: Path, exc: OSError, front_end: FrontEnd) -> HistoryError:
     return HistoryError(
         f"cannot write the history record: {exc.strerror or exc}",
         file=str(directory),
-        hint="free disk space or choose another folder with --hevval-history-dir; "
+        hint=f"free disk space or choose another folder with {front_end.flag('history-dir')}; "
         "the records already there are unchanged",
     )

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from ..core.registry import describe, order_names
 from ..escape import plot_text
 from ..files import write_atomic
-from ..results.codec import json_number, keyed_lambdas
+from ..results.codec import interval_bounds, interval_table, json_number, lambdas_or_none
 from ._base import HistoryError, spec_key
 
 __all__ = [
@@ -121,7 +121,7 @@ def history_table(
                 lambdas={},
                 lag_s=None,
                 passed=passed if isinstance(passed, bool) else None,
-                intervals=_recorded_intervals({"phi": spec_result.get("phi_interval")}),
+                intervals=_phi_interval(spec_result.get("phi_interval")),
             )
             if signal is None:
                 rows.append(spec_row)
@@ -135,26 +135,21 @@ def history_table(
                     replace(
                         spec_row,
                         signal=str(sig["path"]),
-                        lambdas={k: json_number(v) for k, v in keyed_lambdas(lambdas).items()},
+                        lambdas=lambdas_or_none(lambdas),
                         lag_s=json_number(sig.get("lag_s")),
                         passed=passed if isinstance(passed, bool) else None,
                         intervals={
                             **spec_row.intervals,
-                            **_recorded_intervals(sig.get("intervals")),
+                            **interval_table(sig.get("intervals")),
                         },
                     )
                 )
     return rows
 
 
-def _recorded_intervals(raw: Any) -> dict[str, tuple[float, float]]:
-    out: dict[str, tuple[float, float]] = {}
-    for name, bounds in (raw or {}).items() if isinstance(raw, Mapping) else ():
-        if isinstance(bounds, Mapping):
-            low, high = json_number(bounds.get("low")), json_number(bounds.get("high"))
-            if low is not None and high is not None:
-                out[str(name)] = (low, high)
-    return out
+def _phi_interval(raw: Any) -> dict[str, tuple[float, float]]:
+    bounds = interval_bounds(raw)
+    return {} if bounds is None else {"phi": bounds}
 
 
 def characteristic_names(rows: Sequence[HistoryRow]) -> list[str]:

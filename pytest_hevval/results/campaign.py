@@ -32,7 +32,6 @@ __all__ = [
     "campaign_verdicts",
     "phi_quantile",
     "verdict",
-    "verdicts_from_dicts",
 ]
 
 #: How many of the lowest-scoring recordings a verdict names.
@@ -317,10 +316,8 @@ def campaign_verdicts(results: Iterable[SpecResult]) -> list[CampaignVerdict]:
 
 
 def campaign_payloads(dicts: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Every campaign's verdict as plain data: the reports' campaign section."""
-    return [found.to_dict() for found in verdicts_from_dicts(dicts)]
-
-
-def verdicts_from_dicts(dicts: Iterable[Mapping[str, Any]]) -> list[CampaignVerdict]:
-    """:func:`campaign_verdicts` of results in their JSON form (reports, the controller)."""
-    return campaign_verdicts(SpecResult.from_dict(d) for d in dicts if d.get("recording"))
+    """Every campaign's verdict as plain data, from results in their JSON form: the reports'
+    campaign section while the reports read JSON data. A writer that holds the typed results
+    calls :func:`campaign_verdicts` instead."""
+    results = (SpecResult.from_dict(d) for d in dicts if d.get("recording"))
+    return [found.to_dict() for found in campaign_verdicts(results)]

@@ -21,10 +21,13 @@ __all__ = [
     "checked_number",
     "data_identity",
     "dumps",
+    "interval_bounds",
+    "interval_table",
     "is_finite_number",
     "json_number",
     "json_numbers",
     "keyed_lambdas",
+    "lambdas_or_none",
     "number_or_nan",
     "plain_json",
 ]
@@ -100,6 +103,36 @@ def keyed_lambdas(raw: Any) -> dict[str, float | None]:
             name: _lenient_number(v) for name, v in zip(PAPER_CHARACTERISTICS, raw, strict=False)
         }
     return {}
+
+
+def lambdas_or_none(raw: Any) -> dict[str, float | None]:
+    """:func:`keyed_lambdas` for a reader that takes what it can: values it cannot place (a
+    list longer than the paper's seven) read as none."""
+    try:
+        return keyed_lambdas(raw)
+    except ValueError:
+        return {}
+
+
+def interval_bounds(raw: Any) -> tuple[float, float] | None:
+    """(low, high) of a result's ``{"low": …, "high": …}`` interval; ``None`` where it is
+    missing or either bound is not a finite number (``null``: unknown)."""
+    if not isinstance(raw, Mapping):
+        return None
+    low, high = json_number(raw.get("low")), json_number(raw.get("high"))
+    return None if low is None or high is None else (low, high)
+
+
+def interval_table(raw: Any) -> dict[str, tuple[float, float]]:
+    """The intervals of a mapping of name → ``{"low", "high"}`` that :func:`interval_bounds`
+    reads, by name (a signal's λ intervals); empty where ``raw`` is no mapping."""
+    if not isinstance(raw, Mapping):
+        return {}
+    return {
+        str(name): bounds
+        for name, raw_bounds in raw.items()
+        if (bounds := interval_bounds(raw_bounds)) is not None
+    }
 
 
 def _lenient_number(value: Any) -> float | None:

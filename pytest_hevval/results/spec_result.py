@@ -15,7 +15,7 @@ from typing import Any
 from ..core.characteristics import SignalCharacteristics
 from ..core.registry import FUSED_CHARACTERISTICS, describe, order_names
 from ..core.uncertainty import Interval, value_text
-from .codec import json_number, keyed_lambdas
+from .codec import interval_bounds, json_number, keyed_lambdas
 from .local import LocalFailure, LocalResult
 from .measurement import ErrorCheck
 from .runtime import ModelRuntime
@@ -415,9 +415,8 @@ def judged_value(value: float, interval: Interval | None, on: str) -> float:
 
 
 def _interval(value: float, bounds: Mapping[str, Any] | None) -> Interval | None:
-    if not bounds or bounds.get("low") is None or bounds.get("high") is None:
-        return None
-    return Interval(value, float(bounds["low"]), float(bounds["high"]))
+    found = interval_bounds(bounds)
+    return None if found is None else Interval(value, *found)
 
 
 def _intervals(data: Mapping[str, Any] | None, lambdas: Mapping[str, float]) -> dict[str, Interval]:
