@@ -66,6 +66,7 @@ def _run(args: argparse.Namespace) -> int:
     from . import __version__
     from .core.kernel import compile_note, finish_run
     from .data.remote import relative_to
+    from .flags import COMMAND
     from .publish import Publisher, PublishOptions, diagnosis_panels
     from .report.diagnosis import target_payload
     from .report.terminal import run_summary
@@ -76,7 +77,9 @@ def _run(args: argparse.Namespace) -> int:
     from .spec.load import load_specs
 
     rootdir = project_root(args.specs)
-    publisher = Publisher(PublishOptions.from_options(lambda name: _arg(args, name), rootdir))
+    publisher = Publisher(
+        PublishOptions.from_options(lambda name: _arg(args, name), rootdir, COMMAND)
+    )
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
@@ -382,14 +385,20 @@ def _trace(args: argparse.Namespace) -> int:
     """``hevval trace``: each requirement → the items that verify it → their latest verdict."""
     from .history import latest_results, load_side
     from .report.trace import read_requirement_list, render_trace, trace_rows
+    from .results.spec_result import SpecResult
 
     listed = read_requirement_list(args.requirements) if args.requirements else None
     if args.run is None:
         # Each spec's newest recorded verdict, whichever run recorded it.
-        rows = trace_rows(latest_results(Path(args.history_dir)), listed=listed)
+        latest = latest_results(Path(args.history_dir))
+        versions = {str(s["spec"]): str(s["model_version"]) for s in latest}
+        typed = [SpecResult.from_dict(s) for s in latest]
+        rows = trace_rows(typed, versions=versions, listed=listed)
     else:
         specs, label = load_side(args.run, Path(args.history_dir))
-        rows = trace_rows(specs, model_version=label, listed=listed)
+        rows = trace_rows(
+            [SpecResult.from_dict(s) for s in specs], model_version=label, listed=listed
+        )
     if not rows:
         print(
             f"hevval trace: no spec of {args.run} names requirements "
@@ -410,7 +419,10 @@ def _evidence(args: argparse.Namespace) -> int:
     document, source = load_document(args.run or "history:latest", Path(args.history_dir))
     # A history record holds the run's facts at its top, a run's JSON under "run".
     facts = document if source == "history record" else document.get("run") or {}
-    text = render_evidence(document["specs"], facts, source=source)
+    from .results.spec_result import SpecResult
+
+    specs = [SpecResult.from_dict(s) for s in document["specs"]]
+    text = render_evidence(specs, facts, source=source)
     _write(text, args.output)
     return EXIT_OK
 
