@@ -33,8 +33,6 @@ SCHEMA_FILE = "evidence.schema.json"
 #: history record's keys), any of which may be missing.
 RunFacts = Mapping[str, Any]
 
-#: Signal keys an evidence record keeps: the verdict and what it was judged on.
-_SIGNAL_KEYS = ("path", "passed", "lambdas", "thresholds", "failures", "requirements")
 #: Model keys that identify it (beside its kind).
 _MODEL_KEYS = (
     "callable",
@@ -82,6 +80,7 @@ def _lambda_interval(interval: Interval) -> dict[str, Any] | None:
 
 
 def _signal(signal: SignalResult) -> dict[str, Any]:
+    """What the record keeps of a signal: its verdict and what it was judged on."""
     return {
         "path": signal.path,
         "passed": signal.passed,
