@@ -381,14 +381,20 @@ def _trace(args: argparse.Namespace) -> int:
     """``hevval trace``: each requirement → the items that verify it → their latest verdict."""
     from .history import latest_results, load_side
     from .report.trace import read_requirement_list, render_trace, trace_rows
+    from .results.spec_result import SpecResult
 
     listed = read_requirement_list(args.requirements) if args.requirements else None
     if args.run is None:
         # Each spec's newest recorded verdict, whichever run recorded it.
-        rows = trace_rows(latest_results(Path(args.history_dir)), listed=listed)
+        latest = latest_results(Path(args.history_dir))
+        versions = {str(s["spec"]): str(s["model_version"]) for s in latest}
+        typed = [SpecResult.from_dict(s) for s in latest]
+        rows = trace_rows(typed, versions=versions, listed=listed)
     else:
         specs, label = load_side(args.run, Path(args.history_dir))
-        rows = trace_rows(specs, model_version=label, listed=listed)
+        rows = trace_rows(
+            [SpecResult.from_dict(s) for s in specs], model_version=label, listed=listed
+        )
     if not rows:
         print(
             f"hevval trace: no spec of {args.run} names requirements "
@@ -405,9 +411,11 @@ def _evidence(args: argparse.Namespace) -> int:
     """``hevval evidence``: the evidence record of a run, from its JSON or its history record."""
     from .history import load_document
     from .report.evidence import render_evidence
+    from .results.spec_result import SpecResult
 
     found = load_document(args.run or "history:latest", Path(args.history_dir))
-    text = render_evidence(found.specs, found.facts, source=found.source)
+    specs = [SpecResult.from_dict(s) for s in found.specs]
+    text = render_evidence(specs, found.facts, source=found.source)
     _write(text, args.output)
     return EXIT_OK
 

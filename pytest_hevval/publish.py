@@ -26,6 +26,7 @@ from .spec.model import Spec
 
 if TYPE_CHECKING:
     from .history import Comparison, Regression
+    from .report.panels import SignalPanels
 
 __all__ = ["Publication", "PublishOptions", "Publisher", "diagnosis_panels"]
 
@@ -127,7 +128,7 @@ class Publisher:
         from .report import parse_formats
 
         self.options = options
-        self.formats = parse_formats(options.report) if options.report else set()
+        self.formats = parse_formats(options.report, options.front_end) if options.report else set()
         front_end = options.front_end
         self.rules = (
             parse_compare_fail(options.compare_fail, front_end=front_end)
@@ -286,7 +287,7 @@ class Publisher:
             from .history import compare
 
             comparison = compare(data(), self.baseline, after_label=self.run_label)
-        self._write_reports(data, diagnoses, out, comparison)
+        self._write_reports(results, data, diagnoses, out, comparison)
         self._compare(comparison, out)
         self._ratchet(results, specs, out)
         self._record(data, self.acceptance(found), out)
@@ -299,6 +300,7 @@ class Publisher:
 
     def _write_reports(
         self,
+        results: Sequence[SpecResult],
         data: _Data,
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         out: Publication,
@@ -309,13 +311,16 @@ class Publisher:
 
             try:
                 written = write_reports(
-                    self._decorate(data(), diagnoses),
+                    results,
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
                     verdict=out.verdict,
                     comparison=None if comparison is None else comparison.to_dict(),
                     facts=self.run_facts(),
+                    panels=self._panels(results, diagnoses),
+                    data=data() if "json" in self.formats else None,
+                    front_end=self.options.front_end,
                 )
             except HevvalError as exc:
                 out.notes.append(f"report: error: {exc}")
@@ -325,49 +330,29 @@ class Publisher:
         if os.environ.get("GITHUB_ACTIONS") == "true":
             from .report import github_annotations
 
-            out.annotations.extend(github_annotations(data(), self.options.rootdir))
+            out.annotations.extend(github_annotations(results, self.options.rootdir))
 
-    def _decorate(
+    def _panels(
         self,
-        dicts: list[dict[str, Any]],
+        results: Sequence[SpecResult],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
-    ) -> list[dict[str, Any]]:
-        """Report copies of the results with each signal's diagnosis and history trend.
+    ) -> SignalPanels:
+        """Each signal's diagnosis and history trend, as the reports show them beside it.
 
         A trend shows the newest recorded runs that hold the signal (``TREND_RUNS``, from the
         history's index, so that a long history costs a run no more than a short one), then
         this run.
         """
+        from .report.panels import SignalPanels
+
         trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
         if self.options.use_history:
             from .history import HistoryStore
 
             trends = HistoryStore(self.options.history_dir).trends(
-                (result["spec"], signal["path"]) for result in dicts for signal in result["signals"]
+                (result.spec, signal.path) for result in results for signal in result.signals
             )
-        decorated = []
-        for result in dicts:
-            signals = []
-            for signal in result["signals"]:
-                item = dict(signal)
-                found = diagnoses.get((result["spec"], signal["path"]))
-                if found is None and signal.get("origins"):
-                    found = diagnoses.get((result["spec"], signal["origins"][0]))
-                if found is not None:
-                    item["diagnosis"] = dict(found)
-                history = trends.get((result["spec"], signal["path"]))
-                if history:
-                    item["history"] = [
-                        *history,
-                        {
-                            "version": self.model_version,
-                            "phi": result["phi"],
-                            "lambdas": signal["lambdas"],
-                        },
-                    ]
-                signals.append(item)
-            decorated.append({**result, "signals": signals})
-        return decorated
+        return SignalPanels(diagnoses, trends, self.model_version)
 
     def _compare(self, comparison: Comparison | None, out: Publication) -> None:
         """The comparison in the terminal, when it was asked for by name."""

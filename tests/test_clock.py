@@ -122,6 +122,6 @@ def test_the_html_report_shows_the_absolute_start(tmp_path: Path) -> None:
     simulated = pd.DataFrame({"time": _stamps(5.0).asi8 // 1_000_000, "v": signal[50 : 50 + N]})
     simulated.to_csv(tmp_path / "sim.csv", index=False)
     result = evaluate_spec(parse_spec_text(SPEC, tmp_path / "t.hevval.yaml")).result
-    page = render_html([result.to_dict()], title="t", generated_utc="now")
+    page = render_html([result], title="t", generated_utc="now")
     assert "2024-06-01T08:00:05+00:00" in page
     assert "lined up by clock, model 5 s later" in page

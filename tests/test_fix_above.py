@@ -184,6 +184,7 @@ def test_a_signal_whose_parent_is_no_integral_says_why(tmp_path: Path) -> None:
 
 def test_html_report_shows_the_predicted_figures_above() -> None:
     from pytest_hevval.report import render_html
+    from pytest_hevval.results.spec_result import SpecResult
 
     effect = {
         "name": "heating_aircon_kw",
@@ -201,11 +202,13 @@ def test_html_report_shows_the_predicted_figures_above() -> None:
     }
     signal = {
         "path": "E_batt/P_batt",
-        "lambdas": [1.0],
+        **{"set": 1, "level": 2, "alpha": 1.0, "lag_s": 0.0, "peak_correlation": 1.0},
+        **{"mae": 0.0, "rms": 0.0, "lambdas": [1.0]},
         "diagnosis": {"summary": "s", "effects": [effect], "above_note": None},
     }
+    result = {"name": "b03", "spec": "b03.yaml", "phi": 1.0, "signals": [signal]}
     html = render_html(
-        [{"name": "b03", "phi": None, "signals": [signal]}],
+        [SpecResult.from_dict(result)],
         title="t",
         generated_utc="2026-01-01 00:00:00 UTC",
     )
@@ -213,7 +216,7 @@ def test_html_report_shows_the_predicted_figures_above() -> None:
     assert "not predicted for the signals above" not in html
     signal["diagnosis"]["above_note"] = "P_batt is not the running integral of I_batt"
     html = render_html(
-        [{"name": "b03", "phi": None, "signals": [signal]}],
+        [SpecResult.from_dict(result)],
         title="t",
         generated_utc="2026-01-01 00:00:00 UTC",
     )

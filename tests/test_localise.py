@@ -601,7 +601,7 @@ def test_html_report_draws_the_strip_and_the_maps(tmp_path: Path) -> None:
 
     write_trip(tmp_path, stretch=True, fast=True)
     result = _evaluate(tmp_path).result  # type: ignore[attr-defined]
-    page = render_html([result.to_dict()], title="t", generated_utc="now")
+    page = render_html([result], title="t", generated_utc="now")
     assert "Where and when" in page
     assert 'aria-label="characteristics per time window"' in page
     assert "Φ per cell" in page

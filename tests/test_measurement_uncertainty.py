@@ -17,7 +17,7 @@ from pytest_hevval.report import model as report_model
 from pytest_hevval.report.sentences import failure_sentence, within_uncertainty_lines
 from pytest_hevval.report.text import render_markdown
 from pytest_hevval.results.measurement import ErrorCheck, check_error
-from pytest_hevval.results.spec_result import Failure, SignalResult
+from pytest_hevval.results.spec_result import Failure, SignalResult, SpecResult
 from pytest_hevval.spec.load import parse_spec_text
 
 pytest_plugins = ["pytester"]
@@ -219,17 +219,20 @@ def _signal_dict(within: list[Failure], failures: list[Failure]) -> dict[str, ob
         "failures": [f.to_dict() for f in failures],
         "within_uncertainty": [f.to_dict() for f in within],
         "passed": not failures,
+        **{"lag_s": 0.0, "peak_correlation": 1.0, "mae": 1.0, "rms": 1.23},
     }
 
 
 def test_report_model_marks_a_passing_miss_within_uncertainty() -> None:
     check = check_error(1.23, 0.95, 20.4, MeasurementUncertainty(abs=0.3), 0.0)
-    signal = _signal_dict([Failure("rms", 0.9397, 0.95, check)], [])
+    data = _signal_dict([Failure("rms", 0.9397, 0.95, check)], [])
+    signal = SignalResult.from_dict(data)
     statuses = {c.characteristic: c.status for c in report_model.cells(signal)}
     assert statuses["rms"] == "within"
     (line,) = report_model.measurement_lines(signal)
     assert line.endswith("within measurement uncertainty; passes")
-    markdown = render_markdown([{"name": "power", "spec": "p.hevval.yaml", "signals": [signal]}])
+    result = {"name": "power", "spec": "p.hevval.yaml", "phi": 1.0, "signals": [data]}
+    markdown = render_markdown([SpecResult.from_dict(result)])
     assert "**Measurement uncertainty of power**" in markdown
     assert "RMS 1.23 kW is 0.21 kW over its limit 1.02 kW" in markdown
 

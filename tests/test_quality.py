@@ -154,7 +154,7 @@ def test_reports_show_the_findings(tmp_path: Path) -> None:
 
     _project(tmp_path)
     result = evaluate_spec(parse_spec_text(SPEC.format(action="warn"), tmp_path / "w.hevval.yaml"))
-    payload = [result.result.to_dict()]
+    payload = [result.result]
     assert "Velocity [km/h]: straight-line fill at 39.3–199.1 s" in render_html(
         payload, title="t", generated_utc="now"
     )

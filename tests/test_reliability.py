@@ -660,7 +660,7 @@ def test_reports_are_byte_identical_across_runs(tmp_path: Path) -> None:
     contents = []
     for run in ("a", "b"):
         spec = load_spec(tmp_path / "pack.hevval.yaml")
-        result = evaluate_spec(spec, figures=True, workers=2).result.to_dict()
+        result = evaluate_spec(spec, figures=True, workers=2).result
         paths = write_reports(
             [result],
             {"json", "md", "html"},

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 import math
 import os
@@ -22,6 +23,7 @@ from hypothesis import strategies as st
 
 from pytest_hevval.core.characteristics import signal_characteristics
 from pytest_hevval.errors import DegenerateSignalError, HevvalError, MissingExtraError
+from pytest_hevval.flags import COMMAND
 from pytest_hevval.report import (
     ReportOptionError,
     figure_data,
@@ -34,6 +36,8 @@ from pytest_hevval.report import (
     svg,
     write_reports,
 )
+from pytest_hevval.report.panels import SignalPanels
+from pytest_hevval.results.spec_result import SignalResult, SpecResult
 
 STAMP = "2026-01-01 00:00:00 UTC"
 
@@ -133,7 +137,16 @@ def results(figures: dict[str, Any]) -> list[dict[str, Any]]:
 @pytest.fixture(scope="module")
 def page(figures: dict[str, Any]) -> str:
     """The HTML report of :func:`_results`, rendered once for the read-only checks."""
-    return render_html(_results(figures), title="Validation", generated_utc=STAMP)
+    return render_html(_typed(_results(figures)), title="Validation", generated_utc=STAMP)
+
+
+def _typed(specs: list[dict[str, Any]]) -> list[SpecResult]:
+    """The results as the reports take them."""
+    return [SpecResult.from_dict(spec) for spec in specs]
+
+
+def _typed_one(spec: dict[str, Any]) -> SpecResult:
+    return SpecResult.from_dict(spec)
 
 
 def _results(figures: dict[str, Any]) -> list[dict[str, Any]]:
@@ -292,16 +305,17 @@ def test_cells_colour_every_lambda_against_its_threshold() -> None:
     signal = _signal(
         "a", lambdas=[0.99, 0.5, 0.85, 0.9, 1.0, 0.9, 1.0], thresholds={"mae": 0.9, "rms": 0.9}
     )
-    statuses = [c.status for c in model.cells(signal)]
+    typed = SignalResult.from_dict(signal)
+    statuses = [c.status for c in model.cells(typed)]
     assert statuses == ["ungated", "ungated", "fail", "pass", "ungated", "ungated", "ungated"]
-    assert model.margin(signal) == pytest.approx(-0.05)
+    assert model.margin(typed) == pytest.approx(-0.05)
 
 
 def test_tree_rows_put_children_under_their_parent_in_position_order(
     results: list[dict[str, Any]],
 ) -> None:
-    rows = model.tree_rows(results[0])
-    assert [(s["path"], depth) for s, depth in rows] == [
+    rows = model.tree_rows(_typed(results)[0])
+    assert [(s.path, depth) for s, depth in rows] == [
         ("E_batt", 0),
         ("E_batt/P_batt", 1),
         ("E_batt/U_batt", 1),
@@ -309,8 +323,8 @@ def test_tree_rows_put_children_under_their_parent_in_position_order(
 
 
 def test_worst_rows_put_failing_signals_first(results: list[dict[str, Any]]) -> None:
-    rows = model.worst_rows(results, limit=3)
-    assert [r.signal["path"] for r in rows[:2]] == ["E_batt/P_batt", "E_batt"]
+    rows = model.worst_rows(_typed(results), limit=3)
+    assert [r.signal.path for r in rows[:2]] == ["E_batt/P_batt", "E_batt"]
     assert rows[0].worst is not None
     assert rows[0].worst.characteristic == "mae"
 
@@ -321,7 +335,7 @@ def test_glyph_points_weigh_each_lambda_by_alpha_times_beta(
     spec = copy.deepcopy(results[0])
     spec["weights"] = [1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 2.0]
     spec["signals"][0]["alpha"] = 0.7
-    points = [p for p in model.glyph_points(spec) if p.signal == "E_batt/U_batt"]
+    points = [p for p in model.glyph_points(_typed_one(spec)) if p.signal == "E_batt/U_batt"]
     assert [p.weight for p in points] == pytest.approx([0.7, 0.35, 0.7, 0.7, 0.7, 0.7, 1.4])
     assert {p.level for p in points} == {2}
 
@@ -339,7 +353,7 @@ def test_nice_ticks_are_round_and_cover_the_range() -> None:
 def test_markdown_summarises_each_spec_and_its_failing_signals(
     results: list[dict[str, Any]],
 ) -> None:
-    text = render_markdown(results)
+    text = render_markdown(_typed(results))
     assert text.startswith(
         "### ❌ hevval: 2 spec files, 1 pass; 6 items, 3 fail: 2 of 4 signals, 1 of 2 Φ\n"
     )
@@ -354,15 +368,15 @@ def test_markdown_summarises_each_spec_and_its_failing_signals(
 
 def test_markdown_escapes_table_breaking_names(results: list[dict[str, Any]]) -> None:
     results[0]["signals"][2]["path"] = "a|b<c>"
-    text = render_markdown(results)
+    text = render_markdown(_typed(results))
     assert "`a\\|b&lt;c&gt;`" in text
     assert "<c>" not in text
 
 
 def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> None:
     results[0]["signals"][0]["mae"] = math.nan
-    text = render_json(results)
-    assert text == render_json(copy.deepcopy(results))
+    text = render_json(_typed(results))
+    assert text == render_json(_typed(copy.deepcopy(results)))
     payload = json.loads(text)
     compact = json.dumps(payload, sort_keys=True, ensure_ascii=False, separators=(",", ":"))
     assert text == compact + "\n"
@@ -382,11 +396,21 @@ def test_json_is_sorted_stable_and_complete(results: list[dict[str, Any]]) -> No
 
 
 def test_json_turns_numpy_values_into_plain_numbers(results: list[dict[str, Any]]) -> None:
-    results[0]["phi"] = np.float32(0.5)
-    results[0]["signals"][0]["lambdas"] = np.array([1.0, 0.5, np.inf, 1, 1, 1, 1])
-    payload = json.loads(render_json(results))
+    typed = _typed(results)
+    signal = dataclasses.replace(
+        typed[0].signals[0],
+        lambdas={"mae": np.float64(np.inf), "rms": np.float32(0.5)},  # type: ignore[dict-item]
+        figures={"steps": np.array([1.0, np.nan, 2])},
+    )
+    typed[0] = dataclasses.replace(
+        typed[0],
+        phi=np.float32(0.5),  # type: ignore[arg-type]
+        signals=[signal, *typed[0].signals[1:]],
+    )
+    payload = json.loads(render_json(typed))
     assert payload["specs"][0]["phi"] == 0.5
-    assert payload["specs"][0]["signals"][0]["lambdas"][:3] == [1.0, 0.5, None]
+    assert payload["specs"][0]["signals"][0]["lambdas"] == {"mae": None, "rms": 0.5}
+    assert payload["specs"][0]["signals"][0]["figures"] == {"steps": [1.0, None, 2.0]}
 
 
 # --------------------------------------------------------------------------- annotations
@@ -395,7 +419,7 @@ def test_json_turns_numpy_values_into_plain_numbers(results: list[dict[str, Any]
 def test_annotations_point_at_the_failing_signals_spec_line(
     results: list[dict[str, Any]], tmp_path: Path
 ) -> None:
-    lines = github_annotations(results, tmp_path)
+    lines = github_annotations(_typed(results), tmp_path)
     assert lines == [
         "::error file=specs/trip_a01.hevval.yaml,title=hevval::i3 trip A01: Φ 0.8123 is below "
         "min Φ 0.9000",
@@ -411,7 +435,7 @@ def test_annotations_make_paths_relative_and_escape_commands(
 ) -> None:
     results[0]["spec"] = str(tmp_path / "specs" / "a,b.hevval.yaml")
     results[0]["name"] = "two\nlines 100%"
-    first = github_annotations(results, tmp_path)[0]
+    first = github_annotations(_typed(results), tmp_path)[0]
     assert first.startswith("::error file=specs/a%2Cb.hevval.yaml,title=hevval::two%0Alines 100%25")
     assert "\n" not in first
 
@@ -474,7 +498,7 @@ def test_html_escapes_names_and_text(results: list[dict[str, Any]]) -> None:
             }
         ],
     }
-    html = render_html(results, title="<T>", generated_utc=STAMP)
+    html = render_html(_typed(results), title="<T>", generated_utc=STAMP)
     assert "<script>alert" not in html
     assert "<img src=x>" not in html
     assert "<b>bold</b>" not in html
@@ -498,7 +522,7 @@ def test_html_shows_diagnosis_and_history_when_present(
             },
         ],
     }
-    signal["history"] = [
+    history = [
         {"version": "v1", "phi": 0.90, "lambdas": [0.9] * 7},
         {"version": "v2", "phi": 0.81, "lambdas": [0.8] * 7},
     ]
@@ -541,7 +565,10 @@ def test_html_shows_diagnosis_and_history_when_present(
             "stands_in_for": [],
         },
     ]
-    html = render_html(results, title="Validation", generated_utc=STAMP)
+    panels = SignalPanels(
+        trends={(results[0]["spec"], signal["path"]): history}, model_version="v3"
+    )
+    html = render_html(_typed(results), title="Validation", generated_utc=STAMP, panels=panels)
     assert "lag explains most of the residual" in html
     assert "62.0 %" in html
     # Effects: each with its one share and coefficient, its members and its reading.
@@ -554,11 +581,14 @@ def test_html_shows_diagnosis_and_history_when_present(
     assert ">noise<" not in html
     assert html.count('<svg class="hv-plot hv-small"') == 1
     assert ">v2</text>" in html
+    assert ">v3</text>" in html
 
 
 def test_html_survives_missing_optional_fields() -> None:
-    bare = {"name": "bare", "phi": None, "signals": [{"path": "x", "lambdas": [1.0]}]}
-    html = render_html([bare], title="t", generated_utc=STAMP)
+    signal = {"path": "x", "set": 1, "level": 1, "alpha": 1.0, "lambdas": [1.0]}
+    signal.update(lag_s=0.0, peak_correlation=1.0, mae=0.0, rms=0.0)
+    bare = {"name": "bare", "spec": "bare.yaml", "phi": math.nan, "signals": [signal]}
+    html = render_html(_typed([bare]), title="t", generated_utc=STAMP)
     assert "No figure data for this signal." in html
     assert "Φ = —" in html
 
@@ -573,7 +603,7 @@ def test_html_of_20_signals_one_hour_at_100_hz_stays_under_800_kb() -> None:
         signal = _signal(f"sys/s{k:02d}", lambdas=[*chars.lambdas, 1.0], thresholds={"mae": 0.97})
         signal["figures"] = figure_data(ref, sim, dt=0.01, start_s=0.0, max_lag=500)
         signals.append(signal)
-    html = render_html([_spec(signals)], title="one hour", generated_utc=STAMP)
+    html = render_html(_typed([_spec(signals)]), title="one hour", generated_utc=STAMP)
     size = len(html.encode("utf-8"))
     assert html.count('<svg class="hv-plot"') == 20
     # One point per pixel column at whole pixels: noisy traces cost about 30 KB a plot.
@@ -673,7 +703,8 @@ def test_a_spike_one_sample_wide_keeps_its_full_height_and_place() -> None:
     ref = np.zeros(n)
     ref[31_337], ref[77_777] = 100.0, -100.0
     data = figure_data(ref, np.zeros(n), dt=0.01, start_s=0.0, max_lag=10)
-    plot = svg.signal_svg({"path": "x", "name": "x", "figures": data}, "s")
+    signal = SignalResult.from_dict({**_signal("x"), "figures": data})
+    plot = svg.signal_svg(signal, "s")
     assert plot is not None
     for css in ("hv-ref", "hv-res"):
         points = _vertices(_band(plot, css))
@@ -699,8 +730,10 @@ def test_path_data_the_page_already_holds_is_drawn_by_reference(
     overlay = twin["signals"][0]["figures"]["overlay"]
     # A model input equal to its measurement: the two envelopes are the same path.
     overlay["sim_min"], overlay["sim_max"] = list(overlay["ref_min"]), list(overlay["ref_max"])
-    html = render_html([*results, twin], title="t", generated_utc=STAMP)
-    assert html == render_html(copy.deepcopy([*results, twin]), title="t", generated_utc=STAMP)
+    html = render_html(_typed([*results, twin]), title="t", generated_utc=STAMP)
+    assert html == render_html(
+        _typed(copy.deepcopy([*results, twin])), title="t", generated_utc=STAMP
+    )
     long_data = re.findall(r'\sd="([^"]{200,})"', html)
     assert long_data
     assert len(long_data) == len(set(long_data))
@@ -727,7 +760,7 @@ def test_glyph_plot_draws_every_lambda_and_rings_and_labels_the_worst(
 
     spec = copy.deepcopy(results[0])
     spec["signals"][0]["path"] = "E_batt/<b>&U"
-    drawn = plots.glyph_plot(spec)
+    drawn = plots.glyph_plot(_typed_one(spec))
     assert drawn is not None
     assert drawn.startswith('<svg class="hv-glyph"')
     assert "<b>" not in drawn
@@ -736,7 +769,7 @@ def test_glyph_plot_draws_every_lambda_and_rings_and_labels_the_worst(
         r'fill="(#\w+)"><title>([^<]*)</title></circle>',
         drawn,
     )
-    points = model.glyph_points(spec)
+    points = model.glyph_points(_typed_one(spec))
     assert len(glyphs) == len(points) == 21
     by_title = {title: (ring, float(x), float(r), fill) for ring, x, r, fill, title in glyphs}
     assert len(by_title) == len(points)
@@ -757,20 +790,23 @@ def test_glyph_plot_draws_every_lambda_and_rings_and_labels_the_worst(
     assert (" fail", "E_batt/P_batt · λ3 0.850") in labels
     assert (" fail", "E_batt · λ7 0.820") in labels
     assert ("", "E_batt/&lt;b&gt;&amp;U · λ2 0.900") in labels
-    assert plots.glyph_plot({"name": "empty", "signals": []}) is None
+    assert (
+        plots.glyph_plot(_typed_one({"name": "empty", "spec": "e.yaml", "phi": 1.0, "signals": []}))
+        is None
+    )
 
 
 def test_html_needs_jinja2(monkeypatch: pytest.MonkeyPatch, results: list[dict]) -> None:
     monkeypatch.setitem(sys.modules, "jinja2", None)
     with pytest.raises(MissingExtraError, match=r"pytest-hevval\[html\]"):
-        render_html(results, title="t", generated_utc=STAMP)
+        render_html(_typed(results), title="t", generated_utc=STAMP)
 
 
 def test_html_report_draws_without_matplotlib(
     monkeypatch: pytest.MonkeyPatch, results: list[dict]
 ) -> None:
     monkeypatch.setitem(sys.modules, "matplotlib", None)
-    html = render_html(results, title="t", generated_utc=STAMP)
+    html = render_html(_typed(results), title="t", generated_utc=STAMP)
     assert html.count('<svg class="hv-glyph"') == 2
 
 
@@ -790,7 +826,7 @@ def test_write_reports_writes_each_format_atomically(
     results: list[dict[str, Any]], tmp_path: Path
 ) -> None:
     directory = tmp_path / "deep" / "report"
-    paths = write_reports(results, {"md", "json", "html"}, directory, title="T")
+    paths = write_reports(_typed(results), {"md", "json", "html"}, directory, title="T")
     assert [p.name for p in paths] == ["report.html", "report.json", "report.md"]
     assert sorted(p.name for p in directory.iterdir()) == [
         "report.html",
@@ -802,11 +838,11 @@ def test_write_reports_writes_each_format_atomically(
     os.umask(umask)
     # Permissions as for any new file (not mkstemp's 0600): others may serve the report.
     assert stat.S_IMODE((directory / "report.html").stat().st_mode) == 0o666 & ~umask
-    assert (directory / "report.md").read_text("utf-8") == render_markdown(results)
+    assert (directory / "report.md").read_text("utf-8") == render_markdown(_typed(results))
     # Only the requested formats; an existing file is replaced.
     (directory / "report.md").write_text("old", "utf-8")
-    assert write_reports(results, {"md"}, directory, title="T") == [directory / "report.md"]
-    assert (directory / "report.md").read_text("utf-8") == render_markdown(results)
+    assert write_reports(_typed(results), {"md"}, directory, title="T") == [directory / "report.md"]
+    assert (directory / "report.md").read_text("utf-8") == render_markdown(_typed(results))
 
 
 def test_write_reports_leaves_no_temporary_file_when_rendering_fails(
@@ -820,7 +856,7 @@ def test_write_reports_leaves_no_temporary_file_when_rendering_fails(
     (tmp_path / "report.json").write_text("previous", "utf-8")
     monkeypatch.setattr(files.os, "replace", lambda *a: broken(Path(), ""))
     with pytest.raises(OSError, match="disk full"):
-        write_reports(results, {"json"}, tmp_path)
+        write_reports(_typed(results), {"json"}, tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["report.json"]
     assert (tmp_path / "report.json").read_text("utf-8") == "previous"
 
@@ -851,33 +887,55 @@ def test_parse_formats_names_the_option_and_suggests_a_fix() -> None:
         parse_formats(" , ")
 
 
+def test_messages_name_the_report_option_as_the_front_end_spells_it() -> None:
+    with pytest.raises(ReportOptionError) as info:
+        parse_formats("html,jsn", COMMAND)
+    assert str(info.value).startswith("--report: unknown report format 'jsn'")
+    with pytest.raises(ReportOptionError, match=r"e\.g\. --report=html,json,md"):
+        parse_formats(" , ", COMMAND)
+
+
+def test_hevval_run_names_its_own_report_flag(tmp_path: Path) -> None:
+    """``hevval run --report foo`` names ``--report``, the flag the user typed."""
+    run = subprocess.run(
+        [sys.executable, "-m", "pytest_hevval", "run", "specs", "--report", "foo"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2, run.stderr
+    assert "hevval run: error: --report: unknown report format 'foo'" in run.stderr
+    assert "--hevval-report" not in run.stderr
+
+
 def test_write_reports_rejects_unknown_formats(
     results: list[dict[str, Any]], tmp_path: Path
 ) -> None:
     with pytest.raises(ReportOptionError, match="'pdf'"):
-        write_reports(results, {"pdf"}, tmp_path)
+        write_reports(_typed(results), {"pdf"}, tmp_path)
     assert not any(tmp_path.iterdir())
 
 
 def test_an_origin_with_failing_descendants_names_both(results: list[dict[str, Any]]) -> None:
     child = results[0]["signals"][2]
     child["origins"] = ["E_batt/P_batt", "E_batt/P_batt/I_cell"]
-    assert "| here, E_batt/P_batt/I_cell |" in render_markdown(results)
-    annotation = github_annotations(results, ".")[1]
+    assert "| here, E_batt/P_batt/I_cell |" in render_markdown(_typed(results))
+    annotation = github_annotations(_typed(results), ".")[1]
     assert annotation.endswith("(the error appears in this signal and E_batt/P_batt/I_cell)")
 
 
 def test_only_this_runs_reports_stay_and_the_footer_names_what_was_written(
     results: list[dict[str, Any]], tmp_path: Path
 ) -> None:
-    write_reports(results, {"html", "json", "md"}, tmp_path, generated_utc=STAMP)
+    write_reports(_typed(results), {"html", "json", "md"}, tmp_path, generated_utc=STAMP)
     (tmp_path / "notes.txt").write_text("mine")
-    written = write_reports(results, {"html"}, tmp_path, generated_utc=STAMP)
+    written = write_reports(_typed(results), {"html"}, tmp_path, generated_utc=STAMP)
     assert [p.name for p in written] == ["report.html"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "report.html"]
     page = (tmp_path / "report.html").read_text("utf-8")
     assert "report.json" not in page
-    write_reports(results, {"html", "json"}, tmp_path, generated_utc=STAMP)
+    write_reports(_typed(results), {"html", "json"}, tmp_path, generated_utc=STAMP)
     assert "the same data is in report.json" in (tmp_path / "report.html").read_text("utf-8")
 
 
@@ -889,7 +947,7 @@ def test_a_spec_that_fails_on_its_signals_says_so_under_its_phi(
     passing_phi["min_phi"] = 0.9
     passing_phi["phi_passed"] = True
     passing_phi["passed"] = False
-    page = render_html([passing_phi], title="t", generated_utc=STAMP)
+    page = render_html(_typed([passing_phi]), title="t", generated_utc=STAMP)
     assert "✘ FAIL on its signals" in page
     assert "2 spec files" not in page
     assert "1 spec file, 0 pass;" in page

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from pytest_hevval.report import model, render_html
+from pytest_hevval.results.spec_result import SpecResult
 from tests.conftest import IN_CI
 from tests.demo_results import demo_results
 
@@ -137,7 +138,7 @@ def test_console_capture_sees_a_script_error(tmp_path: Path) -> None:
 
 def test_report_loads_without_console_errors_and_draws_its_plots(tmp_path: Path) -> None:
     chromium = _chromium()
-    results = demo_results(specs=1, duration_s=300.0, rate_hz=10.0, seed=3)
+    results = [SpecResult.from_dict(r) for r in demo_results(specs=1, duration_s=300.0, seed=3)]
     page = tmp_path / "report.html"
     page.write_text(render_html(results, title="browser check", generated_utc="now"), "utf-8")
     png = tmp_path / "report.png"
@@ -179,11 +180,13 @@ def test_a_plot_drawn_by_reference_to_a_closed_section_is_drawn(tmp_path: Path) 
     may sit in a signal section that is closed, and must be drawn all the same."""
     chromium = _chromium()
     (spec,) = demo_results(specs=1, duration_s=300.0, rate_hz=10.0, seed=3)
-    closed = model.ordered_signals(spec)[-1]  # after the first three, and passing: closed
-    assert closed["passed"] is not False
+    # After the first three, and passing: closed.
+    closed = model.ordered_signals(SpecResult.from_dict(spec))[-1]
+    assert closed.passed
     twin = {**copy.deepcopy(spec), "name": "the same recording again"}
-    twin["signals"] = [copy.deepcopy(closed)]
-    text = render_html([spec, twin], title="shared plots", generated_utc="now")
+    twin["signals"] = [copy.deepcopy(s) for s in spec["signals"] if s["path"] == closed.path]
+    typed = [SpecResult.from_dict(spec), SpecResult.from_dict(twin)]
+    text = render_html(typed, title="shared plots", generated_utc="now")
     plots = re.findall(r'<svg class="hv-plot".*?</svg>', text, re.S)
     shared = re.findall(r'<use class="hv-(?:ref|sim|res|match)" href="#([^"]+)"', plots[-1])
     assert len(shared) == 4

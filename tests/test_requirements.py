@@ -14,6 +14,7 @@ import pytest
 from pytest_hevval.cli import main
 from pytest_hevval.errors import HevvalError, SpecError
 from pytest_hevval.report.trace import read_requirement_list, render_trace, trace_rows
+from pytest_hevval.results.spec_result import SpecResult
 from pytest_hevval.spec.load import parse_spec_text
 from tests.test_plugin import TREE_SPEC, write_data
 
@@ -231,6 +232,12 @@ def test_requirement_list_reads_plain_lines_and_csv(tmp_path: Path) -> None:
     assert read_requirement_list(table) == ["A-1", "B-2"]
 
 
+#: The fields a signal's result needs besides its path (λ, errors, place in the tree).
+_SIGNAL = {"set": 1, "level": 1, "alpha": 1.0, "lambdas": [1.0], "lag_s": 0.0}
+_SIGNAL |= {"peak_correlation": 1.0, "mae": 0.0, "rms": 0.0}
+_MISS = {"characteristic": "mae", "value": 0.5, "threshold": 0.9}
+
+
 def test_trace_rows_of_a_whole_spec_requirement_judge_the_whole_spec() -> None:
     spec = {
         "name": "s",
@@ -239,12 +246,12 @@ def test_trace_rows_of_a_whole_spec_requirement_judge_the_whole_spec() -> None:
         "passed": False,
         "requirements": ["R-1"],
         "signals": [
-            {"path": "a", "passed": True, "requirements": ["R-1", "R-2"]},
-            {"path": "b", "passed": False, "requirements": ["R-1"]},
+            {**_SIGNAL, "path": "a", "requirements": ["R-1", "R-2"]},
+            {**_SIGNAL, "path": "b", "requirements": ["R-1"], "failures": [_MISS]},
         ],
         "data": {"reference": {"path": "ref.csv", "hash": "sha256", "digest": "ab"}},
     }
-    rows = trace_rows([spec], model_version="v1")
+    rows = trace_rows([SpecResult.from_dict(spec)], model_version="v1")
     assert [(r.requirement, r.status, r.items) for r in rows] == [
         ("R-1", "FAIL", "whole spec (Φ and every signal)"),
         ("R-2", "PASS", "a"),

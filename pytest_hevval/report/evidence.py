@@ -17,8 +17,11 @@ from collections.abc import Mapping, Sequence
 from importlib import resources
 from typing import Any
 
-from ..results.codec import plain_json
-from .text import campaigns_of
+from ..core.uncertainty import Interval
+from ..results.campaign import campaign_verdicts
+from ..results.codec import json_number, plain_json
+from ..results.spec_result import SignalResult, SpecResult
+from .model import model_facts, reference_facts
 
 __all__ = ["EVIDENCE_SCHEMA_VERSION", "RunFacts", "evidence_record", "render_evidence", "schema"]
 
@@ -30,8 +33,6 @@ SCHEMA_FILE = "evidence.schema.json"
 #: history record's keys), any of which may be missing.
 RunFacts = Mapping[str, Any]
 
-#: Signal keys an evidence record keeps: the verdict and what it was judged on.
-_SIGNAL_KEYS = ("path", "passed", "lambdas", "thresholds", "failures", "requirements")
 #: Model keys that identify it (beside its kind).
 _MODEL_KEYS = (
     "callable",
@@ -66,18 +67,29 @@ def schema() -> dict[str, Any]:
     return document
 
 
-def _interval(bounds: Any) -> dict[str, Any] | None:
-    if isinstance(bounds, Mapping) and bounds.get("low") is not None:
-        return {"low": bounds["low"], "high": bounds["high"]}
-    return None
+def _interval(interval: Interval | None) -> dict[str, Any] | None:
+    if interval is None:
+        return None
+    return {"low": interval.low, "high": interval.high}
 
 
-def _signal(signal: Mapping[str, Any]) -> dict[str, Any]:
-    out = {key: signal[key] for key in _SIGNAL_KEYS if key in signal}
-    out.setdefault("requirements", [])
-    intervals = signal.get("intervals") or {}
-    out["intervals"] = {name: _interval(bounds) for name, bounds in intervals.items()}
-    return out
+def _lambda_interval(interval: Interval) -> dict[str, Any] | None:
+    """A λ's interval as its result's JSON holds it: no bounds where the low one is unknown."""
+    low = json_number(interval.low)
+    return None if low is None else {"low": low, "high": json_number(interval.high)}
+
+
+def _signal(signal: SignalResult) -> dict[str, Any]:
+    """What the record keeps of a signal: its verdict and what it was judged on."""
+    return {
+        "path": signal.path,
+        "passed": signal.passed,
+        "lambdas": {name: float(v) for name, v in signal.lambdas.items()},
+        "thresholds": dict(signal.thresholds),
+        "failures": [f.to_dict() for f in signal.failures],
+        "requirements": list(signal.requirements),
+        "intervals": {name: _lambda_interval(i) for name, i in signal.intervals.items()},
+    }
 
 
 def _source(side: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -97,55 +109,53 @@ def _model(model: Mapping[str, Any] | None) -> dict[str, Any]:
     return out
 
 
-def _spec(spec: Mapping[str, Any]) -> dict[str, Any]:
-    data = spec.get("data") or {}
-    model = _model(data.get("model"))
-    runtime = spec.get("runtime")
+def _spec(spec: SpecResult) -> dict[str, Any]:
+    model = _model(model_facts(spec))
     out: dict[str, Any] = {
-        "key": spec.get("spec"),
-        "name": spec.get("name"),
-        "spec_sha256": spec.get("spec_hash") or None,
-        "recording": spec.get("recording"),
-        "role": spec.get("role", "validation"),
-        "reference": _source(data.get("reference")),
+        "key": spec.spec,
+        "name": spec.name,
+        "spec_sha256": spec.spec_hash or None,
+        "recording": spec.recording,
+        "role": spec.role,
+        "reference": _source(reference_facts(spec)),
         "model": model,
         "verdict": {
-            "passed": spec.get("passed") is not False,
-            "phi": spec.get("phi"),
-            "phi_interval": _interval(spec.get("phi_interval")),
-            "min_phi": spec.get("min_phi"),
-            "min_phi_on": spec.get("min_phi_on", "value"),
-            "phi_passed": spec.get("phi_passed") is not False,
+            "passed": spec.passed,
+            "phi": spec.phi,
+            "phi_interval": _interval(spec.phi_interval),
+            "min_phi": spec.min_phi,
+            "min_phi_on": spec.min_phi_on,
+            "phi_passed": spec.phi_passed,
         },
-        "requirements": list(spec.get("requirements") or []),
-        "signals": [_signal(s) for s in spec.get("signals") or []],
-        "runtime": runtime if isinstance(runtime, Mapping) else None,
+        "requirements": list(spec.requirements),
+        "signals": [_signal(s) for s in spec.signals],
+        "runtime": spec.runtime.to_dict() if spec.runtime is not None else None,
     }
     if out["runtime"] is None:
         out["runtime_note"] = _NO_RUNTIME.get(model["kind"], _NO_RUNTIME[None])
     return out
 
 
-def _links(specs: Sequence[Mapping[str, Any]]) -> dict[str, list[dict[str, Any]]]:
+def _links(specs: Sequence[SpecResult]) -> dict[str, list[dict[str, Any]]]:
     """Requirement ID → the items that verify it, spec by spec."""
     links: dict[str, list[dict[str, Any]]] = {}
     for spec in specs:
-        for requirement in spec.get("requirements") or []:
-            links.setdefault(requirement, []).append({"spec": spec.get("spec"), "items": ["Phi"]})
+        for requirement in spec.requirements:
+            links.setdefault(requirement, []).append({"spec": spec.spec, "items": ["Phi"]})
         found: dict[str, list[str]] = {}
-        for signal in spec.get("signals") or []:
-            for requirement in signal.get("requirements") or []:
-                if requirement not in (spec.get("requirements") or []):
-                    found.setdefault(requirement, []).append(signal["path"])
+        for signal in spec.signals:
+            for requirement in signal.requirements:
+                if requirement not in spec.requirements:
+                    found.setdefault(requirement, []).append(signal.path)
         for requirement, paths in found.items():
-            links.setdefault(requirement, []).append({"spec": spec.get("spec"), "items": paths})
+            links.setdefault(requirement, []).append({"spec": spec.spec, "items": paths})
     return dict(sorted(links.items()))
 
 
 def evidence_record(
-    spec_results: Sequence[Mapping[str, Any]], facts: RunFacts, *, source: str
+    spec_results: Sequence[SpecResult], facts: RunFacts, *, source: str
 ) -> dict[str, Any]:
-    """The evidence record of a run: its spec results (JSON data) and facts.
+    """The evidence record of a run: its spec results and facts.
 
     ``source`` says where the results come from: ``pytest run``, ``hevval run`` output or a
     ``history record``.
@@ -153,7 +163,8 @@ def evidence_record(
     versions = dict(facts.get("tool_versions") or {})
     specs = [_spec(spec) for spec in spec_results]
     campaigns = [
-        {key: found[key] for key in _CAMPAIGN_KEYS} for found in campaigns_of(spec_results)
+        {key: found[key] for key in _CAMPAIGN_KEYS}
+        for found in (verdict.to_dict() for verdict in campaign_verdicts(spec_results))
     ]
     record = {
         "evidence_schema_version": EVIDENCE_SCHEMA_VERSION,
@@ -184,9 +195,7 @@ def evidence_record(
     return plain
 
 
-def render_evidence(
-    spec_results: Sequence[Mapping[str, Any]], facts: RunFacts, *, source: str
-) -> str:
+def render_evidence(spec_results: Sequence[SpecResult], facts: RunFacts, *, source: str) -> str:
     """:func:`evidence_record` as sorted, strict JSON text."""
     record = evidence_record(spec_results, facts, source=source)
     return json.dumps(record, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False) + "\n"

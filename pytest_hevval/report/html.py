@@ -1,13 +1,13 @@
 """The self-contained HTML report: one file, CSS inline, no scripts, no external URLs.
 
-Every plot is inline SVG written directly from the result dicts: the glyph plot by
+Every plot is inline SVG written directly from the typed results: the glyph plot by
 :mod:`pytest_hevval.report.plots`, the per-signal plots from the figure data by
 :mod:`pytest_hevval.report.svg`, the local ones by :mod:`pytest_hevval.report.local_svg`.
 Path data is drawn once per page and referred to where it repeats (:class:`svg.PathShare`).
 
 jinja2 (autoescaping on) is imported on first use. Everything the page shows
-comes from the result dicts via :mod:`pytest_hevval.report.model`, the same view-model as the
-JSON and Markdown reports.
+comes from the results via :mod:`pytest_hevval.report.model`, the same view-model as the
+JSON and Markdown reports; each signal's diagnosis and trend from its :class:`.SignalPanels`.
 """
 
 from __future__ import annotations
@@ -19,12 +19,14 @@ from typing import Any
 from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
+from ..results.campaign import campaign_verdicts
 from ..results.local import LocalFailure
+from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg
+from .panels import SignalPanels
 from .sentences import lag_text, local_failure_text
 from .terminal import runtime_of, runtime_text
-from .text import campaigns_of
 from .trace import trace_rows
 
 __all__ = ["render_html"]
@@ -59,53 +61,53 @@ def _percent(value: object) -> float:
 
 
 def _signal_view(
+    result: SpecResult,
     spec_index: int,
-    signal: Mapping[str, Any],
+    signal: SignalResult,
     anchors: Mapping[str, str],
     share: svg.PathShare,
+    panels: SignalPanels,
+    region_grid: Mapping[str, Any] | None,
 ) -> dict[str, Any]:
-    diagnosis = signal.get("diagnosis")
-    history = signal.get("history")
-    failed = signal.get("passed") is False
-    origins = [str(o) for o in model.items(signal.get("origins"))]
-    path = str(signal.get("path") or signal.get("name") or "")
+    diagnosis = panels.diagnosis(result, signal)
+    history = panels.history(result, signal)
+    failed = not signal.passed
+    origins = [str(o) for o in signal.origins]
+    path = signal.path or signal.name
+    errors = signal.characteristics.as_dict()
     return {
         "signal": signal,
+        "errors": errors,
         "path": path,
         "anchor": anchors.get(path, f"spec{spec_index}-{_slug(path)}"),
         "cells": model.cells(signal),
         "standard_metrics": model.standard_metric_rows(signal),
         "measurement": model.measurement_lines(signal),
-        "lag": lag_text(signal),
+        "lag": lag_text(errors),
         "failed": failed,
-        "is_origin": failed and bool(signal.get("origin")),
+        "is_origin": failed and signal.origin,
         "origins": [(o, anchors.get(o)) for o in origins if o != path],
         "margin": model.margin(signal),
         "plot": svg.signal_svg(signal, f"{spec_index}-{anchors.get(path, path)}", share),
         "diagnosis": diagnosis if isinstance(diagnosis, Mapping) else None,
-        "history": svg.history_svg(history) if isinstance(history, Sequence) else None,
-        **_local_view(signal),
+        "history": svg.history_svg(history) if history is not None else None,
+        **_local_view(signal, region_grid),
     }
 
 
-def _local_view(signal: Mapping[str, Any]) -> dict[str, Any]:
+def _local_view(signal: SignalResult, region_grid: Mapping[str, Any] | None) -> dict[str, Any]:
     """Where and when: the window strip, phase and condition tables, the cell heat maps."""
-    local = signal.get("local")
-    if not isinstance(local, Mapping):
+    local = signal.local
+    if local is None:
         return {"local": None}
-    regions = local.get("regions")
-    region_grid = signal.get("_region_grid")
+    regions = local.regions
     maps: list[str] = []
-    if isinstance(regions, Mapping) and isinstance(region_grid, Mapping):
-        missed = {
-            f["characteristic"]: f.get("where", [])
-            for f in model.items(signal.get("local_failures"))
-            if f.get("scope") == "regions"
-        }
+    if regions is not None and region_grid is not None:
+        missed = {f.characteristic: f.where for f in signal.local_failures if f.scope == "regions"}
         for name in missed or ["mae"]:
             drawn = local_svg.heatmap_svg(
                 region_grid,
-                regions.get("lambdas", {}).get(name, []),
+                list(regions.lambdas.get(name, [])),
                 f"{describe(name).title} per cell",
                 missed=missed.get(name, ()),
             )
@@ -115,35 +117,31 @@ def _local_view(signal: Mapping[str, Any]) -> dict[str, Any]:
         "local": local,
         "timeline": local_svg.timeline_svg(signal),
         "region_maps": maps,
-        "local_failures": [
-            _local_failure_sentence(f) for f in model.items(signal.get("local_failures"))
-        ],
+        "local_failures": [_local_failure_sentence(f) for f in signal.local_failures],
     }
 
 
-def _local_failure_sentence(failure: Mapping[str, Any]) -> str:
-    parsed = LocalFailure.from_dict(failure)
-    return local_failure_text(parsed, describe(parsed.characteristic).title)
+def _local_failure_sentence(failure: LocalFailure) -> str:
+    return local_failure_text(failure, describe(failure.characteristic).title)
 
 
-def _spec_view(index: int, spec: Mapping[str, Any], share: svg.PathShare) -> dict[str, Any]:
+def _spec_view(
+    index: int, spec: SpecResult, share: svg.PathShare, panels: SignalPanels
+) -> dict[str, Any]:
     anchors: dict[str, str] = {}
-    for j, signal in enumerate(model.items(spec.get("signals"))):
-        path = str(signal.get("path") or signal.get("name") or "")
+    for j, signal in enumerate(spec.signals):
+        path = signal.path or signal.name
         anchors.setdefault(path, f"spec{index}-{j}-{_slug(path)}")
-    local = spec.get("local") if isinstance(spec.get("local"), Mapping) else None
-    region_grid = local.get("regions") if local else None
+    region_grid = model.region_grid(spec)
     views = {
-        id(s): _signal_view(
-            index, {**s, "_region_grid": region_grid} if region_grid else s, anchors, share
-        )
+        id(s): _signal_view(spec, index, s, anchors, share, panels, region_grid)
         for s in model.ordered_signals(spec)
     }
     tree = [(views[id(s)], depth) for s, depth in model.tree_rows(spec)]
     signals = list(views.values())
-    phi = spec.get("phi")
-    min_phi = spec.get("min_phi")
-    phi_low, phi_high = model.interval_bounds(spec.get("phi_interval"))
+    phi = spec.phi
+    min_phi = spec.min_phi
+    phi_low, phi_high = model.interval_bounds(spec.phi_interval)
     runtime, model_kind = runtime_of(spec)
     return {
         "runtime_text": runtime_text(runtime, model_kind),
@@ -154,9 +152,10 @@ def _spec_view(index: int, spec: Mapping[str, Any], share: svg.PathShare) -> dic
         "phi_high_bar": _percent(phi_high) if phi_high is not None else None,
         "min_phi_bound": model.min_phi_bound(spec),
         "spec": spec,
+        "quality": model.data_quality(spec),
         "index": index,
         "anchor": f"spec{index}",
-        "passed": spec.get("passed") is not False,
+        "passed": spec.passed,
         "phi": phi,
         "min_phi": min_phi,
         "phi_bar": _percent(phi),
@@ -164,23 +163,23 @@ def _spec_view(index: int, spec: Mapping[str, Any], share: svg.PathShare) -> dic
         "phi_gap": (float(phi) - float(min_phi))
         if model.is_finite_number(phi) and model.is_finite_number(min_phi)
         else None,
-        "alignment": spec.get("alignment") if isinstance(spec.get("alignment"), Mapping) else {},
+        "alignment": model.alignment_of(spec),
         "glyph": plots.glyph_plot(spec, share),
         "tree": tree,
         "signals": signals,
         "failing": [v for v in signals if v["failed"]],
-        "weights": spec.get("weights"),
+        "region_min_samples": region_grid.get("min_samples") if region_grid else None,
         "region_phi": (
             local_svg.heatmap_svg(region_grid, region_grid.get("phi", []), "Φ per cell")
-            if isinstance(region_grid, Mapping)
+            if region_grid is not None
             else None
         ),
         "region_coverage": (
-            local_svg.coverage_svg(region_grid) if isinstance(region_grid, Mapping) else None
+            local_svg.coverage_svg(region_grid) if region_grid is not None else None
         ),
         "region_unvisited": (
             [region_grid["labels"][_flat(region_grid, i)] for i in region_grid.get("unvisited", [])]
-            if isinstance(region_grid, Mapping)
+            if region_grid is not None
             else []
         ),
     }
@@ -213,12 +212,13 @@ def _environment() -> Any:
 
 
 def render_html(
-    spec_results: Sequence[Mapping[str, Any]],
+    spec_results: Sequence[SpecResult],
     *,
     title: str,
     generated_utc: str,
     formats: Collection[str] = ("html", "json"),
     verdict: RunVerdict | None = None,
+    panels: SignalPanels | None = None,
 ) -> str:
     """The HTML report of ``spec_results`` as one self-contained page; its header says
     ``verdict`` (else the verdict of the results alone).
@@ -226,7 +226,7 @@ def render_html(
     Parameters
     ----------
     spec_results:
-        Per-spec result dicts (the JSON report's ``specs``).
+        The run's results.
     title:
         Page title and heading.
     generated_utc:
@@ -234,19 +234,20 @@ def render_html(
     formats:
         The reports written beside this page (the footer points to ``report.json`` only when
         it is one of them).
+    panels:
+        Each signal's diagnosis and history trend.
     """
     env = _environment()
     share = svg.PathShare()
-    specs = [_spec_view(i, spec, share) for i, spec in enumerate(spec_results)]
+    panels = panels if panels is not None else SignalPanels()
+    specs = [_spec_view(i, spec, share, panels) for i, spec in enumerate(spec_results)]
     anchors = {
         (view["index"], sv["path"]): sv["anchor"] for view in specs for sv in view["signals"]
     }
     worst = [
         {
             "row": row,
-            "anchor": anchors.get(
-                (row.spec_index, str(row.signal.get("path") or row.signal.get("name") or ""))
-            ),
+            "anchor": anchors.get((row.spec_index, row.signal.path or row.signal.name)),
         }
         for row in model.worst_rows(spec_results, limit=12)
     ]
@@ -258,7 +259,7 @@ def render_html(
         summary=model.summary(spec_results, verdict),
         specs=specs,
         worst=worst,
-        campaigns=campaigns_of(spec_results),
+        campaigns=campaign_verdicts(spec_results),
         trace=trace_rows(spec_results),
         characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,

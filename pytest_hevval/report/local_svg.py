@@ -1,6 +1,7 @@
 """Where and when, drawn: λ per time window as a strip, λ, Φ and coverage per region cell.
 
-Plain SVG from the JSON result, like :mod:`.svg`; every piece of text is escaped.
+Plain SVG from the typed result (the signal's :class:`~pytest_hevval.results.local.LocalResult`)
+and the spec's grid of cells, like :mod:`.svg`; every piece of text is escaped.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import Any
 
 from ..core.registry import describe, order_names
 from ..results.codec import number_or_nan
+from ..results.spec_result import SignalResult
 
 __all__ = ["coverage_svg", "heatmap_svg", "timeline_svg"]
 
@@ -39,22 +41,21 @@ def _low(values: Sequence[float], threshold: float | None) -> float:
     return min(low, 0.99)
 
 
-def timeline_svg(signal: Mapping[str, Any]) -> str | None:
+def timeline_svg(signal: SignalResult) -> str | None:
     """One strip per characteristic: λ of every time window as colour; misses outlined."""
-    local = signal.get("local")
-    if not isinstance(local, Mapping) or not isinstance(local.get("windows"), Mapping):
+    local = signal.local
+    if local is None:
         return None
-    windows = local["windows"]
-    spans = [(float(a), float(b)) for a, b in windows.get("spans_s", [])]
-    lambdas: Mapping[str, Sequence[Any]] = windows.get("lambdas", {})
+    windows = local.windows
+    spans = [(float(a), float(b)) for a, b in local.spans_s]
+    lambdas = windows.lambdas
     if not spans or not lambdas:
         return None
     names = order_names(lambdas)
     missed: dict[str, set[str]] = {}
-    for failure in signal.get("local_failures", []):
-        if failure.get("scope") == "windows":
-            missed.setdefault(failure["characteristic"], set()).update(failure.get("where", []))
-    thresholds: Mapping[str, float] = signal.get("local_thresholds") or {}
+    for failure in signal.local_failures:
+        if failure.scope == "windows":
+            missed.setdefault(failure.characteristic, set()).update(failure.where)
     left, right, row, top = 150, 850, 16, 18
     start, stop = spans[0][0], spans[-1][1]
     scale = (right - left) / max(stop - start, 1e-12)
@@ -63,10 +64,10 @@ def timeline_svg(signal: Mapping[str, Any]) -> str | None:
         f'<svg class="hv-local" viewBox="0 0 {right + 20} {height}" width="100%" '
         f'role="img" aria-label="characteristics per time window">'
     ]
-    labels = windows.get("labels", [])
+    labels = list(windows.labels)
     for i, name in enumerate(names):
         values = [number_or_nan(v) for v in lambdas[name]]
-        low = _low(values, thresholds.get(name))
+        low = _low(values, None)
         y = top + i * row
         title = escape(describe(name).title)
         parts.append(f'<text x="{left - 6}" y="{y + row - 4}" text-anchor="end">{title}</text>')

@@ -1,8 +1,9 @@
 """One view-model for every report format.
 
-HTML, JSON and Markdown all read the per-spec result dicts through these functions, so the order
-of signals, what counts as "worst", and the pass/fail colour of every λ agree across formats.
-Pure Python on plain dicts: no numpy, no I/O.
+HTML, JSON and Markdown all read the typed results through these functions, so the order of
+signals, what counts as "worst", and the pass/fail colour of every λ agree across formats.
+The result's fields that are still plain mappings (``data``, ``alignment``, the spec's
+``local`` grid) are read here and nowhere else in the reports. No numpy, no I/O.
 """
 
 from __future__ import annotations
@@ -10,13 +11,13 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal, cast
+from typing import Any, Literal
 
 from ..core.characteristics import CHARACTERISTICS
 from ..core.registry import describe, order_names, registered_characteristics
-from ..results.codec import is_finite_number, keyed_lambdas
-from ..results.measurement import ErrorCheck
-from ..results.spec_result import SpecResult
+from ..core.uncertainty import Interval
+from ..results.codec import is_finite_number
+from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from .sentences import failure_sentence, verdict_line
 
@@ -29,15 +30,19 @@ __all__ = [
     "GlyphPoint",
     "StandardMetricRow",
     "WorstRow",
+    "alignment_of",
     "cells",
     "characteristic_names",
+    "data_quality",
     "failing_signals",
     "glyph_points",
     "is_finite_number",
-    "items",
     "margin",
     "measurement_lines",
+    "model_facts",
     "ordered_signals",
+    "reference_facts",
+    "region_grid",
     "signal_order",
     "standard_metric_rows",
     "summary",
@@ -70,13 +75,12 @@ SHORT_LABELS: Mapping[str, str] = _Described("symbol")
 CHARACTERISTIC_COLOURS: Mapping[str, str] = _Described("colour")
 
 
-def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
+def characteristic_names(specs: Iterable[SpecResult]) -> list[str]:
     """Every characteristic any signal of ``specs`` carries, in report order."""
     names: list[str] = []
     for spec in specs:
-        for signal in items(spec.get("signals")):
-            if isinstance(signal, Mapping):
-                names.extend(_lambdas(signal))
+        for signal in spec.signals:
+            names.extend(_lambdas(signal))
     return order_names(names) if names else list(CHARACTERISTICS)
 
 
@@ -84,38 +88,17 @@ def characteristic_names(specs: Iterable[Mapping[str, Any]]) -> list[str]:
 Status = Literal["pass", "fail", "ungated", "within"]
 
 
-def items(value: object) -> list[Any]:
-    """``value`` as a list: ``None`` and scalars give ``[]``; numpy arrays work too."""
-    if value is None or isinstance(value, (str, bytes, Mapping)):
-        return []
-    try:
-        return list(cast("Iterable[Any]", value))
-    except TypeError:
-        return []
+def _finite(value: float) -> float | None:
+    return float(value) if is_finite_number(value) else None
 
 
-def _lambdas(signal: Mapping[str, Any]) -> dict[str, float | None]:
-    """λ values by name, in report order (a list in paper order is read too)."""
-    try:
-        raw = keyed_lambdas(signal.get("lambdas"))
-    except ValueError:
-        return {}
-    return {name: raw[name] for name in order_names(raw)}
+def _lambdas(signal: SignalResult) -> dict[str, float | None]:
+    """λ values by name, in report order; None for a value that is not a finite number."""
+    return {name: _finite(signal.lambdas[name]) for name in order_names(signal.lambdas)}
 
 
-def _thresholds(signal: Mapping[str, Any]) -> dict[str, float]:
-    raw = signal.get("thresholds")
-    if not isinstance(raw, Mapping):
-        return {}
-    return {str(k): float(v) for k, v in raw.items() if is_finite_number(v)}
-
-
-def _failed_names(signal: Mapping[str, Any]) -> set[str]:
-    return {
-        str(f.get("characteristic"))
-        for f in items(signal.get("failures"))
-        if isinstance(f, Mapping)
-    }
+def _thresholds(signal: SignalResult) -> dict[str, float]:
+    return {str(k): float(v) for k, v in signal.thresholds.items() if is_finite_number(v)}
 
 
 @dataclass(frozen=True)
@@ -136,7 +119,7 @@ class Cell:
         return SHORT_LABELS[self.characteristic]
 
 
-def cells(signal: Mapping[str, Any]) -> list[Cell]:
+def cells(signal: SignalResult) -> list[Cell]:
     """λ1…λ7 of ``signal`` coloured against their thresholds.
 
     A characteristic listed in ``failures`` is failing even if its value would pass (the engine
@@ -144,10 +127,8 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
     """
     values = _lambdas(signal)
     gates = _thresholds(signal)
-    failed = _failed_names(signal)
-    raw = signal.get("intervals")
-    intervals: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
-    excused = _failed_names({"failures": signal.get("within_uncertainty")})
+    failed = {f.characteristic for f in signal.failures}
+    excused = {f.characteristic for f in signal.within_uncertainty}
     out: list[Cell] = []
     for i, (name, value) in enumerate(values.items(), 1):
         threshold = gates.get(name)
@@ -162,56 +143,52 @@ def cells(signal: Mapping[str, Any]) -> list[Cell]:
             status = "fail"
         else:
             status = "pass"
-        low, high = interval_bounds(intervals.get(name))
+        low, high = interval_bounds(signal.intervals.get(name))
         out.append(Cell(name, i, value, threshold, status, low, high))
     return out
 
 
-def interval_bounds(raw: Any) -> tuple[float | None, float | None]:
-    """(low, high) of a result's ``{"low", "high"}`` interval; (None, None) where absent."""
-    if not isinstance(raw, Mapping):
+def interval_bounds(interval: Interval | None) -> tuple[float | None, float | None]:
+    """(low, high) of a 95 % interval; (None, None) where absent or not finite."""
+    if interval is None:
         return None, None
-    low, high = raw.get("low"), raw.get("high")
+    low, high = interval.low, interval.high
     if is_finite_number(low) and is_finite_number(high):
         return float(low), float(high)
     return None, None
 
 
-def phi_failed(spec: Mapping[str, Any]) -> bool:
-    """Whether Φ missed ``min_phi`` (the engine's verdict where recorded, else Φ < min Φ)."""
-    if isinstance(spec.get("phi_passed"), bool):
-        return not spec["phi_passed"]
-    phi, min_phi = spec.get("phi"), spec.get("min_phi")
-    return is_finite_number(phi) and is_finite_number(min_phi) and float(phi) < float(min_phi)
+def phi_failed(spec: SpecResult) -> bool:
+    """Whether Φ missed ``min_phi``."""
+    return not spec.phi_passed
 
 
-def min_phi_bound(spec: Mapping[str, Any]) -> str:
+def min_phi_bound(spec: SpecResult) -> str:
     """`` on the lower bound`` when ``min_phi`` judges a bound of Φ's interval, else empty."""
-    on = spec.get("min_phi_on", "value")
+    on = spec.min_phi_on
     return "" if on == "value" else f" on the {on} bound"
 
 
-def measurement_lines(signal: Mapping[str, Any]) -> list[str]:
+def measurement_lines(signal: SignalResult) -> list[str]:
     """Each miss of ``signal`` checked against its declared measurement uncertainty.
 
     Failing misses first, then those passing within the uncertainty (ending "; passes").
     """
-    unit = signal.get("unit")
+    unit = signal.unit
     lines: list[str] = []
-    for key, suffix in (("failures", ""), ("within_uncertainty", "; passes")):
-        for found in items(signal.get(key)):
-            if not isinstance(found, Mapping) or not isinstance(found.get("measurement"), Mapping):
+    for found_list, suffix in ((signal.failures, ""), (signal.within_uncertainty, "; passes")):
+        for found in found_list:
+            check = found.check
+            if check is None or check.uncertainty is None:
                 continue
-            try:
-                check = ErrorCheck.from_dict(found["measurement"])
-                name = str(found["characteristic"])
-                value, threshold = float(found["value"]), float(found["threshold"])
-            except (KeyError, TypeError, ValueError):
-                continue
-            if check.uncertainty is None:
-                continue
+            name = found.characteristic
             sentence = failure_sentence(
-                describe(name).title, name, value, threshold, check, unit if unit else None
+                describe(name).title,
+                name,
+                found.value,
+                found.threshold,
+                check,
+                unit if unit else None,
             )
             lines.append(sentence + suffix)
     return lines
@@ -232,25 +209,21 @@ class StandardMetricRow:
         return ", ".join(f"{key} {value:.{digits}g}" for key, value in self.components)
 
 
-def standard_metric_rows(signal: Mapping[str, Any]) -> list[StandardMetricRow]:
+def standard_metric_rows(signal: SignalResult) -> list[StandardMetricRow]:
     """The "standard metrics" table of ``signal``: empty unless its spec switched any on."""
-    parts = signal.get("components")
-    parts = parts if isinstance(parts, Mapping) else {}
     rows: list[StandardMetricRow] = []
     for cell in cells(signal):
         if not describe(cell.characteristic).standard:
             continue
-        found = parts.get(cell.characteristic)
+        found = signal.components.get(cell.characteristic, {})
         components = tuple(
-            (str(key), float(value))
-            for key, value in (found.items() if isinstance(found, Mapping) else ())
-            if is_finite_number(value)
+            (str(key), float(value)) for key, value in found.items() if is_finite_number(value)
         )
         rows.append(StandardMetricRow(cell, components))
     return rows
 
 
-def margin(signal: Mapping[str, Any]) -> float | None:
+def margin(signal: SignalResult) -> float | None:
     """Smallest λ − threshold over the gated characteristics (negative: failing)."""
     gaps = [
         c.value - c.threshold
@@ -260,65 +233,61 @@ def margin(signal: Mapping[str, Any]) -> float | None:
     return min(gaps) if gaps else None
 
 
-def _min_lambda(signal: Mapping[str, Any]) -> float:
+def _min_lambda(signal: SignalResult) -> float:
     values = [v for v in _lambdas(signal).values() if v is not None]
     return min(values) if values else 1.0
 
 
-def signal_order(signal: Mapping[str, Any]) -> tuple[int, float, float, str]:
+def signal_order(signal: SignalResult) -> tuple[int, float, float, str]:
     """Sort key: failing first, then the smallest margin, then the smallest λ."""
     gap = margin(signal)
     return (
-        0 if signal.get("passed") is False else 1,
+        0 if not signal.passed else 1,
         gap if gap is not None else math.inf,
         _min_lambda(signal),
-        str(signal.get("path", "")),
+        signal.path,
     )
 
 
-def ordered_signals(spec: Mapping[str, Any]) -> list[Mapping[str, Any]]:
-    return sorted(items(spec.get("signals")), key=signal_order)
+def ordered_signals(spec: SpecResult) -> list[SignalResult]:
+    return sorted(spec.signals, key=signal_order)
 
 
-def failing_signals(spec: Mapping[str, Any]) -> list[Mapping[str, Any]]:
-    return [s for s in ordered_signals(spec) if s.get("passed") is False]
+def failing_signals(spec: SpecResult) -> list[SignalResult]:
+    return [s for s in ordered_signals(spec) if not s.passed]
 
 
 def _parent(path: str) -> str | None:
     return path.rsplit("/", 1)[0] if "/" in path else None
 
 
-def tree_rows(spec: Mapping[str, Any]) -> list[tuple[Mapping[str, Any], int]]:
+def tree_rows(spec: SpecResult) -> list[tuple[SignalResult, int]]:
     """Signals depth-first as (signal, depth), each set's root first, siblings by position.
 
     A signal's parent is the signal whose path is its own minus the last segment; signals whose
     parent is not in the spec start a new root.
     """
-    signals: list[Mapping[str, Any]] = items(spec.get("signals"))
-    by_path = {str(s.get("path", "")): s for s in signals}
-    children: dict[str | None, list[Mapping[str, Any]]] = {}
+    signals = spec.signals
+    by_path = {s.path: s for s in signals}
+    children: dict[str | None, list[SignalResult]] = {}
     for s in signals:
-        parent = _parent(str(s.get("path", "")))
+        parent = _parent(s.path)
         if parent not in by_path:
             parent = None
         children.setdefault(parent, []).append(s)
 
-    def key(s: Mapping[str, Any]) -> tuple[float, float, float]:
-        def num(name: str) -> float:
-            value = s.get(name)
-            return float(value) if is_finite_number(value) else math.inf
+    def key(s: SignalResult) -> tuple[float, float, float]:
+        return (float(s.set), float(s.level), float(s.position))
 
-        return (num("set"), num("level"), num("position"))
-
-    rows: list[tuple[Mapping[str, Any], int]] = []
+    rows: list[tuple[SignalResult, int]] = []
     seen: set[int] = set()
 
-    def visit(s: Mapping[str, Any], depth: int) -> None:
+    def visit(s: SignalResult, depth: int) -> None:
         if id(s) in seen:
             return
         seen.add(id(s))
         rows.append((s, depth))
-        for child in sorted(children.get(str(s.get("path", "")), []), key=key):
+        for child in sorted(children.get(s.path, []), key=key):
             visit(child, depth + 1)
 
     for root in sorted(children.get(None, []), key=key):
@@ -339,27 +308,19 @@ class GlyphPoint:
     status: Status
 
 
-def _weights(spec: Mapping[str, Any]) -> dict[str, float]:
-    try:
-        raw = keyed_lambdas(spec.get("weights"))
-    except ValueError:
-        return {}
-    return {name: value for name, value in raw.items() if value is not None}
-
-
-def glyph_points(spec: Mapping[str, Any]) -> list[GlyphPoint]:
+def glyph_points(spec: SpecResult) -> list[GlyphPoint]:
     """Every (signal, λ) pair at x = λ, y = α·β."""
-    beta = _weights(spec)
+    beta = {name: value for name, value in spec.weights.items() if is_finite_number(value)}
     out: list[GlyphPoint] = []
-    for s in items(spec.get("signals")):
-        alpha = float(s["alpha"]) if is_finite_number(s.get("alpha")) else 1.0
-        level = int(s["level"]) if is_finite_number(s.get("level")) else 1
+    for s in spec.signals:
+        alpha = float(s.alpha) if is_finite_number(s.alpha) else 1.0
+        level = int(s.level)
         for c in cells(s):
             if c.value is None:
                 continue
             out.append(
                 GlyphPoint(
-                    signal=str(s.get("path") or s.get("name") or "?"),
+                    signal=str(s.path or s.name or "?"),
                     characteristic=c.characteristic,
                     index=c.index,
                     value=c.value,
@@ -376,7 +337,7 @@ def glyph_points(spec: Mapping[str, Any]) -> list[GlyphPoint]:
 class WorstRow:
     spec: str
     spec_index: int
-    signal: Mapping[str, Any]
+    signal: SignalResult
     worst: Cell | None
 
     @property
@@ -384,7 +345,7 @@ class WorstRow:
         return margin(self.signal)
 
 
-def _worst_cell(signal: Mapping[str, Any]) -> Cell | None:
+def _worst_cell(signal: SignalResult) -> Cell | None:
     all_cells = [c for c in cells(signal) if c.value is not None]
     if not all_cells:
         return None
@@ -394,19 +355,19 @@ def _worst_cell(signal: Mapping[str, Any]) -> Cell | None:
     return min(all_cells, key=lambda c: c.value or 0.0)
 
 
-def worst_rows(spec_results: Sequence[Mapping[str, Any]], limit: int = 10) -> list[WorstRow]:
+def worst_rows(spec_results: Sequence[SpecResult], limit: int = 10) -> list[WorstRow]:
     """The ``limit`` worst signals of all specs: failing first, then the closest to failing."""
     rows = [
-        WorstRow(str(spec.get("name", "")), i, s, _worst_cell(s))
+        WorstRow(spec.name, i, s, _worst_cell(s))
         for i, spec in enumerate(spec_results)
-        for s in items(spec.get("signals"))
+        for s in spec.signals
     ]
     rows.sort(key=lambda r: signal_order(r.signal))
     return rows[:limit]
 
 
 def summary(
-    spec_results: Iterable[Mapping[str, Any]], verdict: RunVerdict | None = None
+    spec_results: Iterable[SpecResult], verdict: RunVerdict | None = None
 ) -> dict[str, Any]:
     """Counts for the headers; ``outcome`` is the run's verdict in one line (as the terminal's
     last line), ``passed`` the verdict itself: ``verdict`` as the run decided it, else decided
@@ -414,32 +375,52 @@ def summary(
     specs = list(spec_results)
     regressed = verdict.regressed if verdict is not None else {}
 
-    def signal_failed(spec: Mapping[str, Any], signal: Mapping[str, Any]) -> bool:
-        return signal.get("passed") is False or signal.get("path") in regressed.get(
-            str(spec.get("spec")), ()
-        )
+    def signal_failed(spec: SpecResult, signal: SignalResult) -> bool:
+        return not signal.passed or signal.path in regressed.get(spec.spec, ())
 
-    counts: dict[str, Any] = {
+    decided = verdict if verdict is not None else RunVerdict.decide(specs)
+    return {
         "specs": len(specs),
-        "specs_failed": sum(
-            1 for spec in specs if spec.get("passed") is False or str(spec.get("spec")) in regressed
-        ),
-        "signals": sum(len(items(spec.get("signals"))) for spec in specs),
+        "specs_failed": sum(1 for spec in specs if not spec.passed or spec.spec in regressed),
+        "signals": sum(len(spec.signals) for spec in specs),
         "signals_failed": sum(
-            signal_failed(spec, signal) for spec in specs for signal in items(spec.get("signals"))
+            signal_failed(spec, signal) for spec in specs for signal in spec.signals
         ),
         "regressions": len(verdict.regressions) if verdict is not None else 0,
+        "passed": decided.passed,
+        "outcome": verdict_line(specs, decided) if specs else "no specs scored",
     }
-    try:
-        typed = [SpecResult.from_dict(spec) for spec in specs]
-    except (KeyError, TypeError, ValueError):  # a hand-made partial result: the plain counts
-        counts["outcome"] = (
-            f"{counts['specs']} specs, {counts['specs_failed']} fail; "
-            f"{counts['signals_failed']} of {counts['signals']} signals fail"
-        )
-        counts["passed"] = counts["specs_failed"] == 0 and (verdict is None or verdict.passed)
-        return counts
-    decided = verdict if verdict is not None else RunVerdict.decide(typed)
-    counts["passed"] = decided.passed
-    counts["outcome"] = verdict_line(typed, decided) if typed else "no specs scored"
-    return counts
+
+
+# -- the result's facts, as the templates and tables read them ---------------------------------
+# The facts are typed (results/spec_facts.py); the HTML template, the evidence record and the
+# trace read them by their JSON keys, so each accessor hands over that one part's JSON form.
+
+
+def data_quality(spec: SpecResult) -> Mapping[str, Any] | None:
+    """The data-quality findings on the spec's measurement (``action``, ``findings``)."""
+    quality = spec.data.quality
+    return quality.to_dict() if quality is not None else None
+
+
+def model_facts(spec: SpecResult) -> Mapping[str, Any]:
+    """What the result records of its model: ``kind``, its path or callable, its digest."""
+    found = spec.data.model
+    return found.to_dict() if found is not None else {}
+
+
+def reference_facts(spec: SpecResult) -> Mapping[str, Any]:
+    """What the result records of its measured data file: ``path``, ``hash``, ``digest``."""
+    found = spec.data.reference
+    return found.to_dict() if found is not None else {}
+
+
+def alignment_of(spec: SpecResult) -> Mapping[str, Any]:
+    """How the model's output was lined up with the measurement (rate, window, offset, …)."""
+    return spec.alignment.to_dict()
+
+
+def region_grid(spec: SpecResult) -> Mapping[str, Any] | None:
+    """The spec's grid of operating-region cells (shape, labels, counts, Φ per cell)."""
+    regions = spec.local.regions if spec.local is not None else None
+    return regions.to_dict() if regions is not None else None

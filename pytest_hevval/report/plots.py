@@ -10,11 +10,10 @@ look as they did.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from html import escape
-from typing import Any
 
 from ..core.registry import order_names
+from ..results.spec_result import SpecResult
 from .model import CHARACTERISTIC_COLOURS, LABELS, SHORT_LABELS, GlyphPoint, glyph_points
 from .svg import Panel, PathShare, nice_ticks
 
@@ -47,7 +46,7 @@ def _circle(x: float, y: float, r: float, css: str, fill: str, tip: str = "") ->
     return f'<circle class="{css}" cx="{x:.1f}" cy="{y:.1f}" r="{r:.1f}" fill="{fill}"{end}'
 
 
-def glyph_plot(spec: Mapping[str, Any], share: PathShare | None = None) -> str | None:
+def glyph_plot(spec: SpecResult, share: PathShare | None = None) -> str | None:
     """Paper Fig. 10 for one spec: x = λ, y = α·β, size by level, fill by characteristic.
 
     Glyphs sharing a weight are spread over a thin band (a fixed offset per characteristic)
@@ -117,7 +116,7 @@ def glyph_plot(spec: Mapping[str, Any], share: PathShare | None = None) -> str |
     legend, bottom = _legend(points, panel.x + panel.width + 16, panel.y + 4)
     parts.append(legend)
     height = math.ceil(max(panel.y + panel.height + 40, bottom + 8))
-    name = str(spec.get("name") or spec.get("spec") or "")
+    name = spec.name or spec.spec
     return (
         f'<svg class="hv-glyph" viewBox="0 0 {_WIDTH} {height}" role="img">'
         f"<title>behavioural glyph plot of {escape(name)}</title>{''.join(parts)}</svg>"

@@ -24,7 +24,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.registry import order_names
-from .model import CHARACTERISTIC_COLOURS, SHORT_LABELS, _lambdas, is_finite_number
+from ..results.codec import keyed_lambdas
+from ..results.spec_result import SignalResult
+from .model import CHARACTERISTIC_COLOURS, SHORT_LABELS, is_finite_number
 
 __all__ = ["Panel", "PathShare", "column_envelope", "history_svg", "nice_ticks", "signal_svg"]
 
@@ -343,7 +345,7 @@ def _draw(css: str, d: str | None, share: PathShare | None = None) -> str:
     return share.element(css, d)
 
 
-def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = None) -> str | None:
+def signal_svg(signal: SignalResult, ident: str, share: PathShare | None = None) -> str | None:
     """Overlay, residual and derivative match along time; correlation curve; error histogram.
 
     ``ident`` makes the SVG's clip-path ids unique within the page; ``share`` draws path data
@@ -351,7 +353,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
     Returns ``None`` when the signal carries no figure data.
     """
     share = share if share is not None else PathShare()
-    data = signal.get("figures")
+    data = signal.figures
     if not isinstance(data, Mapping) or not isinstance(data.get("overlay"), Mapping):
         return None
     overlay = data["overlay"]
@@ -362,7 +364,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
     series.update({k: _array(overlay.get(k)) for k in ("res_min", "res_max")})
     if any(v.shape != time.shape for v in series.values()):
         return None
-    unit = str(signal.get("unit") or "")
+    unit = str(signal.unit or "")
     suffix = f" [{unit}]" if unit else ""
     ident = "".join(ch if ch.isalnum() else "-" for ch in ident)
 
@@ -391,7 +393,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
     ov.frame(
         parts,
         x_label=None,
-        y_label=f"{signal.get('name') or ''}{suffix}",
+        y_label=f"{signal.name or ''}{suffix}",
         x_ticks=False,
         share=share,
     )
@@ -522,7 +524,7 @@ def signal_svg(signal: Mapping[str, Any], ident: str, share: PathShare | None = 
                 "line: cumulative fraction (right axis)</text>"
             )
 
-    title = f"{signal.get('path') or signal.get('name') or 'signal'}: measured vs simulated"
+    title = f"{signal.path or signal.name or 'signal'}: measured vs simulated"
     return (
         f'<svg class="hv-plot" viewBox="0 0 {width} {height}" role="img">'
         f"<title>{_esc(title)}</title>"
@@ -549,12 +551,11 @@ def _bars(panel: Panel, edges: FloatArray, counts: FloatArray) -> str | None:
     return drawn or None
 
 
-def _hot_spans(signal: Mapping[str, Any], panel: Panel) -> list[str]:
+def _hot_spans(signal: SignalResult, panel: Panel) -> list[str]:
     """The windows where the error concentrates (``local:``), shaded behind the overlay."""
-    local = signal.get("local")
-    if not isinstance(local, Mapping):
+    if signal.local is None:
         return []
-    spans = (local.get("concentration") or {}).get("spans_s") or []
+    spans = (signal.local.concentration or {}).get("spans_s") or []
     out = []
     for a, b in spans:
         x0, x1 = float(panel.px(float(a))), float(panel.px(float(b)))
@@ -588,7 +589,7 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
     if not entries:
         return None
     lines: dict[str, FloatArray] = {}
-    keyed = [_lambdas(h) for h in entries]
+    keyed = [_trend_lambdas(h) for h in entries]
     for name in order_names(n for values_of in keyed for n in values_of):
         values = []
         for values_of in keyed:
@@ -643,3 +644,11 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
         "<title>characteristics over recorded versions"
         f"</title>{''.join(parts)}</svg>"
     )
+
+
+def _trend_lambdas(entry: Mapping[str, Any]) -> dict[str, float | None]:
+    """λ values by name of one recorded run in a trend (a list in paper order is read too)."""
+    try:
+        return keyed_lambdas(entry.get("lambdas"))
+    except ValueError:
+        return {}

@@ -6,14 +6,14 @@ Pure functions over :mod:`pytest_hevval.results.spec_result` objects; no pytest,
 from __future__ import annotations
 
 import shlex
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any
+from collections.abc import Iterable, Sequence
 
 from ..core.registry import describe
 from ..results.campaign import CampaignVerdict, campaign_verdicts
 from ..results.runtime import ModelRuntime
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
+from .model import model_facts
 from .sentences import (
     failure_lines,
     failure_text,
@@ -136,11 +136,9 @@ def runtime_text(runtime: ModelRuntime | None, model_kind: object) -> str:
     return parts[0] + ": " + ", ".join(parts[1:])
 
 
-def runtime_of(spec: Mapping[str, Any]) -> tuple[ModelRuntime | None, object]:
-    """A spec result's runtime (JSON data) and its model's kind, for :func:`runtime_text`."""
-    raw = spec.get("runtime")
-    runtime = ModelRuntime.from_dict(raw) if isinstance(raw, Mapping) else None
-    return runtime, ((spec.get("data") or {}).get("model") or {}).get("kind")
+def runtime_of(spec: SpecResult) -> tuple[ModelRuntime | None, object]:
+    """A spec result's runtime and its model's kind, for :func:`runtime_text`."""
+    return spec.runtime, model_facts(spec).get("kind")
 
 
 def runtime_report(result: SpecResult, line: int) -> str:

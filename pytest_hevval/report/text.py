@@ -1,6 +1,7 @@
 """Machine- and chat-readable reports: JSON (the source of truth), Markdown, CI annotations.
 
-Standard library only, so these work without the ``html`` extra.
+Each takes the typed results. JSON is made in one place, :func:`report_document`, from the
+results' own JSON. Standard library only, so these work without the ``html`` extra.
 """
 
 from __future__ import annotations
@@ -14,9 +15,12 @@ from typing import Any
 from .. import __version__
 from ..defaults import split_key
 from ..escape import markdown, markdown_code
+from ..results.campaign import CampaignVerdict, RecordingOutcome, campaign_verdicts
 from ..results.codec import plain_json
+from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from . import model
+from .panels import SignalPanels
 
 __all__ = [
     "REPORT_SCHEMA_VERSION",
@@ -26,6 +30,7 @@ __all__ = [
     "render_comparison",
     "render_json",
     "render_markdown",
+    "report_document",
 ]
 
 #: Version of the report.json layout (the per-spec dicts carry their own ``schema_version``).
@@ -35,7 +40,7 @@ REPORT_SCHEMA_VERSION = 1
 _MARKDOWN_SIGNALS = 15
 
 
-def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def _worst_json(spec_results: Sequence[SpecResult]) -> list[dict[str, Any]]:
     out = []
     for row in model.worst_rows(spec_results, limit=12):
         cell = row.worst
@@ -43,40 +48,62 @@ def _worst_json(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any
             {
                 "spec": row.spec,
                 "spec_index": row.spec_index,
-                "path": row.signal.get("path"),
-                "passed": row.signal.get("passed"),
+                "path": row.signal.path,
+                "passed": row.signal.passed,
                 "characteristic": cell.characteristic if cell else None,
                 "value": cell.value if cell else None,
                 "threshold": cell.threshold if cell else None,
                 "margin": row.margin,
-                "origins": list(model.items(row.signal.get("origins"))),
+                "origins": list(row.signal.origins),
             }
         )
     return out
 
 
-def render_json(
-    spec_results: Sequence[Mapping[str, Any]],
+def report_document(
+    results: Sequence[SpecResult],
     verdict: RunVerdict | None = None,
     comparison: Mapping[str, Any] | None = None,
+    *,
+    panels: SignalPanels | None = None,
+    data: Sequence[Mapping[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """The report.json document: every spec result's JSON (``data``, ``to_dict`` of each
+    result where not given) with each signal's diagnosis and trend beside it, the summary
+    (with the run's verdict, ``summary.passed``), the worst-signal table, the campaigns'
+    verdicts and, when the run decided one, ``verdict``: its regressions against the baseline
+    and the specs that could not be scored; and the ``comparison`` with the baseline when one
+    ran (``Comparison.to_dict()``)."""
+    panels = panels if panels is not None else SignalPanels()
+    found = data if data is not None else [result.to_dict() for result in results]
+    campaigns = campaign_verdicts(results)
+    return {
+        "report_schema_version": REPORT_SCHEMA_VERSION,
+        "generated_by": f"pytest-hevval {__version__}",
+        "summary": model.summary(results, verdict),
+        **({"verdict": verdict.to_dict()} if verdict is not None else {}),
+        **({"comparison": comparison} if comparison is not None else {}),
+        "worst": _worst_json(results),
+        "specs": [
+            panels.decorate(result, item) for result, item in zip(results, found, strict=True)
+        ],
+        **({"campaigns": [v.to_dict() for v in campaigns]} if campaigns else {}),
+    }
+
+
+def render_json(
+    results: Sequence[SpecResult],
+    verdict: RunVerdict | None = None,
+    comparison: Mapping[str, Any] | None = None,
+    *,
+    panels: SignalPanels | None = None,
+    data: Sequence[Mapping[str, Any]] | None = None,
 ) -> str:
-    """report.json: every spec result as given, plus the summary (with the run's verdict,
-    ``summary.passed``), the worst-signal table and, when the run decided one, ``verdict``:
-    its regressions against the baseline and the specs that could not be scored; and the
-    ``comparison`` with the baseline when one ran (``Comparison.to_dict()``).
+    """report.json: :func:`report_document` as text.
 
     Keys are sorted and separators fixed, so equal results give byte-identical files.
     """
-    payload = {
-        "report_schema_version": REPORT_SCHEMA_VERSION,
-        "generated_by": f"pytest-hevval {__version__}",
-        "summary": model.summary(spec_results, verdict),
-        **({"verdict": verdict.to_dict()} if verdict is not None else {}),
-        **({"comparison": comparison} if comparison is not None else {}),
-        "worst": _worst_json(spec_results),
-        "specs": list(spec_results),
-        **({"campaigns": campaigns} if (campaigns := campaigns_of(spec_results)) else {}),
-    }
+    payload = report_document(results, verdict, comparison, panels=panels, data=data)
     options: dict[str, Any] = {
         "sort_keys": True,
         "ensure_ascii": False,
@@ -92,60 +119,49 @@ def render_json(
     return text + "\n"
 
 
-def campaigns_of(spec_results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """The campaign verdicts, when any result is one recording of a campaign."""
-    if not any(spec.get("recording") for spec in spec_results):
-        return []
-    from ..results.campaign import campaign_payloads
-
-    return campaign_payloads(spec_results)
-
-
-def _campaign_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+def _campaign_markdown(verdicts: Sequence[CampaignVerdict]) -> list[str]:
     lines: list[str] = []
-    for found in campaigns_of(spec_results):
-        mark = "✅" if found["passed"] else "❌"
+    for found in verdicts:
+        mark = "✅" if found.passed else "❌"
         lines += [
             "",
-            f"**{mark} campaign {_md(found['name'])}** ({_code(found['spec'])}): "
-            f"pass rate {_percent(found['pass_rate'])} of the validation recordings"
+            f"**{mark} campaign {_md(found.name)}** ({_code(found.spec)}): "
+            f"pass rate {_percent(found.pass_rate)} of the validation recordings"
             + (
-                f" (min {_percent(found['min_pass_rate'])})"
-                if found["min_pass_rate"] is not None
-                else ""
+                f" (min {_percent(found.min_pass_rate)})" if found.min_pass_rate is not None else ""
             ),
             "",
         ]
-        if found["excluded"]:
+        if found.excluded:
             lines += [
                 "Excluded from the gate (calibration): "
-                + ", ".join(_code(r) for r in found["excluded"]),
+                + ", ".join(_code(r) for r in found.excluded),
                 "",
             ]
-        if found.get("unused_models"):
+        if found.unused_models:
             lines += [
                 "Model output files no recording uses: "
-                + ", ".join(_code(r) for r in found["unused_models"]),
+                + ", ".join(_code(r) for r in found.unused_models),
                 "",
             ]
         lines += ["| recording | role | Φ | failing signals |", "|---|---|--:|---|"]
-        for recording in found["recordings"]:
-            failing = ", ".join(_code(s) for s in recording["failed_signals"]) or "—"
+        for recording in found.recordings:
+            failing = ", ".join(_code(s) for s in recording.failed_signals) or "—"
             lines.append(
-                f"| {'✅' if recording['passed'] else '❌'} {_md(recording['id'])} "
-                f"| {recording['role']} | {_phi_cell(recording)} | {failing} |"
+                f"| {'✅' if recording.passed else '❌'} {_md(recording.id)} "
+                f"| {recording.role} | {_phi_cell(recording)} | {failing} |"
             )
         lines += [
             "",
             "| signal | pass rate | u-pooling area |",
             "|---|--:|--:|",
             *(
-                f"| {_code(path)} | {_percent(rate)} | {_num(found['pooled_area'].get(path), 3)} |"
-                for path, rate in found["signal_pass_rates"].items()
+                f"| {_code(path)} | {_percent(rate)} | {_num(found.pooled_area.get(path), 3)} |"
+                for path, rate in found.signal_pass_rates.items()
             ),
         ]
-        if found["failures"]:
-            lines += ["", *(f"- gate: {_md(failure)}" for failure in found["failures"])]
+        if found.failures:
+            lines += ["", *(f"- gate: {_md(failure)}" for failure in found.failures)]
     return lines
 
 
@@ -164,13 +180,13 @@ def _num(value: object, digits: int = 4) -> str:
     return f"{float(value):.{digits}f}" if model.is_finite_number(value) else "—"
 
 
-def _phi_cell(recording: Mapping[str, Any]) -> str:
+def _phi_cell(recording: RecordingOutcome) -> str:
     """A campaign recording's Φ with its interval, marked where the interval holds min_phi."""
-    interval = recording.get("phi_interval")
-    text = _num(recording["phi"])
-    if interval:
-        text += f" [{_num(interval['low'])}, {_num(interval['high'])}]"
-    return text + (" (within noise of min_phi)" if recording.get("within_noise") else "")
+    interval = recording.phi_interval
+    text = _num(recording.phi)
+    if interval is not None:
+        text += f" [{_num(interval.low)}, {_num(interval.high)}]"
+    return text + (" (within noise of min_phi)" if recording.within_noise else "")
 
 
 def _md(text: object) -> str:
@@ -182,18 +198,18 @@ def _code(text: object) -> str:
     return markdown_code(text)
 
 
-def _phi(spec: Mapping[str, Any]) -> str:
+def _phi(spec: SpecResult) -> str:
     """Φ with its 95 % interval where the result carries one: ``0.9248 [0.9225, 0.9272]``."""
-    low, high = model.interval_bounds(spec.get("phi_interval"))
+    low, high = model.interval_bounds(spec.phi_interval)
     bounds = f" [{_num(low)}, {_num(high)}]" if low is not None else ""
-    return f"{_num(spec.get('phi'))}{bounds}"
+    return f"{_num(spec.phi)}{bounds}"
 
 
-def _min_phi(spec: Mapping[str, Any]) -> str:
-    return f"{_num(spec.get('min_phi'))}{model.min_phi_bound(spec)}"
+def _min_phi(spec: SpecResult) -> str:
+    return f"{_num(spec.min_phi)}{model.min_phi_bound(spec)}"
 
 
-def _below(signal: Mapping[str, Any]) -> list[str]:
+def _below(signal: SignalResult) -> list[str]:
     parts = []
     for c in model.cells(signal):
         if c.status == "fail":
@@ -204,21 +220,21 @@ def _below(signal: Mapping[str, Any]) -> list[str]:
     return parts
 
 
-def _where(signal: Mapping[str, Any]) -> tuple[bool, list[str]]:
+def _where(signal: SignalResult) -> tuple[bool, list[str]]:
     """Whether the error appears in ``signal`` itself, and the other signals it appears in."""
-    path = str(signal.get("path") or "")
-    origins = [str(o) for o in model.items(signal.get("origins"))]
+    path = signal.path
+    origins = [str(o) for o in signal.origins]
     others = [o for o in origins if o != path]
-    here = bool(signal.get("origin")) or path in origins or not origins
+    here = signal.origin or path in origins or not origins
     return here, others
 
 
-def _where_text(signal: Mapping[str, Any]) -> str:
+def _where_text(signal: SignalResult) -> str:
     here, others = _where(signal)
     return ", ".join((["here"] if here else []) + others)
 
 
-def _measurement_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+def _measurement_markdown(spec_results: Sequence[SpecResult]) -> list[str]:
     """Each miss checked against a declared measurement uncertainty, per spec."""
     lines: list[str] = []
     for spec in spec_results:
@@ -229,12 +245,12 @@ def _measurement_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str
         ]
         if not found:
             continue
-        lines += ["", f"**Measurement uncertainty of {_md(spec.get('name', ''))}**", ""]
-        lines += [f"- {_code(signal.get('path', ''))}: {_md(text)}" for signal, text in found]
+        lines += ["", f"**Measurement uncertainty of {_md(spec.name)}**", ""]
+        lines += [f"- {_code(signal.path)}: {_md(text)}" for signal, text in found]
     return lines
 
 
-def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+def _standard_metrics_markdown(spec_results: Sequence[SpecResult]) -> list[str]:
     """A "standard metrics" table per spec that switched any on, one row per signal and metric."""
     lines: list[str] = []
     for spec in spec_results:
@@ -247,7 +263,7 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
             continue
         lines += [
             "",
-            f"**Standard metrics of {_md(spec.get('name', ''))}**",
+            f"**Standard metrics of {_md(spec.name)}**",
             "",
             "| signal | metric | score | threshold | components |",
             "|---|---|--:|--:|---|",
@@ -255,13 +271,13 @@ def _standard_metrics_markdown(spec_results: Sequence[Mapping[str, Any]]) -> lis
         for signal, row in rows:
             gate = _num(row.cell.threshold, 3) if row.cell.threshold is not None else "—"
             lines.append(
-                f"| {_code(signal.get('path', ''))} | {_md(row.cell.label)} {_md(row.title)} "
+                f"| {_code(signal.path)} | {_md(row.cell.label)} {_md(row.title)} "
                 f"| {_num(row.cell.value)} | {gate} | {_md(row.components_text())} |"
             )
     return lines
 
 
-def _runtime_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
+def _runtime_markdown(spec_results: Sequence[SpecResult]) -> list[str]:
     """The model's runtime per spec that ran its model (a callable or an FMU)."""
     from .terminal import runtime_of, runtime_text
 
@@ -274,22 +290,21 @@ def _runtime_markdown(spec_results: Sequence[Mapping[str, Any]]) -> list[str]:
         mark = "❌ " if failures else "✅ " if runtime is not None and runtime.gate else ""
         gate = "; ".join(failures) or ("met" if mark else "—")
         rows.append(
-            f"| {mark}{_md(spec.get('name', ''))} | {_md(runtime_text(runtime, kind))} "
-            f"| {_md(gate)} |"
+            f"| {mark}{_md(spec.name)} | {_md(runtime_text(runtime, kind))} | {_md(gate)} |"
         )
     if not rows:
         return []
     return ["", "**Model runtime**", "", "| spec | runtime | gate |", "|---|---|---|", *rows]
 
 
-def headline(spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict | None) -> str:
+def headline(spec_results: Sequence[SpecResult], verdict: RunVerdict | None) -> str:
     """The Markdown headline of a run: its verdict in one line."""
     counts = model.summary(spec_results, verdict)
     return f"### {'✅' if counts['passed'] else '❌'} hevval: {_md(counts['outcome'])}"
 
 
 def render_markdown(
-    spec_results: Sequence[Mapping[str, Any]],
+    spec_results: Sequence[SpecResult],
     verdict: RunVerdict | None = None,
     comparison: Mapping[str, Any] | None = None,
 ) -> str:
@@ -305,15 +320,15 @@ def render_markdown(
         "|:-:|---|--:|--:|--:|",
     ]
     for spec in spec_results:
-        failing_paths = {str(s.get("path")) for s in model.failing_signals(spec)}
-        worse = regressed.get(str(spec.get("spec")), frozenset())
+        failing_paths = {s.path for s in model.failing_signals(spec)}
+        worse = regressed.get(spec.spec, frozenset())
         # A signal failed by a regression counts as failing, as its item does.
         failing_paths |= {path for path in worse if path is not None}
-        failed = spec.get("passed") is False or bool(worse)
+        failed = not spec.passed or bool(worse)
         lines.append(
-            f"| {'❌' if failed else '✅'} | {_md(spec.get('name', ''))} "
-            f"| {_phi(spec)} | {_num(spec.get('min_phi'))} "
-            f"| {len(failing_paths)} / {len(model.items(spec.get('signals')))} |"
+            f"| {'❌' if failed else '✅'} | {_md(spec.name)} "
+            f"| {_phi(spec)} | {_num(spec.min_phi)} "
+            f"| {len(failing_paths)} / {len(spec.signals)} |"
         )
     if verdict is not None and comparison is not None:
         from .comparison import comparison_markdown
@@ -323,29 +338,28 @@ def render_markdown(
         lines += _verdict_markdown(verdict, regressions=comparison is None)
     for spec in spec_results:
         failing = model.failing_signals(spec)
-        if spec.get("passed") is not False and not failing:
+        if spec.passed and not failing:
             continue
         relation = "<" if model.phi_failed(spec) else "≥"
-        mark = "❌" if spec.get("passed") is False else "✅"
+        mark = "❌" if not spec.passed else "✅"
         lines += [
             "",
-            f"**{mark} {_md(spec.get('name', ''))}** — Φ {_phi(spec)} {relation} min Φ "
-            f"{_min_phi(spec)} ({_code(spec.get('spec', ''))})",
+            f"**{mark} {_md(spec.name)}** — Φ {_phi(spec)} {relation} min Φ "
+            f"{_min_phi(spec)} ({_code(spec.spec)})",
         ]
         if not failing:
             continue
         lines += ["", "| signal | below threshold | error appears in |", "|---|---|---|"]
         for signal in failing[:_MARKDOWN_SIGNALS]:
-            line = signal.get("line")
-            where = f" (line {line})" if isinstance(line, int) else ""
+            where = f" (line {signal.line})"
             below = "; ".join(_below(signal)) or "—"
             places = _md(_where_text(signal))
-            lines.append(f"| {_code(signal.get('path', ''))}{where} | {_md(below)} | {places} |")
+            lines.append(f"| {_code(signal.path)}{where} | {_md(below)} | {places} |")
         if len(failing) > _MARKDOWN_SIGNALS:
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
     lines += _measurement_markdown(spec_results)
     lines += _standard_metrics_markdown(spec_results)
-    lines += _campaign_markdown(spec_results)
+    lines += _campaign_markdown(campaign_verdicts(spec_results))
     lines += _runtime_markdown(spec_results)
     from .trace import trace_markdown_section, trace_rows
 
@@ -354,12 +368,12 @@ def render_markdown(
         lines += ["", *trace_markdown_section(trace, heading="**Requirements**")]
     lines += ["", f"<sub>pytest-hevval {__version__}</sub>"]
     for spec in spec_results:
-        quality = (spec.get("data") or {}).get("quality")
+        quality = model.data_quality(spec)
         if not quality or not quality.get("findings"):
             continue
         lines += [
             "",
-            f"**Data quality of {_md(spec.get('name', ''))}** ({quality.get('action', 'warn')}): "
+            f"**Data quality of {_md(spec.name)}** ({quality.get('action', 'warn')}): "
             "the measurement, not the model",
             "",
         ]
@@ -406,7 +420,7 @@ def _verdict_markdown(verdict: RunVerdict, *, regressions: bool) -> list[str]:
 
 
 def render_comparison(
-    spec_results: Sequence[Mapping[str, Any]], verdict: RunVerdict, comparison: Mapping[str, Any]
+    spec_results: Sequence[SpecResult], verdict: RunVerdict, comparison: Mapping[str, Any]
 ) -> str:
     """comparison.md: the run's headline and its comparison with the baseline, alone, for a
     workflow that posts just that as a pull-request comment."""
@@ -432,7 +446,7 @@ def _relative(spec_path: str, rootdir: Path | str) -> str:
     return path.as_posix()
 
 
-def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path | str) -> list[str]:
+def github_annotations(spec_results: Sequence[SpecResult], rootdir: Path | str) -> list[str]:
     """``::error`` workflow commands pointing at the spec line of every failing signal.
 
     A spec whose Φ is below min Φ gets one more, file-level annotation first. Within a spec the
@@ -440,8 +454,8 @@ def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path 
     """
     out: list[str] = []
     for spec in spec_results:
-        name = str(spec.get("name", ""))
-        file = _escape_property(_relative(split_key(str(spec.get("spec", "")))[0], rootdir))
+        name = spec.name
+        file = _escape_property(_relative(split_key(spec.spec)[0], rootdir))
         if model.phi_failed(spec):
             message = f"{name}: Φ {_phi(spec)} is below min Φ {_min_phi(spec)}"
             out.append(f"::error file={file},title=hevval::{_escape_data(message)}")
@@ -450,8 +464,8 @@ def github_annotations(spec_results: Sequence[Mapping[str, Any]], rootdir: Path 
             here, others = _where(signal)
             places = (["this signal"] if here else []) + others
             origin = "the error appears in " + " and ".join(places)
-            message = f"{name}: {signal.get('path', '')}: {below} ({origin})"
-            line = signal.get("line")
-            location = f",line={line}" if isinstance(line, int) and line > 0 else ""
+            message = f"{name}: {signal.path}: {below} ({origin})"
+            line = signal.line
+            location = f",line={line}" if line > 0 else ""
             out.append(f"::error file={file}{location},title=hevval::{_escape_data(message)}")
     return out

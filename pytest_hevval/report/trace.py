@@ -22,6 +22,8 @@ from ..core.uncertainty import Interval, value_text
 from ..defaults import requirement_id_problem
 from ..errors import HevvalError
 from ..files import read_input
+from ..results.spec_result import SpecResult
+from .model import model_facts, reference_facts
 from .text import _md
 
 __all__ = [
@@ -112,47 +114,49 @@ def _digest_text(source: Mapping[str, Any]) -> str | None:
 
 
 def trace_rows(
-    spec_results: Sequence[Mapping[str, Any]],
+    spec_results: Sequence[SpecResult],
     *,
     model_version: str | None = None,
+    versions: Mapping[str, str] | None = None,
     listed: Iterable[str] | None = None,
 ) -> list[TraceRow]:
     """The traceability rows of a run's spec results, requirement by requirement.
 
     ``listed``: the team's requirement IDs; those no item verifies become uncovered rows,
-    and linked IDs not among them are marked ``listed=False``. A result's own
-    ``model_version`` (a history's newest result of each spec) wins over ``model_version``.
+    and linked IDs not among them are marked ``listed=False``. ``versions``: the model
+    version of each result by its ``spec`` key (a history's newest result of each spec was
+    recorded by its own run), which wins over ``model_version``.
     """
     team = list(dict.fromkeys(listed)) if listed is not None else None
+    versions = versions or {}
     rows: list[TraceRow] = []
     for spec in spec_results:
-        whole = [str(r) for r in spec.get("requirements") or []]
+        whole = [str(r) for r in spec.requirements]
         by_requirement: dict[str, list[str]] = {}
-        for signal in spec.get("signals") or []:
-            for requirement in signal.get("requirements") or []:
+        for signal in spec.signals:
+            for requirement in signal.requirements:
                 if requirement not in whole:
-                    by_requirement.setdefault(str(requirement), []).append(str(signal["path"]))
-        signals = {str(s["path"]): s for s in spec.get("signals") or []}
-        data = spec.get("data") or {}
-        reference = data.get("reference") or {}
-        interval = spec.get("phi_interval") or {}
+                    by_requirement.setdefault(str(requirement), []).append(signal.path)
+        signals = {s.path: s for s in spec.signals}
+        reference = reference_facts(spec)
+        interval = spec.phi_interval
         facts: dict[str, Any] = {
-            "spec": str(spec.get("name", spec.get("spec", ""))),
-            "spec_file": spec.get("spec"),
-            "phi": spec.get("phi"),
-            "phi_low": interval.get("low"),
-            "phi_high": interval.get("high"),
-            "model_version": spec.get("model_version", model_version),
+            "spec": spec.name,
+            "spec_file": spec.spec,
+            "phi": spec.phi,
+            "phi_low": interval.low if interval is not None else None,
+            "phi_high": interval.high if interval is not None else None,
+            "model_version": versions.get(spec.spec, model_version),
             "reference": reference.get("path"),
             "reference_digest": _digest_text(reference),
-            "model": _model_text(data.get("model") or {}),
+            "model": _model_text(model_facts(spec)),
         }
         for requirement in whole:
             rows.append(
                 TraceRow(
                     requirement=requirement,
                     whole_spec=True,
-                    passed=spec.get("passed") is not False,
+                    passed=spec.passed,
                     listed=team is None or requirement in team,
                     **facts,
                 )
@@ -162,7 +166,7 @@ def trace_rows(
                 TraceRow(
                     requirement=requirement,
                     signals=tuple(paths),
-                    passed=all(signals[p].get("passed") is not False for p in paths),
+                    passed=all(signals[p].passed for p in paths),
                     listed=team is None or requirement in team,
                     **facts,
                 )

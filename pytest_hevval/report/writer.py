@@ -1,4 +1,9 @@
-"""Writing report files: the ``--hevval-report`` grammar and atomic writes."""
+"""Writing report files: the ``report`` option's grammar and atomic writes.
+
+The writers take the typed results; report.json alone is made from the results' JSON
+(:func:`.text.report_document`), at the file it is written to. A message about the option
+names it as the front end in use spells it (:mod:`pytest_hevval.flags`).
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,10 @@ from typing import Any
 
 from ..errors import HevvalError, did_you_mean
 from ..files import output_error, write_atomic
+from ..flags import PYTEST, FrontEnd
+from ..results.spec_result import SpecResult
 from ..results.verdict import RunVerdict
+from .panels import SignalPanels
 
 __all__ = [
     "COMPARISON_FILE",
@@ -34,13 +42,14 @@ _ALIASES = {"markdown": "md", "htm": "html"}
 
 
 class ReportOptionError(HevvalError, ValueError):
-    """A ``--hevval-report`` value names no known format."""
+    """A ``report`` option's value names no known format."""
 
 
-def parse_formats(value: str) -> set[str]:
-    """Formats named in a comma-separated ``--hevval-report`` value, e.g. ``"html,json,md"``.
+def parse_formats(value: str, front_end: FrontEnd = PYTEST) -> set[str]:
+    """Formats named in a comma-separated ``report`` value, e.g. ``"html,json,md"``.
 
-    Names are case-insensitive and may repeat; ``markdown`` means ``md``.
+    Names are case-insensitive and may repeat; ``markdown`` means ``md``. Messages name the
+    option as ``front_end`` spells it.
 
     Raises
     ------
@@ -50,23 +59,24 @@ def parse_formats(value: str) -> set[str]:
     names = [part.strip().lower() for part in value.split(",")]
     names = [_ALIASES.get(name, name) for name in names if name]
     choices = ", ".join(FORMATS)
+    flag = front_end.flag("report")
     if not names:
         raise ReportOptionError(
-            f"--hevval-report: expected a comma-separated list of formats (got {value!r})",
-            hint=f"choose from {choices}, e.g. --hevval-report=html,json,md",
+            f"{flag}: expected a comma-separated list of formats (got {value!r})",
+            hint=f"choose from {choices}, e.g. {flag}=html,json,md",
         )
     for name in names:
         if name not in FILE_NAMES:
             suggestion = did_you_mean(name, FORMATS)
             raise ReportOptionError(
-                f"--hevval-report: unknown report format {name!r} (choose from {choices})",
+                f"{flag}: unknown report format {name!r} (choose from {choices})",
                 hint=suggestion or None,
             )
     return set(names)
 
 
 def write_reports(
-    spec_results: Sequence[Mapping[str, Any]],
+    results: Sequence[SpecResult],
     formats: set[str],
     directory: Path,
     *,
@@ -75,13 +85,18 @@ def write_reports(
     verdict: RunVerdict | None = None,
     comparison: Mapping[str, Any] | None = None,
     facts: Mapping[str, Any] | None = None,
+    panels: SignalPanels | None = None,
+    data: Sequence[Mapping[str, Any]] | None = None,
+    front_end: FrontEnd = PYTEST,
 ) -> list[Path]:
     """Write report.html / report.json / report.md / evidence.json for ``formats`` into
     ``directory``; each says ``verdict``, the run's (else the verdict of the results alone).
     With ``comparison`` (the comparison with the baseline, ``Comparison.to_dict()``) and a
     verdict, report.json and report.md carry it, and with ``md`` it is also written alone to
     comparison.md. ``facts`` are the run's model version, start and tool versions, which the
-    evidence record holds (docs/evidence.md).
+    evidence record holds (docs/evidence.md). ``panels``: each signal's diagnosis and history
+    trend. ``data``: the results' JSON (``SpecResult.to_dict`` of each, in order) where the
+    caller holds it already; report.json is written from it.
 
     The directory is created if needed; each file is replaced atomically. Returns the written
     paths in the order html, json, md.
@@ -89,9 +104,10 @@ def write_reports(
     unknown = sorted(set(formats) - set(FILE_NAMES))
     if unknown:
         raise ReportOptionError(
-            f"--hevval-report: unknown report format {unknown[0]!r} "
+            f"{front_end.flag('report')}: unknown report format {unknown[0]!r} "
             f"(choose from {', '.join(FORMATS)})"
         )
+    panels = panels if panels is not None else SignalPanels()
     directory = Path(directory)
     try:
         directory.mkdir(parents=True, exist_ok=True)
@@ -106,20 +122,25 @@ def write_reports(
             from .html import render_html
 
             text = render_html(
-                spec_results, title=title, generated_utc=stamp, formats=formats, verdict=verdict
+                results,
+                title=title,
+                generated_utc=stamp,
+                formats=formats,
+                verdict=verdict,
+                panels=panels,
             )
         elif name == "json":
             from .text import render_json
 
-            text = render_json(spec_results, verdict, comparison)
+            text = render_json(results, verdict, comparison, panels=panels, data=data)
         elif name == "evidence":
             from .evidence import render_evidence
 
-            text = render_evidence(spec_results, facts or {}, source="pytest run")
+            text = render_evidence(results, facts or {}, source="pytest run")
         else:
             from .text import render_markdown
 
-            text = render_markdown(spec_results, verdict, comparison)
+            text = render_markdown(results, verdict, comparison)
         path = directory / FILE_NAMES[name]
         write_atomic(path, text)
         written.append(path)
@@ -128,7 +149,7 @@ def write_reports(
         from .text import render_comparison
 
         path = directory / COMPARISON_FILE
-        write_atomic(path, render_comparison(spec_results, verdict, comparison))
+        write_atomic(path, render_comparison(results, verdict, comparison))
         written.append(path)
     # A report of an earlier run beside this run's would be read as this run's: only this
     # run's reports stay (the report files' own names only; nothing else is touched).
