@@ -19,7 +19,6 @@ Exit codes: 0 every spec passed, 1 a gate failed, 2 bad input or usage.
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import os
 import sys
@@ -38,6 +37,8 @@ __all__ = ["main"]
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+#: The exit code of each outcome of a run (``results.verdict.Outcome``, by value).
+_EXIT_CODES = {"passed": EXIT_OK, "failed": EXIT_FAILED, "error": EXIT_USAGE}
 
 
 def _write_json(path: str, payload: Any) -> None:
@@ -63,38 +64,18 @@ def _expand(paths: Sequence[str]) -> list[Path]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .data.kernel_cache import compile_note, finish_run
-    from .data.remote import relative_to
+    """``hevval run``: the command line's options into one run, and what it says printed."""
     from .flags import COMMAND
-    from .publish import Publisher, PublishOptions, diagnosis_panels
-    from .report.diagnosis import target_payload
-    from .report.terminal import run_summary
-    from .results.campaign import campaign_verdicts
-    from .results.envelope import run_document
-    from .scoring.cluster import error_payload
-    from .scoring.engine import Evaluation
-    from .scoring.run import RunOptions, run_specs
+    from .run import Run, RunSettings
     from .spec.load import load_specs
 
     rootdir = project_root(args.specs)
-    publisher = Publisher(
-        PublishOptions.from_options(lambda name: _arg(args, name), rootdir, COMMAND)
-    )
+    run = Run(RunSettings.read(lambda name: _arg(args, name), rootdir, COMMAND))
     specs = [spec for path in _expand(args.specs) for spec in load_specs(path)]
     if not specs:
         print("hevval run: no spec files found", file=sys.stderr)
         return EXIT_USAGE
-    notes = publisher.start()
-    options = RunOptions(
-        rootdir=rootdir,
-        figures="html" in publisher.formats,
-        workers=args.workers,
-        dask=args.dask,
-        data_hash=args.hash,
-        intervals=not args.no_intervals,
-        # Only a report shows diagnoses; without one, scoring keeps no data to diagnose.
-        diagnose=args.diagnose if publisher.formats else "off",
-    )
+    run.start()
     progress = _progress(len(specs), enabled=not args.quiet and len(specs) > 1)
     done = [0]
 
@@ -102,64 +83,25 @@ def _run(args: argparse.Namespace) -> int:
         progress.update(count - done[0])
         done[0] = count
 
-    outcomes = run_specs(specs, options, progress=advance)
+    run.score(specs, progress=advance)
     progress.close()
-    evaluations = [outcome for outcome in outcomes if isinstance(outcome, Evaluation)]
-    errors = [
-        (relative_to(rootdir, spec.key), outcome)
-        for spec, outcome in zip(specs, outcomes, strict=True)
-        if not isinstance(outcome, Evaluation)
-    ]
-    if errors and not evaluations:
-        raise errors[0][1]
-    results = [evaluation.result for evaluation in evaluations]
-    verdicts = campaign_verdicts(results)
-
-    @functools.cache
-    def dicts() -> list[dict[str, Any]]:
-        """The results as JSON data, made once for the JSON file and the publisher, and only
-        if one of them asks."""
-        return [r.to_dict() for r in results]
-
-    panels = diagnosis_panels(
-        target_payload(evaluation.result.spec, target, found)
-        for evaluation in evaluations
-        for target, found in evaluation.diagnoses.items()
-    )
-    published = publisher.publish(
-        results,
-        {relative_to(rootdir, spec.key): spec for spec in specs},
-        panels,
-        dicts,
-        [f"{key}: {str(error).splitlines()[0]}" for key, error in errors],
-    )
-    verdict = published.verdict
-    for line in run_summary(results, details=args.details, verdict=verdict):
+    run.close_scoring()
+    verdict = run.finish()
+    for line in run.summary():
         print(line)
     if args.json:
-        payload = run_document(
-            dicts(),
-            facts=publisher.run_facts(),
-            verdict=verdict,
-            campaigns=verdicts,
-            errors=[error_payload(key, exc) for key, exc in errors],
-        )
-        _write_json(args.json, payload)
-    for line in published.annotations:
+        _write_json(args.json, run.json_document())
+    for line in run.annotations:
         _own_line(line)
-    finish_run()
-    kernel_note = compile_note()
-    for note in [*notes, *published.notes, *([kernel_note] if kernel_note else [])]:
+    for note in run.notes:
         print(note)
     for item in verdict.regressions:
         accepted = " (accepted)" if verdict.regressions_accepted else ""
         print(f"regression{accepted}: {item.text}")
     # The others were scored and published; the specs that could not be are named once each.
-    for _, error in errors:
+    for _, error in run.errors:
         print(f"hevval run: error: {error}", file=sys.stderr)
-    if errors:
-        return EXIT_USAGE
-    return EXIT_OK if verdict.passed and not published.failed else EXIT_FAILED
+    return _EXIT_CODES[verdict.outcome.value]
 
 
 #: Files that make a folder pytest's rootdir, with the section that must be in them (if any).
@@ -489,13 +431,13 @@ def _shared(parser: argparse.ArgumentParser, name: str, **overrides: Any) -> Non
 
 
 def _workers(text: str) -> int:
+    """``--workers``, checked by the run's own rule (:func:`pytest_hevval.run.worker_count`)."""
+    from .run.settings import worker_count
+
     try:
-        count = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be a whole number (got {text!r})") from None
-    if count < 1:
-        raise argparse.ArgumentTypeError(f"must be ≥ 1 (got {count})")
-    return count
+        return worker_count(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _parser() -> argparse.ArgumentParser:

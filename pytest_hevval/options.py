@@ -15,7 +15,7 @@ import pytest
 from .data.digest import DEFAULT_HASH, HASH_CHOICES
 from .defaults import HISTORY_DIR, REPORT_DIR, SPEC_GLOBS
 
-__all__ = ["OPTIONS", "Option", "add_options", "get_option", "option_named"]
+__all__ = ["OPTIONS", "Option", "add_options", "get_option", "option_named", "snapshot"]
 
 Kind = Literal["bool", "string", "linelist", "choice"]
 
@@ -183,3 +183,8 @@ def get_option(config: pytest.Config, name: str) -> Any:
             f"ini {option.ini} = {value!r}: must be one of {', '.join(option.choices)}"
         )
     return value
+
+
+def snapshot(config: pytest.Config) -> dict[str, Any]:
+    """Every option's value, read once for the session (:func:`get_option` of each)."""
+    return {option.name: get_option(config, option.name) for option in OPTIONS}

@@ -1,10 +1,11 @@
 """The end of the pipeline, once for both front ends: results → everything a run leaves behind.
 
-``pytest --hevval`` and ``hevval run`` score specs (:mod:`pytest_hevval.scoring`), then hand
-the typed results here: each signal gets its diagnosis and its history trend, the reports are
-written, the run is compared with its baseline, the thresholds are ratcheted and the run is
-recorded. What comes back are lines for the front end to print and whether a step failed.
-Results become JSON data here, where they are written, and nowhere before.
+The run (:mod:`pytest_hevval.run`) scores specs (:mod:`pytest_hevval.scoring`), judges its
+verdict, then hands the typed results and the verdict here: each signal gets its diagnosis and
+its history trend, the reports are written, the run is compared with its baseline, the
+thresholds are ratcheted and the run is recorded. What comes back are lines for the front end
+to print and whether a step failed. Results become JSON data here, where they are written, and
+nowhere before.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
 from .flags import PYTEST, FrontEnd
 from .results.spec_result import SpecResult
-from .results.verdict import RegressedItem, RunVerdict
+from .results.verdict import RunVerdict
 from .spec.model import Spec
 
 if TYPE_CHECKING:
@@ -66,17 +67,26 @@ class PublishOptions:
     accept: bool = False
     #: The ratchet margin as given, or ``None`` for no ratchet.
     ratchet: str | None = None
-    #: The front end the options came from: messages name its flags.
+    #: The front end in use: messages name its flags.
     front_end: FrontEnd = PYTEST
+    #: The run is on a CI runner (:func:`~pytest_hevval.history.is_ci`), detected once.
+    ci: bool = False
+    #: The run is on GitHub Actions: its reports add workflow annotations.
+    github_actions: bool = False
 
     @classmethod
     def from_options(
-        cls, option: Callable[[str], Any], rootdir: Path, front_end: FrontEnd = PYTEST
+        cls,
+        option: Callable[[str], Any],
+        rootdir: Path,
+        front_end: FrontEnd = PYTEST,
+        environ: Mapping[str, str] = os.environ,
     ) -> PublishOptions:
         """From an option getter that takes the names of :data:`~pytest_hevval.options.OPTIONS`
-        (pytest's ``--hevval-NAME`` and ``hevval run --NAME`` share them)."""
+        (pytest's ``--hevval-NAME`` and ``hevval run --NAME`` share them); the environment is
+        read here, once."""
 
-        from .history import records_this_run
+        from .history import is_ci, records_this_run
 
         def text(name: str) -> str | None:
             value = option(name)
@@ -90,7 +100,7 @@ class PublishOptions:
             record=records_this_run(
                 asked=any(bool(option(name)) for name in ("history", "create-baseline", "accept")),
                 refused=bool(option("no-history")),
-                environ=os.environ,
+                environ=environ,
             ),
             use_history=not option("no-history"),
             model_version=text("model-version"),
@@ -100,6 +110,8 @@ class PublishOptions:
             accept=bool(option("accept")),
             ratchet=text("ratchet"),
             front_end=front_end,
+            ci=is_ci(environ),
+            github_actions=environ.get("GITHUB_ACTIONS") == "true",
         )
 
 
@@ -112,8 +124,6 @@ class Publication:
     annotations: list[str] = field(default_factory=list)
     #: A step of publishing failed (a report or the record could not be written).
     failed: bool = False
-    #: The run's verdict, which every report says and the front ends end the run with.
-    verdict: RunVerdict = field(default_factory=lambda: RunVerdict(passed=True))
 
 
 class Publisher:
@@ -178,7 +188,7 @@ class Publisher:
         Every process of a run reads the baseline (items judge regressions against it); only
         the ``controller`` decides what a missing one means, and raises when it fails the run.
         """
-        from .history import HistoryStore, is_ci, missing_baseline, resolve_model_version
+        from .history import HistoryStore, missing_baseline, resolve_model_version
         from .history.load import baseline_record
 
         self.model_version = resolve_model_version(
@@ -191,7 +201,7 @@ class Publisher:
         if self.baseline is not None or not controller:
             return []
         decision = missing_baseline(
-            ci=is_ci(os.environ),
+            ci=self.options.ci,
             create_baseline=self.options.create_baseline or self.options.accept,
             directory=self.options.history_dir,
             wanted=wanted,
@@ -230,7 +240,17 @@ class Publisher:
             if found.signal == signal and (signal is not None or found.field == "phi")
         ]
 
-    def acceptance(self, found: Sequence[Regression]) -> str:
+    def found_regressions(self, results: Sequence[SpecResult], data: _Data) -> list[Regression]:
+        """Every rule of ``compare-fail`` each result breaks against the baseline, in the order
+        of ``results``; ``data`` gives the results' JSON data, made once if a comparison needs
+        it."""
+        return [
+            regression
+            for index, result in enumerate(results)
+            for regression in self.regressions(result, functools.partial(_item, data, index))
+        ]
+
+    def acceptance(self, found: Sequence[object]) -> str:
         """Why this run's record is, or is not, an accepted baseline (``ACCEPTANCE``)."""
         from .history import acceptance
 
@@ -247,50 +267,29 @@ class Publisher:
         results: Sequence[SpecResult],
         specs: Mapping[str, Spec],
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
-        dicts: Sequence[dict[str, Any]] | Callable[[], Sequence[dict[str, Any]]] | None = None,
-        errors: Sequence[str] = (),
+        data: _Data,
+        verdict: RunVerdict,
     ) -> Publication:
-        """The run's verdict, then its reports, comparison, ratchet and history record.
+        """The run's reports, comparison, ratchet and history record, saying ``verdict``.
 
         ``specs`` by the result's ``spec`` key (for the ratchet's thresholds); ``diagnoses`` by
-        (spec, signal), as :func:`diagnosis_panels` gives them; ``dicts`` the results' JSON
-        data (``SpecResult.to_dict`` of each, in order) where the caller holds it already, or
-        a function that makes it. The data is made only if a step uses it: a run that writes
-        nothing does not pay for it (the tables of a spec with windows and regions cost
-        seconds to turn into JSON). ``errors``: the specs that could not be scored, each
-        named with its error.
+        (spec, signal), as :func:`diagnosis_panels` gives them; ``data`` makes the results'
+        JSON data (``SpecResult.to_dict`` of each, in order), called only if a step uses it: a
+        run that writes nothing does not pay for it (the tables of a spec with windows and
+        regions cost seconds to turn into JSON).
         """
-        out = Publication(verdict=RunVerdict.decide(results, errors=errors))
+        out = Publication()
         if not results:
             return out
-
-        @functools.cache
-        def data() -> list[dict[str, Any]]:
-            if dicts is None:
-                return [r.to_dict() for r in results]
-            return list(dicts() if callable(dicts) else dicts)
-
-        found = [
-            regression
-            for index, result in enumerate(results)
-            for regression in self.regressions(result, functools.partial(_item, data, index))
-        ]
-        out.verdict = RunVerdict.decide(
-            results,
-            regressions=[RegressedItem(r.spec, r.signal, r.field, str(r)) for r in found],
-            regressions_accepted=self.options.accept,
-            baseline=self.baseline_label,
-            errors=errors,
-        )
         comparison = None
         if self.baseline is not None:
             from .history import compare
 
             comparison = compare(data(), self.baseline, after_label=self.run_label)
-        self._write_reports(results, data, diagnoses, out, comparison)
+        self._write_reports(results, data, diagnoses, out, comparison, verdict)
         self._compare(comparison, out)
         self._ratchet(results, specs, out)
-        self._record(data, self.acceptance(found), out)
+        self._record(data, self.acceptance(verdict.regressions), out)
         return out
 
     def _relative(self, path: Path | str) -> str:
@@ -305,6 +304,7 @@ class Publisher:
         diagnoses: Mapping[tuple[str, str], Mapping[str, Any]],
         out: Publication,
         comparison: Comparison | None,
+        verdict: RunVerdict,
     ) -> None:
         if self.formats:
             from .report import write_reports
@@ -315,7 +315,7 @@ class Publisher:
                     self.formats,
                     self.options.report_dir,
                     title=REPORT_TITLE,
-                    verdict=out.verdict,
+                    verdict=verdict,
                     comparison=None if comparison is None else comparison.to_dict(),
                     facts=self.run_facts(),
                     panels=self._panels(results, diagnoses),
@@ -327,7 +327,7 @@ class Publisher:
                 out.failed = True
             else:
                 out.notes.extend(f"report: {self._relative(p)}" for p in written)
-        if os.environ.get("GITHUB_ACTIONS") == "true":
+        if self.options.github_actions:
             from .report import github_annotations
 
             out.annotations.extend(github_annotations(results, self.options.rootdir))

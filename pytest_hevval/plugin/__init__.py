@@ -32,9 +32,8 @@ def pytest_configure(config: pytest.Config) -> None:
     from .session import HevvalSession
 
     remove_temporaries_on_signals()
-    state = HevvalSession(config)
+    state = HevvalSession.configure(config)
     config.stash[session_key] = state
-    state.validate_options()
     from ..core.registry import load_entry_points
 
     try:
@@ -49,7 +48,7 @@ def pytest_collect_file(parent: pytest.Collector, file_path: Path) -> pytest.Col
     state = state_of(parent.config)
     if state is None:
         return None
-    patterns = state.option("files")
+    patterns = state.run.settings.files
     if any(fnmatch.fnmatch(file_path.name, pattern) for pattern in patterns):
         from .items import SpecFile
 
@@ -68,7 +67,7 @@ def pytest_collect_directory(
     state = state_of(parent.config)
     if collector is None or state is None:
         return collector
-    patterns = state.option("files")
+    patterns = state.run.settings.files
     try:
         broken = sorted(
             Path(entry.path)
@@ -137,7 +136,7 @@ def pytest_collection_modifyitems(
         items[:] = defer_campaign_gates(items, state)
         if config.workerinput.get(_CARRY):  # type: ignore[attr-defined]
             carry_spec_items(items)
-    elif state.option("dask"):
+    elif state.run.settings.dask:
         # Scored on the cluster: this process only judges and reports, one item per spec.
         from .items import carry_spec_items
 

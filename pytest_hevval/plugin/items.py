@@ -21,12 +21,13 @@ from _pytest._code.code import TerminalRepr
 from ..core.registry import describe
 from ..errors import HevvalError
 from ..escape import terminal
+from ..flags import PYTEST
 from ..report.terminal import phi_report, runtime_report, signal_failure_report
 from ..results.spec_result import SignalResult, SpecResult
 from ..scoring.engine import Evaluation
 from ..spec.load import load_spec
 from ..spec.model import Spec
-from .session import SPEC_ITEM_PLACE, HevvalSession, judge_campaign
+from .session import SPEC_ITEM_PLACE, HevvalSession
 from .stash import session_key
 
 __all__ = [
@@ -84,11 +85,11 @@ class SpecFile(pytest.File):
         self.spec = load_spec(self.path)
         spec = self.spec
         if spec.campaign is None:
-            state.register(spec)
+            state.run.register(spec)
             yield from _spec_items(self, spec)
             return
         for recording in spec.per_recording():
-            state.register(recording)
+            state.run.register(recording)
             name = terminal(recording.recording).replace("\n", "\\n")
             yield Recording.from_parent(self, name=name, spec=recording)
         yield CampaignItem.from_parent(self, name="campaign", spec=spec, line=spec.campaign.line)
@@ -274,10 +275,11 @@ class RuntimeItem(_SpecItem):
 def _raise_regressions(found: list[str], what: str) -> None:
     if found:
         raise ThresholdMissed(
-            f"{what} got worse than the baseline by more than --hevval-compare-fail allows:\n"
+            f"{what} got worse than the baseline by more than {PYTEST.flag('compare-fail')} "
+            "allows:\n"
             + "\n".join(f"  {line}" for line in found)
             + "\n  next: fix the model, or, if the change is intended, accept it as the new "
-            "baseline with a run given --hevval-accept"
+            f"baseline with a run given {PYTEST.flag('accept')}"
         )
 
 
@@ -297,7 +299,7 @@ class CampaignItem(_SpecItem):
         # Every recording's result reaches the controller, even those deselected with -k.
         shipped = [self.state.ship(result) for result in results]
         self.hevval_campaign = [payload for payload in shipped if payload is not None]
-        pass_rate, failure = judge_campaign(
+        pass_rate, failure = self.state.run.judge_campaign(
             {
                 name: o.result if isinstance(o, Evaluation) else o
                 for name, o in self.outcomes.items()

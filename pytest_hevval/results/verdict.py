@@ -1,5 +1,6 @@
-"""The run's one verdict, decided once, and read by every output: the terminal's last line, the
-Markdown summary's headline, report.json, report.html, and ``hevval run``'s exit code.
+"""The run's one verdict, decided once (by :class:`pytest_hevval.run.Run`), and read by every
+output: the terminal's last line, the Markdown summary's headline, report.json, report.html,
+``hevval run``'s exit code (:attr:`RunVerdict.outcome`) and pytest's, when publishing failed.
 
 A run fails when a spec misses a threshold or its Φ bound, when a campaign misses its pass
 rate, when a spec could not be scored, or when a result got worse than the baseline by more
@@ -10,14 +11,26 @@ signal or Φ), so JUnit XML and pytest's exit code count the same failures.
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-from .campaign import campaign_verdicts
+from .campaign import CampaignVerdict, campaign_verdicts
 from .spec_result import SpecResult
 
-__all__ = ["RegressedItem", "RunVerdict"]
+__all__ = ["Outcome", "RegressedItem", "RunVerdict"]
+
+
+class Outcome(enum.Enum):
+    """How a run ended, as an exit code says it."""
+
+    #: Every spec scored and passed, and everything was published.
+    PASSED = "passed"
+    #: A gate failed, or a report or the history record could not be written.
+    FAILED = "failed"
+    #: A spec could not be scored (bad spec or unreadable data): the input is at fault.
+    ERROR = "error"
 
 
 @dataclass(frozen=True)
@@ -50,6 +63,23 @@ class RunVerdict:
     errors: tuple[str, ...] = ()
     #: The items failed by a regression: spec → signal paths (None for Φ).
     regressed: Mapping[str, frozenset[str | None]] = field(default_factory=dict)
+    #: A step of publishing failed (a report, the ratchet or the history record). Known only
+    #: once the run is published, so the files the run wrote do not say it.
+    publishing_failed: bool = False
+    #: Each campaign's verdict over its recordings, as judged for this verdict.
+    campaigns: tuple[CampaignVerdict, ...] = ()
+
+    @property
+    def outcome(self) -> Outcome:
+        """An error when a spec could not be scored; else a failure when the gates or the
+        publishing failed; else a pass."""
+        if self.errors:
+            return Outcome.ERROR
+        return Outcome.PASSED if self.passed and not self.publishing_failed else Outcome.FAILED
+
+    def published(self, *, failed: bool) -> RunVerdict:
+        """This verdict, once publishing ran (``failed``: a step of it failed)."""
+        return replace(self, publishing_failed=failed)
 
     @classmethod
     def decide(
@@ -66,9 +96,10 @@ class RunVerdict:
         regressed: dict[str, set[str | None]] = {}
         for item in failing:
             regressed.setdefault(item.spec, set()).add(item.signal)
+        campaigns = tuple(campaign_verdicts(results))
         passed = (
             all(result.passed for result in results)
-            and all(found.passed for found in campaign_verdicts(results))
+            and all(found.passed for found in campaigns)
             and not failing
             and not errors
         )
@@ -79,6 +110,7 @@ class RunVerdict:
             baseline=baseline,
             errors=tuple(errors),
             regressed={spec: frozenset(signals) for spec, signals in regressed.items()},
+            campaigns=campaigns,
         )
 
     def to_dict(self) -> dict[str, Any]:
