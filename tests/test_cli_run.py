@@ -3,6 +3,7 @@ front end's messages name its own flags; the run's one verdict gives the exit co
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -67,3 +68,55 @@ def test_the_verdict_gives_the_outcome() -> None:
     assert RunVerdict(passed=False, errors=("a.hevval.yaml: bad",)).outcome is Outcome.ERROR
     # The files the run wrote never say whether publishing failed.
     assert "publishing_failed" not in passed.published(failed=True).to_dict()
+
+
+def test_a_campaign_run_makes_each_results_json_once_and_judges_its_campaign_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`hevval run` of the example's ten-recording campaign with two reports: each result is
+    turned into JSON once (shared by report.json and the report's panels), none is read back
+    from JSON, and the campaign verdict is judged once, by the run's verdict."""
+    import shutil
+
+    from pytest_hevval.results import campaign
+    from pytest_hevval.results.spec_result import SpecResult
+
+    project = tmp_path / "project"
+    example = Path(__file__).resolve().parents[1] / "example_project"
+    shutil.copytree(example / "specs", project / "specs")
+    shutil.copytree(example / "data", project / "data")
+    shutil.copytree(example / "models", project / "models")
+    shutil.copy(example / "pytest.ini", project / "pytest.ini")
+    calls = {"to_dict": 0, "from_dict": 0, "verdict": 0}
+    to_dict, from_dict, judge = SpecResult.to_dict, SpecResult.from_dict.__func__, campaign.verdict
+
+    def counted_to_dict(self: SpecResult) -> dict[str, object]:
+        calls["to_dict"] += 1
+        return to_dict(self)
+
+    def counted_from_dict(cls: type[SpecResult], data: object) -> SpecResult:
+        calls["from_dict"] += 1
+        return from_dict(cls, data)  # type: ignore[no-any-return]
+
+    def counted_verdict(*args: object, **kwargs: object) -> object:
+        calls["verdict"] += 1
+        return judge(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(SpecResult, "to_dict", counted_to_dict)
+    monkeypatch.setattr(SpecResult, "from_dict", classmethod(counted_from_dict))
+    monkeypatch.setattr(campaign, "verdict", counted_verdict)
+    monkeypatch.chdir(project)
+    code = main(
+        [
+            "run",
+            "specs/i3-campaign-v2.hevval.yaml",
+            "--report",
+            "json,md",
+            "--quiet",
+            "--no-history",
+        ]
+    )
+    assert code == 1  # the campaign fails its gate on purpose
+    report = json.loads((project / ".hevval" / "report" / "report.json").read_text("utf-8"))
+    assert sum(spec.get("recording", "").startswith("Trip") for spec in report["specs"]) == 10
+    assert calls == {"to_dict": 10, "from_dict": 0, "verdict": 1}

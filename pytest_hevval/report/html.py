@@ -19,7 +19,6 @@ from typing import Any
 from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
-from ..results.campaign import campaign_verdicts
 from ..results.local import LocalFailure
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
@@ -259,7 +258,7 @@ def render_html(
         summary=model.summary(spec_results, verdict),
         specs=specs,
         worst=worst,
-        campaigns=campaign_verdicts(spec_results),
+        campaigns=model.campaigns_of(spec_results, verdict),
         trace=trace_rows(spec_results),
         characteristics=model.characteristic_names(spec_results),
         labels=model.LABELS,

@@ -16,6 +16,7 @@ from typing import Any, Literal
 from ..core.characteristics import CHARACTERISTICS
 from ..core.registry import describe, order_names, registered_characteristics
 from ..core.uncertainty import Interval
+from ..results.campaign import CampaignVerdict, campaign_verdicts
 from ..results.codec import is_finite_number
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
@@ -390,6 +391,16 @@ def summary(
         "passed": decided.passed,
         "outcome": verdict_line(specs, decided) if specs else "no specs scored",
     }
+
+
+def campaigns_of(
+    results: Sequence[SpecResult], verdict: RunVerdict | None
+) -> Sequence[CampaignVerdict]:
+    """The campaigns' verdicts: the run's verdict judged them once; results shown without a
+    verdict (or with one made without campaigns) are judged here."""
+    if verdict is not None and verdict.campaigns:
+        return verdict.campaigns
+    return campaign_verdicts(results)
 
 
 # -- the result's facts, as the templates and tables read them ---------------------------------

@@ -254,4 +254,6 @@ def verdict_line(
     if verdict.errors:
         count = len(verdict.errors)
         parts.append(f"{count} spec{'s' * (count != 1)} could not be scored")
+    if verdicts is None and verdict.campaigns:
+        verdicts = verdict.campaigns
     return "; ".join([*parts, outcome_line(results, verdicts, verdict.regressed)])

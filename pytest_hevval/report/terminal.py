@@ -9,11 +9,11 @@ import shlex
 from collections.abc import Iterable, Sequence
 
 from ..core.registry import describe
-from ..results.campaign import CampaignVerdict, campaign_verdicts
+from ..results.campaign import CampaignVerdict
 from ..results.runtime import ModelRuntime
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
-from .model import model_facts
+from .model import campaigns_of, model_facts
 from .sentences import (
     failure_lines,
     failure_text,
@@ -264,7 +264,7 @@ def run_summary(
     """The run's summary: every spec's tree, then each campaign's verdict, then the run's
     verdict in one line (``verdict``, else the counts of the results alone)."""
     lines = tree_summary(results, details=details)
-    verdicts = campaign_verdicts(results)
+    verdicts = campaigns_of(results, verdict)
     for found in verdicts:
         lines.extend(verdict_lines(found))
     if results:

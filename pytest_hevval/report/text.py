@@ -15,7 +15,7 @@ from typing import Any
 from .. import __version__
 from ..defaults import split_key
 from ..escape import markdown, markdown_code
-from ..results.campaign import CampaignVerdict, RecordingOutcome, campaign_verdicts
+from ..results.campaign import CampaignVerdict, RecordingOutcome
 from ..results.codec import plain_json
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
@@ -76,7 +76,7 @@ def report_document(
     ran (``Comparison.to_dict()``)."""
     panels = panels if panels is not None else SignalPanels()
     found = data if data is not None else [result.to_dict() for result in results]
-    campaigns = campaign_verdicts(results)
+    campaigns = model.campaigns_of(results, verdict)
     return {
         "report_schema_version": REPORT_SCHEMA_VERSION,
         "generated_by": f"pytest-hevval {__version__}",
@@ -359,7 +359,7 @@ def render_markdown(
             lines.append(f"| … and {len(failing) - _MARKDOWN_SIGNALS} more (see report.html) | | |")
     lines += _measurement_markdown(spec_results)
     lines += _standard_metrics_markdown(spec_results)
-    lines += _campaign_markdown(campaign_verdicts(spec_results))
+    lines += _campaign_markdown(model.campaigns_of(spec_results, verdict))
     lines += _runtime_markdown(spec_results)
     from .trace import trace_markdown_section, trace_rows
 
