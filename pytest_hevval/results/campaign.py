@@ -10,7 +10,7 @@ gate: a model always matches the data it was fitted to.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -28,7 +28,6 @@ __all__ = [
     "Distribution",
     "RecordingOutcome",
     "campaign_of",
-    "campaign_payloads",
     "campaign_verdicts",
     "phi_quantile",
     "verdict",
@@ -313,11 +312,3 @@ def campaign_verdicts(results: Iterable[SpecResult]) -> list[CampaignVerdict]:
         if result.recording is not None:
             groups.setdefault(campaign_of(result.spec), []).append(result)
     return [verdict(groups[key]) for key in sorted(groups)]
-
-
-def campaign_payloads(dicts: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Every campaign's verdict as plain data, from results in their JSON form: the reports'
-    campaign section while the reports read JSON data. A writer that holds the typed results
-    calls :func:`campaign_verdicts` instead."""
-    results = (SpecResult.from_dict(d) for d in dicts if d.get("recording"))
-    return [found.to_dict() for found in campaign_verdicts(results)]
