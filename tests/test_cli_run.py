@@ -73,8 +73,8 @@ def test_the_verdict_gives_the_outcome() -> None:
 def test_a_campaign_run_makes_each_results_json_once_and_judges_its_campaign_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """`hevval run` of the example's ten-recording campaign with two reports: each result is
-    turned into JSON once (shared by report.json and the report's panels), none is read back
+    """`hevval run` of the example's ten-recording campaign with three reports: each result is
+    turned into JSON once (shared by the files that hold it), none is read back
     from JSON, and the campaign verdict is judged once, by the run's verdict."""
     import shutil
 
@@ -111,7 +111,7 @@ def test_a_campaign_run_makes_each_results_json_once_and_judges_its_campaign_onc
             "run",
             "specs/i3-campaign-v2.hevval.yaml",
             "--report",
-            "json,md",
+            "json,md,evidence",
             "--quiet",
             "--no-history",
         ]

@@ -18,10 +18,10 @@ from importlib import resources
 from typing import Any
 
 from ..core.uncertainty import Interval
-from ..results.campaign import campaign_verdicts
 from ..results.codec import json_number, plain_json
 from ..results.spec_result import SignalResult, SpecResult
-from .model import model_facts, reference_facts
+from ..results.verdict import RunVerdict
+from .model import campaigns_of, model_facts, reference_facts
 
 __all__ = ["EVIDENCE_SCHEMA_VERSION", "RunFacts", "evidence_record", "render_evidence", "schema"]
 
@@ -153,7 +153,11 @@ def _links(specs: Sequence[SpecResult]) -> dict[str, list[dict[str, Any]]]:
 
 
 def evidence_record(
-    spec_results: Sequence[SpecResult], facts: RunFacts, *, source: str
+    spec_results: Sequence[SpecResult],
+    facts: RunFacts,
+    *,
+    source: str,
+    verdict: RunVerdict | None = None,
 ) -> dict[str, Any]:
     """The evidence record of a run: its spec results and facts.
 
@@ -164,7 +168,7 @@ def evidence_record(
     specs = [_spec(spec) for spec in spec_results]
     campaigns = [
         {key: found[key] for key in _CAMPAIGN_KEYS}
-        for found in (verdict.to_dict() for verdict in campaign_verdicts(spec_results))
+        for found in (judged.to_dict() for judged in campaigns_of(spec_results, verdict))
     ]
     record = {
         "evidence_schema_version": EVIDENCE_SCHEMA_VERSION,
@@ -195,7 +199,14 @@ def evidence_record(
     return plain
 
 
-def render_evidence(spec_results: Sequence[SpecResult], facts: RunFacts, *, source: str) -> str:
-    """:func:`evidence_record` as sorted, strict JSON text."""
-    record = evidence_record(spec_results, facts, source=source)
+def render_evidence(
+    spec_results: Sequence[SpecResult],
+    facts: RunFacts,
+    *,
+    source: str,
+    verdict: RunVerdict | None = None,
+) -> str:
+    """:func:`evidence_record` as sorted, strict JSON text (``verdict``: the run's, whose
+    campaign verdicts it reuses; without one they are judged from the results)."""
+    record = evidence_record(spec_results, facts, source=source, verdict=verdict)
     return json.dumps(record, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False) + "\n"

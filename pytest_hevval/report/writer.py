@@ -136,7 +136,7 @@ def write_reports(
         elif name == "evidence":
             from .evidence import render_evidence
 
-            text = render_evidence(results, facts or {}, source="pytest run")
+            text = render_evidence(results, facts or {}, source="pytest run", verdict=verdict)
         else:
             from .text import render_markdown
 
