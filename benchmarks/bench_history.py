@@ -15,7 +15,7 @@ tracked); ``--seed PATH`` uses another record, ``--fresh-seed`` runs the example
 ``--part history``
     What a run does that depends on its history, step by step, on folders of ``--records``
     records, in one process, ``--repeat`` runs each: ``Publisher.start`` (the baseline of
-    ``--hevval-compare=latest``, read), ``Publisher._decorate`` (each signal's trend for the
+    ``--hevval-compare=latest``, read), ``Publisher._panels`` (each signal's trend for the
     HTML report), the trend plots the report draws from them (``report.svg.history_svg``, one
     per signal that has a trend; the rest of the report does not depend on the history, but
     for the page growing by about 6 KB per trend) and
@@ -71,6 +71,7 @@ from pytest_hevval.history import HistoryStore, format_utc, migrate_record, slug
 from pytest_hevval.history.store import record_text
 from pytest_hevval.publish import Publication, Publisher, PublishOptions
 from pytest_hevval.report.svg import history_svg
+from pytest_hevval.results.spec_result import SpecResult
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "example_project"
@@ -180,31 +181,35 @@ _STEPS = ("start", "decorate", "plots", "record")
 def _history_part(
     publisher: Callable[[], Publisher], results: list[dict[str, Any]]
 ) -> tuple[dict[str, tuple[float, float]], int]:
-    """What a run does that depends on its history: the baseline (start), the trends
-    (decorate), the trend plots the HTML report draws from them (plots) and its own record,
-    added to the index (record). (wall, CPU) seconds by step, and the number of trend points
-    drawn."""
+    """What a run does that depends on its history: the baseline (start), the trends beside
+    each signal (decorate), the trend plots the HTML report draws from them (plots) and its own
+    record, added to the index (record). (wall, CPU) seconds by step, and the number of trend
+    points drawn."""
     run = publisher()
+    typed = [SpecResult.from_dict(spec) for spec in results]
     spent: dict[str, tuple[float, float]] = {}
-    decorated: list[dict[str, Any]] = []
+    panels = None
+    points = 0
     for step in _STEPS:
         wall, cpu = time.perf_counter(), time.process_time()
         if step == "start":
             run.start()
         elif step == "decorate":
-            decorated = run._decorate(results, {})
+            panels = run._panels(typed, {})
         elif step == "plots":
-            for spec in decorated:
-                for signal in spec["signals"]:
-                    if signal.get("history"):
-                        history_svg(signal["history"])
+            assert panels is not None
+            for result in typed:
+                for signal in result.signals:
+                    history = panels.history(result, signal)
+                    if history:
+                        history_svg(history)
+                        points += len(history)
         else:
             out = Publication()
             run._record(lambda: results, run.acceptance([]), out)
             if out.failed:
                 sys.exit(f"recording failed: {out.notes}")
         spent[step] = (time.perf_counter() - wall, time.process_time() - cpu)
-    points = sum(len(s.get("history", [])) for spec in decorated for s in spec["signals"])
     return spent, points
 
 

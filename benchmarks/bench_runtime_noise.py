@@ -31,6 +31,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from pytest_hevval.results.recorded import RecordedSpec
+
 HERE = Path(__file__).resolve().parent
 EXAMPLE = HERE.parent / "example_project"
 SPEC = EXAMPLE / "specs" / "i3-campaign-v2.hevval.yaml"
@@ -50,6 +52,10 @@ def simulate(frame, **params):
 def _spin() -> None:
     while True:
         pass
+
+
+def _recorded(results: list[dict[str, object]]) -> list[RecordedSpec]:
+    return [RecordedSpec.from_json(result) for result in results]
 
 
 def _campaign(text: str) -> list[dict[str, object]]:
@@ -114,7 +120,7 @@ def main() -> int:
     failed_gates = 0
     for run in range(1, args.runs + 1):
         results = _campaign(_with_runtime(text, gate))
-        [change] = runtime_changes(baseline, results)
+        [change] = runtime_changes(_recorded(baseline), _recorded(results))
         failures = gate_failures(results)
         alarms += change.regression
         failed_gates += failures
@@ -127,7 +133,7 @@ def main() -> int:
         Path(folder, "slow_ev.py").write_text(SLOW_MODEL, encoding="utf-8")
         sys.path.insert(0, folder)
         slow = _campaign(_with_runtime(text, gate, 'callable: "slow_ev:simulate"'))
-    [change] = runtime_changes(baseline, slow)
+    [change] = runtime_changes(_recorded(baseline), _recorded(slow))
     print(
         f"3× slower model: ×{change.ratio:.2f} of the baseline's CPU (fastest calls), "
         f"real-time factor (cpu) {min(best_factors(slow)):.0f} to {max(best_factors(slow)):.0f}, "

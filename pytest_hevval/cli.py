@@ -230,11 +230,11 @@ def _history(args: argparse.Namespace) -> int:
     )
 
     store = HistoryStore(Path(args.history_dir))
-    records = store.records()
+    runs = store.runs()
     report_problems(store)
-    rows = history_table(records, spec=args.spec, signal=args.signal)
+    rows = history_table(runs, spec=args.spec, signal=args.signal)
     if not rows:
-        what = "no readable records" if not records else "no recorded runs match"
+        what = "no readable records" if not runs else "no recorded runs match"
         print(f"hevval history: {what} in {args.history_dir}", file=sys.stderr)
         return 1
     if args.json is not None:
@@ -321,7 +321,8 @@ def _compare(args: argparse.Namespace) -> int:
 
 def _trace(args: argparse.Namespace) -> int:
     """``hevval trace``: each requirement → the items that verify it → their latest verdict."""
-    from .history import latest_results, load_side
+    from .history import latest_results, load_document
+    from .history.load import side_label
     from .report.trace import read_requirement_list, render_trace, trace_rows
     from .results.spec_result import SpecResult
 
@@ -333,9 +334,11 @@ def _trace(args: argparse.Namespace) -> int:
         typed = [SpecResult.from_dict(s) for s in latest]
         rows = trace_rows(typed, versions=versions, listed=listed)
     else:
-        specs, label = load_side(args.run, Path(args.history_dir))
+        found = load_document(args.run, Path(args.history_dir))
         rows = trace_rows(
-            [SpecResult.from_dict(s) for s in specs], model_version=label, listed=listed
+            [SpecResult.from_dict(s) for s in found.specs],
+            model_version=side_label(found, args.run),
+            listed=listed,
         )
     if not rows:
         print(

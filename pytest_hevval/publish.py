@@ -10,7 +10,6 @@ nowhere before.
 
 from __future__ import annotations
 
-import functools
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,6 +20,7 @@ from typing import TYPE_CHECKING, Any
 from .defaults import UNKNOWN_MODEL_VERSION
 from .errors import HevvalError
 from .flags import PYTEST, FrontEnd
+from .results.recorded import RecordedPoint, RecordedRun, RecordedSpec
 from .results.spec_result import SpecResult
 from .results.verdict import RunVerdict
 from .spec.model import Spec
@@ -148,8 +148,10 @@ class Publisher:
         self.margin = (
             parse_margin(options.ratchet, front_end=front_end) if options.ratchet else None
         )
-        self.baseline: dict[str, Any] | None = None
+        self.baseline: RecordedRun | None = None
         self._regressions: dict[str, list[Regression]] = {}
+        #: Each result as a comparison reads it, made once (by its ``spec`` key).
+        self._recorded: dict[str, RecordedSpec] = {}
         self.model_version = UNKNOWN_MODEL_VERSION
         self.started = datetime.now(timezone.utc)
 
@@ -172,11 +174,7 @@ class Publisher:
     @property
     def baseline_label(self) -> str | None:
         """The baseline in words (model version, commit, time), or None without one."""
-        if self.baseline is None:
-            return None
-        from .history import describe_record
-
-        return describe_record(self.baseline)
+        return None if self.baseline is None else self.baseline.describe()
 
     @property
     def wants_comparison(self) -> bool:
@@ -189,7 +187,7 @@ class Publisher:
         the ``controller`` decides what a missing one means, and raises when it fails the run.
         """
         from .history import HistoryStore, missing_baseline, resolve_model_version
-        from .history.load import baseline_record
+        from .history.load import baseline_run
 
         self.model_version = resolve_model_version(
             self.options.model_version, os.environ, self.options.rootdir
@@ -197,7 +195,7 @@ class Publisher:
         if not self.wants_comparison:
             return []
         wanted = self.options.compare or "latest"
-        self.baseline = baseline_record(HistoryStore(self.options.history_dir), wanted)
+        self.baseline = baseline_run(HistoryStore(self.options.history_dir), wanted)
         if self.baseline is not None or not controller:
             return []
         decision = missing_baseline(
@@ -212,20 +210,23 @@ class Publisher:
             raise HevvalError(decision.message)
         return [decision.message]
 
-    def regressions(
-        self, result: SpecResult, data: Callable[[], Mapping[str, Any]] | None = None
-    ) -> list[Regression]:
+    def recorded(self, result: SpecResult) -> RecordedSpec:
+        """The result as a comparison reads it, made once per result."""
+        found = self._recorded.get(result.spec)
+        if found is None:
+            found = self._recorded[result.spec] = RecordedSpec.of(result)
+        return found
+
+    def regressions(self, result: SpecResult) -> list[Regression]:
         """Every rule of ``compare-fail`` the result breaks against the baseline; each result
-        is compared once, however many of its signals ask. ``data``: the result's JSON data,
-        where the caller holds it already."""
+        is compared once, however many of its signals ask."""
         if self.baseline is None or not self.rules:
             return []
         found = self._regressions.get(result.spec)
         if found is None:
             from .history import compare, regressions
 
-            spec = result.to_dict() if data is None else data()
-            found = regressions(compare([spec], self.baseline), self.rules)
+            found = regressions(compare([self.recorded(result)], self.baseline), self.rules)
             self._regressions[result.spec] = found
         return found
 
@@ -240,15 +241,10 @@ class Publisher:
             if found.signal == signal and (signal is not None or found.field == "phi")
         ]
 
-    def found_regressions(self, results: Sequence[SpecResult], data: _Data) -> list[Regression]:
+    def found_regressions(self, results: Sequence[SpecResult]) -> list[Regression]:
         """Every rule of ``compare-fail`` each result breaks against the baseline, in the order
-        of ``results``; ``data`` gives the results' JSON data, made once if a comparison needs
-        it."""
-        return [
-            regression
-            for index, result in enumerate(results)
-            for regression in self.regressions(result, functools.partial(_item, data, index))
-        ]
+        of ``results``."""
+        return [regression for result in results for regression in self.regressions(result)]
 
     def acceptance(self, found: Sequence[object]) -> str:
         """Why this run's record is, or is not, an accepted baseline (``ACCEPTANCE``)."""
@@ -285,7 +281,11 @@ class Publisher:
         if self.baseline is not None:
             from .history import compare
 
-            comparison = compare(data(), self.baseline, after_label=self.run_label)
+            comparison = compare(
+                [self.recorded(result) for result in results],
+                self.baseline,
+                after_label=self.run_label,
+            )
         self._write_reports(results, data, diagnoses, out, comparison, verdict)
         self._compare(comparison, out)
         self._ratchet(results, specs, out)
@@ -316,7 +316,7 @@ class Publisher:
                     self.options.report_dir,
                     title=REPORT_TITLE,
                     verdict=verdict,
-                    comparison=None if comparison is None else comparison.to_dict(),
+                    comparison=comparison,
                     facts=self.run_facts(),
                     panels=self._panels(results, diagnoses),
                     data=data() if "json" in self.formats else None,
@@ -345,7 +345,7 @@ class Publisher:
         """
         from .report.panels import SignalPanels
 
-        trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        trends: dict[tuple[str, str], list[RecordedPoint]] = {}
         if self.options.use_history:
             from .history import HistoryStore
 
@@ -416,7 +416,7 @@ class Publisher:
                     started_utc=self.started,
                     acceptance=acceptance,
                     commit=resolve_commit(self.options.rootdir),
-                    baseline=self.baseline,
+                    baseline=None if self.baseline is None else self.baseline.summary(),
                     front_end=self.options.front_end,
                 )
             )
@@ -432,10 +432,6 @@ class Publisher:
         out.notes.append(
             f"history: recorded {self.model_version} in {self._relative(path)} ({accepted})"
         )
-
-
-def _item(data: _Data, index: int) -> dict[str, Any]:
-    return data()[index]
 
 
 def diagnosis_panels(

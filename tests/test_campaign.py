@@ -34,6 +34,7 @@ from pytest_hevval.results.campaign import (
 from pytest_hevval.scoring.engine import DataCache, Evaluation
 from pytest_hevval.scoring.run import RunOptions, run_specs
 from pytest_hevval.spec.load import load_specs, parse_spec_text
+from tests.recorded_runs import recorded
 
 from .strategies import finite
 
@@ -742,7 +743,8 @@ def _recording(trip: str, phi: float, low: float | None = None, high: float | No
 
 
 def test_campaign_compare_separates_real_changes_from_noise() -> None:
-    from pytest_hevval.history.compare import campaign_change_lines, campaign_changes, compare
+    from pytest_hevval.history.compare import campaign_change_lines, compare
+    from pytest_hevval.results.changes import campaign_changes
 
     before = [
         _recording("Trip01", 0.90, 0.89, 0.91),
@@ -758,7 +760,7 @@ def test_campaign_compare_separates_real_changes_from_noise() -> None:
         _recording("Trip04", 0.901, 0.89, 0.91),  # no interval before: the point value decides
         _recording("Trip05", 0.90, 0.89, 0.91),
     ]
-    comparison = compare(after, before, before_label="v1", after_label="v2")
+    comparison = compare(recorded(after), recorded(before), before_label="v1", after_label="v2")
     (change,) = campaign_changes(comparison)
     assert [r for r, _ in change.better] == ["Trip01", "Trip04"]
     assert [r for r, _ in change.worse] == ["Trip03"]

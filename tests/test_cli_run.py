@@ -73,9 +73,10 @@ def test_the_verdict_gives_the_outcome() -> None:
 def test_a_campaign_run_makes_each_results_json_once_and_judges_its_campaign_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """`hevval run` of the example's ten-recording campaign with three reports: each result is
-    turned into JSON once (shared by the files that hold it), none is read back
-    from JSON, and the campaign verdict is judged once, by the run's verdict."""
+    """`hevval run` of the example's ten-recording campaign with three reports, compared with
+    the run before and recorded: each result is turned into JSON once (shared by the files that
+    hold it), none is read back from JSON (the baseline is read as history compares it), and
+    the campaign verdict is judged once, by the run's verdict."""
     import shutil
 
     from pytest_hevval.results import campaign
@@ -102,21 +103,30 @@ def test_a_campaign_run_makes_each_results_json_once_and_judges_its_campaign_onc
         calls["verdict"] += 1
         return judge(*args, **kwargs)  # type: ignore[arg-type]
 
+    monkeypatch.chdir(project)
+    campaign_spec = ["run", "specs/i3-campaign-v2.hevval.yaml", "--quiet"]
+    assert main([*campaign_spec, "--history", "--model-version", "v1"]) == 1
     monkeypatch.setattr(SpecResult, "to_dict", counted_to_dict)
     monkeypatch.setattr(SpecResult, "from_dict", classmethod(counted_from_dict))
     monkeypatch.setattr(campaign, "verdict", counted_verdict)
-    monkeypatch.chdir(project)
     code = main(
         [
-            "run",
-            "specs/i3-campaign-v2.hevval.yaml",
+            *campaign_spec,
             "--report",
             "json,md,evidence",
-            "--quiet",
-            "--no-history",
+            "--history",
+            "--model-version",
+            "v2",
+            "--compare",
+            "latest",
+            "--compare-fail",
+            "phi:0.5",
         ]
     )
     assert code == 1  # the campaign fails its gate on purpose
     report = json.loads((project / ".hevval" / "report" / "report.json").read_text("utf-8"))
     assert sum(spec.get("recording", "").startswith("Trip") for spec in report["specs"]) == 10
+    assert report["comparison"]["before"] == "v1"
+    assert len(report["comparison"]["specs"]) == 10
+    assert len(list((project / ".hevval" / "history").glob("*.json"))) == 2
     assert calls == {"to_dict": 10, "from_dict": 0, "verdict": 1}

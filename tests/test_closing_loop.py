@@ -23,6 +23,7 @@ import yaml
 from pytest_hevval.cli import main as cli_main
 from pytest_hevval.history import compare
 from tests.example_cli import EXAMPLE, run_in_example
+from tests.recorded_runs import recorded
 
 B03_V1 = "specs/i3-B03-winter-v1.hevval.yaml"
 B03_V2 = "specs/i3-B03-winter-v2.hevval.yaml"
@@ -317,7 +318,7 @@ def _spec(path: str | None, name: str, phi: float, mae: float = 0.9) -> dict[str
 def test_one_spec_per_side_pairs_whatever_the_path_only_when_asked() -> None:
     before = [_spec("specs/trip-v1.yaml", "trip, model v1", 0.90)]
     after = [_spec("specs/trip-v2.yaml", "trip, model v2", 0.95)]
-    (pair,) = compare(after, before, pair_single=True).specs
+    (pair,) = compare(recorded(after), recorded(before), pair_single=True).specs
     assert (pair.before_key, pair.key, pair.matched_by) == (
         "specs/trip-v1.yaml",
         "specs/trip-v2.yaml",
@@ -329,7 +330,7 @@ def test_one_spec_per_side_pairs_whatever_the_path_only_when_asked() -> None:
         "the only spec on each side"
     )
     # A gate comparing one spec of this run with a history record must not pair strangers.
-    plain = compare(after, before)
+    plain = compare(recorded(after), recorded(before))
     assert plain.specs == ()
     assert (plain.added_specs, plain.removed_specs) == (
         ("specs/trip-v2.yaml",),
@@ -349,7 +350,7 @@ def test_several_specs_match_by_path_then_by_unique_name() -> None:
         _spec("specs/new-b.yaml", "B", 0.96),
         _spec("specs/c3.yaml", "C", 0.97),
     ]
-    comparison = compare(after, before, pair_single=True)
+    comparison = compare(recorded(after), recorded(before), pair_single=True)
     pairs = {s.key: (s.before_key, s.matched_by) for s in comparison.specs}
     assert pairs == {
         "specs/a.yaml": ("specs/a.yaml", "path"),
@@ -365,7 +366,7 @@ def test_several_specs_match_by_path_then_by_unique_name() -> None:
 def test_same_spec_on_both_sides_needs_no_pairing_note() -> None:
     before = {"schema_version": 1, "specs": [_spec("specs/a.yaml", "A", 0.91)]}
     after = {"schema_version": 1, "specs": [_spec("specs/a.yaml", "A", 0.95, mae=0.8)]}
-    comparison = compare(after, before, pair_single=True)
+    comparison = compare(recorded(after), recorded(before), pair_single=True)
     (pair,) = comparison.specs
     assert (pair.matched_by, pair.pairing, comparison.pairings) == ("path", None, ())
     assert pair.signals[0].field("mae").delta == pytest.approx(-0.1)

@@ -31,6 +31,7 @@ from pytest_hevval.results.spec_result import SpecResult
 from pytest_hevval.scoring.confidence import _phi_replicates, resampled_blocks
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import parse_spec_text
+from tests.recorded_runs import recorded
 from tests.strategies import signal_trees
 from tests.test_plugin import TREE_SPEC, write_data
 
@@ -243,7 +244,9 @@ def _spec_record(phi: float, low: float, high: float) -> dict[str, object]:
 def test_a_noise_aware_rule_fails_only_beyond_noise(
     after: tuple[float, float, float], rules: str, regressed: bool
 ) -> None:
-    comparison = compare([_spec_record(*after)], [_spec_record(0.91, 0.90, 0.92)])
+    comparison = compare(
+        recorded([_spec_record(*after)]), recorded([_spec_record(0.91, 0.90, 0.92)])
+    )
     assert bool(regressions(comparison, parse_compare_fail(rules))) is regressed
 
 
@@ -251,7 +254,7 @@ def test_noise_aware_rule_falls_back_to_the_drop_without_intervals() -> None:
     before = _spec_record(0.91, 0.90, 0.92)
     after = _spec_record(0.905, 0.895, 0.915)
     del after["phi_interval"]
-    comparison = compare([after], [before])
+    comparison = compare(recorded([after]), recorded([before]))
     assert regressions(comparison, parse_compare_fail("phi:0.001+noise"))
 
 

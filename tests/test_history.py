@@ -26,7 +26,9 @@ from pytest_hevval.cli import main as cli_main
 from pytest_hevval.errors import SpecError
 from pytest_hevval.flags import COMMAND
 from pytest_hevval.results.codec import dumps, json_number, json_numbers, plain_json
+from pytest_hevval.results.recorded import RecordedPoint
 from pytest_hevval.results.spec_result import SpecResult
+from tests.recorded_runs import recorded
 
 T0 = datetime(2024, 5, 1, 12, 0, 0, tzinfo=timezone.utc)
 LAMBDAS = [0.99, 0.95, 0.93, 0.92, 0.97, 0.91, 0.94]
@@ -358,8 +360,8 @@ def test_the_newest_accepted_record_is_found_without_reading_the_others(
     reads.clear()
     assert store.accepted()["model_version"] == "v1"
     assert [name.split("_")[1] for name in reads] == ["v1"]
-    specs, label = h.load_side("history:accepted", tmp_path)
-    assert (label, specs[0]["phi"]) == ("v1", spec()["phi"])
+    run, label = h.load_side("history:accepted", tmp_path)
+    assert (label, run.specs[0].phi) == ("v1", spec()["phi"])
 
 
 def test_history_accepted_names_what_to_do_when_nothing_is_accepted(tmp_path: Path) -> None:
@@ -592,15 +594,15 @@ def test_two_concurrent_writers_lose_nothing(tmp_path: Path) -> None:
 TREND = 3  # short trends, so that a few records already trim and refill them
 
 
-def full_trends(directory: Path, limit: int) -> dict[tuple[str, str], list[dict[str, Any]]]:
+def full_trends(directory: Path, limit: int) -> dict[tuple[str, str], list[RecordedPoint]]:
     """Each signal's trend as the report built it from a full read, kept to its newest runs."""
-    trends: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    trends: dict[tuple[str, str], list[RecordedPoint]] = {}
     for rec in h.HistoryStore(directory).records():
         version = str(rec.get("model_version", "?"))
         for spec_result in rec.get("specs", []):
             for sig in spec_result.get("signals", []):
                 trends.setdefault((spec_result.get("spec", ""), sig["path"]), []).append(
-                    {"version": version, "phi": spec_result.get("phi"), "lambdas": sig["lambdas"]}
+                    RecordedPoint.from_json(version, spec_result.get("phi"), sig["lambdas"])
                 )
     return {key: points[-limit:] for key, points in trends.items()}
 
@@ -723,7 +725,7 @@ def test_index_is_built_once_then_read_instead_of_the_records(
     assert len(reads) == 6
     assert (tmp_path / ".index" / "index").is_file()
     assert (tmp_path / ".index" / ".gitignore").read_text().splitlines()[-1] == "*"
-    assert [p["version"] for p in trends[("specs/trip_a01.hevval.yaml", "E_batt/P_batt")]] == [
+    assert [p.version for p in trends[("specs/trip_a01.hevval.yaml", "E_batt/P_batt")]] == [
         "v0",
         "v1",
         "v2",
@@ -867,7 +869,7 @@ def test_a_folder_without_an_index_is_read_from_its_newest_records(
     first = h.HistoryStore(tmp_path).append(with_extra)
     reads.clear()
     found = store.trends([*keys, old])
-    assert found[old] == [{"version": "v9", "phi": 0.3, "lambdas": dict.fromkeys(_names(), 0.15)}]
+    assert found[old] == [RecordedPoint("v9", 0.3, dict.fromkeys(_names(), 0.15))]
     assert reads == [*(path.name for path in files[::-1][:TREND]), first.name]
     # Something that asks for every record builds the index, which the next run reads.
     assert store.versions()[0] == "v9"
@@ -959,7 +961,7 @@ def test_record_changed_by_hand_is_read_again(tmp_path: Path, reads: list[str]) 
     # A changed record is one gone and one new: the trends it leaves get their oldest points
     # back first (the oldest kept run, then the one before), then it is read as new.
     assert reads == [paths[1].name, paths[0].name, paths[-1].name]
-    assert trends[("b.hevval.yaml", "E_batt/P_batt")][-1]["version"] == "v0-edited"
+    assert trends[("b.hevval.yaml", "E_batt/P_batt")][-1].version == "v0-edited"
     assert_same_as_full_read(tmp_path, versions=["v0", "v0-edited", "v1"])
 
 
@@ -1071,7 +1073,7 @@ def test_concurrent_runs_lose_no_record_and_leave_a_sound_index(tmp_path: Path) 
 
     assert load_index(tmp_path, 100) is not None  # whole after every race
     trends = h.HistoryStore(tmp_path, trend_runs=100).trends()
-    versions = sorted(point["version"] for point in trends[("s.hevval.yaml", "a")])
+    versions = sorted(point.version for point in trends[("s.hevval.yaml", "a")])
     assert versions == sorted(f"p{k}-{i}" for k in range(3) for i in range(12))
     assert_same_as_full_read(tmp_path, limit=100, versions=["p0-11", "p1-0", "seed"])
 
@@ -1252,7 +1254,7 @@ def test_compare_deltas_and_membership() -> None:
         signal("new/sig"),
     ]
     current = [spec(phi=0.93, signals=after_signals), spec("C", path="c.hevval.yaml")]
-    comparison = h.compare(current, before)
+    comparison = h.compare(recorded(current), recorded(before))
     assert comparison.before_label == "v1"
     assert comparison.added_specs == ("c.hevval.yaml",)
     assert comparison.removed_specs == ("b.hevval.yaml",)
@@ -1296,8 +1298,8 @@ def test_compare_says_data_changed_only_for_the_same_hash(
     before: dict[str, str], after: dict[str, str], changed: tuple[str, ...]
 ) -> None:
     comparison = h.compare(
-        [_with_data(after, model={"hash": "sha256", "digest": "m"})],
-        record("v1", T0, [_with_data(before, model={"hash": "sha256", "digest": "m"})]),
+        recorded([_with_data(after, model={"hash": "sha256", "digest": "m"})]),
+        recorded(record("v1", T0, [_with_data(before, model={"hash": "sha256", "digest": "m"})])),
     )
     (one,) = comparison.specs
     assert one.data_changed == changed
@@ -1317,15 +1319,15 @@ def test_stored_old_records_compare_with_new_ones() -> None:
         "hash": "sha256",
         "digest": digest,
     }
-    assert h.compare(new, old).specs[0].data_changed == ()
+    assert h.compare(recorded(new), recorded(old)).specs[0].data_changed == ()
     new[0]["data"]["reference"]["digest"] = "0" * 64
-    assert h.compare(new, old).specs[0].data_changed == ("reference",)
+    assert h.compare(recorded(new), recorded(old)).specs[0].data_changed == ("reference",)
 
 
 def test_regressions_absolute_relative_and_lag() -> None:
     before = record("v1", T0)
     current = [spec(phi=0.93, signals=[signal(lambdas=changed({2: 0.90, 0: 0.985}), lag_s=-0.6)])]
-    comparison = h.compare(current, before)
+    comparison = h.compare(recorded(current), recorded(before))
 
     def hits(expr: str) -> set[tuple[str | None, str]]:
         return {(r.signal, r.field) for r in h.regressions(comparison, h.parse_compare_fail(expr))}
@@ -1357,14 +1359,16 @@ def test_regressions_equal_runs_and_improvements_pass() -> None:
     before = record("v1", T0)
     better = [spec(phi=0.99, signals=[signal(lambdas=[1.0] * 7, lag_s=0.0)])]
     rules = h.parse_compare_fail("phi:0,lambda:0,lag:0")
-    assert h.regressions(h.compare(before, before), rules) == []
-    assert h.regressions(h.compare(better, before), rules) == []
+    assert h.regressions(h.compare(recorded(before), recorded(before)), rules) == []
+    assert h.regressions(h.compare(recorded(better), recorded(before)), rules) == []
 
 
 def test_regressions_value_becoming_undefined() -> None:
     before = record("v1", T0)
     current = [spec(phi=None, signals=[signal(lambdas=changed({4: float("nan")}))])]
-    found = h.regressions(h.compare(current, before), h.parse_compare_fail("phi:1,anomaly:1"))
+    found = h.regressions(
+        h.compare(recorded(current), recorded(before)), h.parse_compare_fail("phi:1,anomaly:1")
+    )
     assert {(r.field, r.after) for r in found} == {("phi", None), ("anomaly", None)}
     assert "undefined" in str(found[0])
 
@@ -1598,17 +1602,23 @@ def three_runs() -> list[dict[str, Any]]:
 
 def test_history_table_filters() -> None:
     runs = three_runs()
-    rows = h.history_table(reversed(runs))
+    rows = h.history_table([recorded(r) for r in reversed(runs)])
     assert [(r.model_version, r.spec) for r in rows] == [
         ("v1", "specs/trip_a01.hevval.yaml"),
         ("v2", "specs/trip_a01.hevval.yaml"),
         ("v3", "specs/trip_a01.hevval.yaml"),
         ("v3", "b"),
     ]
-    assert [r.phi for r in h.history_table(runs, spec="trip A01")] == [0.95, 0.96, 0.90]
-    sig_rows = h.history_table(runs, spec="specs/*", signal="E_batt/*")
+    assert [r.phi for r in h.history_table([recorded(r) for r in runs], spec="trip A01")] == [
+        0.95,
+        0.96,
+        0.90,
+    ]
+    sig_rows = h.history_table([recorded(r) for r in runs], spec="specs/*", signal="E_batt/*")
     assert [r.value("mae") for r in sig_rows] == [0.93, 0.93, 0.5]
-    assert h.history_table(runs, signal="y") == h.history_table(runs, signal="x/y")
+    assert h.history_table([recorded(r) for r in runs], signal="y") == h.history_table(
+        [recorded(r) for r in runs], signal="x/y"
+    )
     text = h.render_history_table(sig_rows)
     assert "v3" in text
     assert "0.5000" in text
@@ -1653,7 +1663,10 @@ def test_detect_steps_respects_min_size_and_skips_missing() -> None:
 @pytest.mark.parametrize("suffix", [".png", ".svg"])
 def test_plot_history(tmp_path: Path, suffix: str) -> None:
     runs = three_runs()
-    out = h.plot_history(h.history_table(runs, signal="E_batt/P_batt"), tmp_path / f"h{suffix}")
+    out = h.plot_history(
+        h.history_table([recorded(r) for r in runs], signal="E_batt/P_batt"),
+        tmp_path / f"h{suffix}",
+    )
     head = out.read_bytes()[:200]
     if suffix == ".png":
         assert head.startswith(b"\x89PNG")
@@ -1663,7 +1676,7 @@ def test_plot_history(tmp_path: Path, suffix: str) -> None:
 
 def test_plot_history_rejects_unknown_format(tmp_path: Path) -> None:
     with pytest.raises(h.HistoryError, match=r"\*\.png or \*\.svg"):
-        h.plot_history(h.history_table(three_runs()), tmp_path / "h.jpg")
+        h.plot_history(h.history_table([recorded(r) for r in three_runs()]), tmp_path / "h.jpg")
 
 
 # -- CLI ------------------------------------------------------------------------------------

@@ -19,9 +19,11 @@ from pytest_hevval.core.local import (
     segment_sums,
 )
 from pytest_hevval.errors import SpecError
+from pytest_hevval.results.recorded import RecordedSpec
 from pytest_hevval.scoring.engine import evaluate_spec
 from pytest_hevval.spec.load import load_spec, parse_spec_text
 from tests.conftest import needs_kernel
+from tests.recorded_runs import recorded
 from tests.strategies import signal_pairs
 
 pytest_plugins = ["pytester"]
@@ -623,15 +625,22 @@ def test_compare_names_the_windows_and_cells_a_model_change_fixed(tmp_path: Path
     after_dir.mkdir()
     write_trip(before_dir, stretch=True, fast=False)
     write_trip(after_dir, stretch=False, fast=True)
-    before = _evaluate(before_dir).result.to_dict()  # type: ignore[attr-defined]
-    after = _evaluate(after_dir).result.to_dict()  # type: ignore[attr-defined]
+    before_result = _evaluate(before_dir).result  # type: ignore[attr-defined]
+    after_result = _evaluate(after_dir).result  # type: ignore[attr-defined]
+    before, after = before_result.to_dict(), after_result.to_dict()
     from datetime import datetime, timezone
 
     record = make_record([before], model_version="v1", started_utc=datetime.now(timezone.utc))
     kept = record["specs"][0]["signals"][0]["local"]
     assert "lambdas" not in kept["windows"]  # history keeps the windows' errors, not their λ
     assert kept["regions"]["lambdas"]["mae"]
-    comparison = compare([after], record, pair_single=True)
+    # A result reads alike typed, from its JSON and from the history record of it.
+    typed = RecordedSpec.of(before_result)
+    assert typed.signals[0].local["windows"]
+    assert typed.signals[0].local["regions"]
+    assert typed == RecordedSpec.from_json(before) == recorded(record).specs[0]
+    comparison = compare([RecordedSpec.of(after_result)], recorded(record), pair_single=True)
+    assert comparison == compare(recorded([after]), recorded(record), pair_single=True)
     (signal,) = comparison.specs[0].signals
     assert {c.label for c in signal.better if c.grouping == "windows"} == {
         "1200–1230 s",

@@ -37,6 +37,7 @@ from pytest_hevval.report import (
     write_reports,
 )
 from pytest_hevval.report.panels import SignalPanels
+from pytest_hevval.results.recorded import RecordedPoint
 from pytest_hevval.results.spec_result import SignalResult, SpecResult
 
 STAMP = "2026-01-01 00:00:00 UTC"
@@ -522,9 +523,10 @@ def test_html_shows_diagnosis_and_history_when_present(
             },
         ],
     }
+    # Points as an old history index holds them: λ listed in paper order.
     history = [
-        {"version": "v1", "phi": 0.90, "lambdas": [0.9] * 7},
-        {"version": "v2", "phi": 0.81, "lambdas": [0.8] * 7},
+        RecordedPoint.from_json("v1", 0.90, [0.9] * 7),
+        RecordedPoint.from_json("v2", 0.81, [0.8] * 7),
     ]
     signal["diagnosis"]["effects"] = [
         {
@@ -955,25 +957,20 @@ def test_a_spec_that_fails_on_its_signals_says_so_under_its_phi(
 
 def test_the_comparison_shows_the_worst_changes_and_every_change_behind_details() -> None:
     from pytest_hevval.report.comparison import COMPARISON_ROWS, comparison_markdown
+    from pytest_hevval.results.changes import (
+        Comparison,
+        FieldDelta,
+        SignalComparison,
+        SpecComparison,
+    )
     from pytest_hevval.results.verdict import RegressedItem, RunVerdict
 
-    lambdas = {
-        f"c{i}": {"before": 0.9, "after": 0.9 - (i - 12) / 1000, "delta": -(i - 12) / 1000}
-        for i in range(30)
-        if i != 12
-    }
-    comparison = {
-        "before": "v1",
-        "after": "v2",
-        "specs": [
-            {
-                "spec": "a|b.hevval.yaml",
-                "phi": {"before": 0.95, "after": 0.95, "delta": 0.0},
-                "signals": [{"path": "s<x>", "lambdas": lambdas}],
-                "data_changed": [],
-            }
-        ],
-    }
+    lambdas = tuple(FieldDelta(f"c{i}", 0.9, 0.9 - (i - 12) / 1000) for i in range(30) if i != 12)
+    signal = SignalComparison("s<x>", "x", None, lambdas, (), None, None)
+    spec = SpecComparison(
+        "a|b.hevval.yaml", "b", FieldDelta("phi", 0.95, 0.95), None, None, (signal,), (), ()
+    )
+    comparison = Comparison("v1", "v2", (spec,), (), ())
     regression = RegressedItem("a|b.hevval.yaml", "s<x>", "c20", "a|b: c20 dropped")
     verdict = RunVerdict(passed=False, regressions=(regression,), baseline="v1 (…)")
     lines = comparison_markdown(comparison, verdict)

@@ -21,6 +21,7 @@ from pytest_hevval.results.runtime import (
     RuntimeGate,
 )
 from pytest_hevval.spec.load import parse_spec_text
+from tests.recorded_runs import recorded
 from tests.strategies import call_times
 from tests.test_plugin import write_data
 
@@ -191,7 +192,8 @@ def test_the_rule_judges_the_fastest_calls_cpu_and_not_the_wall_clock(
         cpu_s=tuple(c * work for c in before),
     )
     [change] = runtime_changes(
-        [_result("a.hevval.yaml", _runtime(before))], [_result("a.hevval.yaml", after)]
+        recorded([_result("a.hevval.yaml", _runtime(before))]),
+        recorded([_result("a.hevval.yaml", after)]),
     )
     assert change.ratio == pytest.approx(work)
     grown = min(before) * work - min(before)
@@ -203,8 +205,8 @@ def test_the_rule_judges_the_fastest_calls_cpu_and_not_the_wall_clock(
 def test_a_few_hundredths_of_a_second_more_is_not_a_runtime_regression() -> None:
     """A 25 ms model timed at 48 ms under load is the machine's noise, said so."""
     [change] = runtime_changes(
-        [_result("a.hevval.yaml", _runtime([0.025]))],
-        [_result("a.hevval.yaml", _runtime([0.048]))],
+        recorded([_result("a.hevval.yaml", _runtime([0.025]))]),
+        recorded([_result("a.hevval.yaml", _runtime([0.048]))]),
     )
     assert change.ratio > RUNTIME_SLOWDOWN
     assert not change.regression

@@ -5,15 +5,9 @@ Pure functions plus :class:`HistoryStore`; nothing here imports pytest or matplo
 time. See ``docs/history.md`` for the record format and the option names.
 """
 
+from ..results.changes import Comparison, FieldDelta, SignalComparison, SpecComparison
 from ._base import ERROR_FIELDS, HistoryError
-from .compare import (
-    Comparison,
-    FieldDelta,
-    SignalComparison,
-    SpecComparison,
-    compare,
-    specs_of,
-)
+from .compare import compare
 from .compare_fail import RULE_FIELDS, Rule, parse_compare_fail
 from .index import TREND_RUNS
 from .load import latest_results, load_document, load_side, report_problems
@@ -42,7 +36,6 @@ from .records import (
     MODEL_VERSION_ENV,
     SCHEMA_VERSION,
     default_tool_versions,
-    describe_record,
     format_utc,
     make_record,
     migrate_record,
@@ -94,7 +87,6 @@ __all__ = [
     "comparison_markdown",
     "comparison_table",
     "default_tool_versions",
-    "describe_record",
     "detect_steps",
     "format_utc",
     "history_table",
@@ -123,7 +115,6 @@ __all__ = [
     "resolve_model_version",
     "sidecar_path",
     "slugify",
-    "specs_of",
     "validate_record",
     "write_sidecar",
 ]

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
-
 from ..core.characteristics import CHARACTERISTICS
 from ..results.record_schema import HistoryError
+from ..results.recorded import spec_key
 from ..results.spec_result import PHYSICAL_ERRORS
 
 __all__ = [
@@ -18,9 +16,3 @@ __all__ = [
 
 #: Physical error quantities carried by every signal result (the results' own list).
 ERROR_FIELDS: tuple[str, ...] = PHYSICAL_ERRORS
-
-
-def spec_key(spec: Mapping[str, Any]) -> str:
-    """Identity of a spec across runs: its file path when known, else its name."""
-    key = spec.get("spec") or spec.get("name")
-    return str(key) if key is not None else "?"

@@ -12,18 +12,20 @@ from ..errors import did_you_mean
 from ..files import read_json
 from ..flags import COMMAND
 from ..results.envelope import RunDocument, read_document
+from ..results.recorded import RecordedRun
 from ._base import HistoryError
-from .compare import specs_of
 from .store import HistoryStore
 
 __all__ = [
     "HISTORY_PREFIX",
     "NAMED_BASELINES",
     "baseline_record",
+    "baseline_run",
     "latest_results",
     "load_document",
     "load_side",
     "report_problems",
+    "side_label",
 ]
 
 #: How a compare operand names a recorded run.
@@ -40,6 +42,12 @@ def baseline_record(store: HistoryStore, wanted: str) -> dict[str, Any] | None:
     if wanted == "accepted":
         return store.accepted()
     return store.find(wanted)
+
+
+def baseline_run(store: HistoryStore, wanted: str) -> RecordedRun | None:
+    """The run :func:`baseline_record` names, as a comparison reads it."""
+    record = baseline_record(store, wanted)
+    return None if record is None else RecordedRun.from_json(record)
 
 
 def report_problems(store: HistoryStore) -> None:
@@ -62,7 +70,7 @@ def latest_results(directory: Path) -> list[dict[str, Any]]:
         )
     newest: dict[str, dict[str, Any]] = {}
     for record in reversed(records):
-        for spec in specs_of(record):
+        for spec in record["specs"]:
             key = str(spec.get("spec", spec.get("name", "")))
             if key not in newest:
                 newest[key] = {
@@ -73,8 +81,8 @@ def latest_results(directory: Path) -> list[dict[str, Any]]:
     return list(newest.values())
 
 
-def load_side(ref: str, directory: Path) -> tuple[list[dict[str, Any]], str]:
-    """Resolve a compare operand to (spec results, label).
+def load_side(ref: str, directory: Path) -> tuple[RecordedRun, str]:
+    """Resolve a compare operand to (the run, its label).
 
     ``ref`` is ``history:latest``, ``history:previous`` (the record before the latest),
     ``history:accepted`` (the newest record accepted as a baseline),
@@ -82,10 +90,16 @@ def load_side(ref: str, directory: Path) -> tuple[list[dict[str, Any]], str]:
     a history record file, or a ``hevval run --json`` file (``{"specs": [...]}``).
     """
     found = load_document(ref, directory)
+    return found.recorded(), side_label(found, ref)
+
+
+def side_label(found: RunDocument, ref: str) -> str:
+    """How a comparison names the run ``ref`` gave: its model version, else (a run document
+    without one) the file's name."""
     version = found.content.get("model_version")
     if found.kind != "record" and not (isinstance(version, str) and version):
         version = Path(ref).name
-    return found.specs, str(version)
+    return str(version)
 
 
 def load_document(ref: str, directory: Path) -> RunDocument:

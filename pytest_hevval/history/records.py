@@ -39,7 +39,6 @@ __all__ = [
     "SCHEMA_VERSION",
     "baseline_summary",
     "default_tool_versions",
-    "describe_record",
     "format_utc",
     "make_record",
     "migrate_record",
@@ -110,15 +109,6 @@ def _git(cwd: Path, *arguments: str) -> str | None:
 def resolve_commit(cwd: Path) -> str | None:
     """The git commit checked out in ``cwd`` (``git rev-parse HEAD``), or ``None``."""
     return _git(cwd, "rev-parse", "--verify", "-q", "HEAD")
-
-
-def describe_record(record: Mapping[str, Any]) -> str:
-    """A record in words, as a comparison names its baseline: ``v1.4 (commit 3f2a9c1d0e4b,
-    2026-11-28 22:10 UTC)``."""
-    started = str(record["started_utc"])
-    commit = record.get("commit")
-    shown = f"commit {commit[:12]}, " if isinstance(commit, str) and commit else ""
-    return f"{record['model_version']} ({shown}{started[:10]} {started[11:16]} UTC)"
 
 
 def make_record(

@@ -1,8 +1,8 @@
 """Regressions: the quantities of a comparison that got worse by more than a rule allows.
 
-A :class:`~.compare.Comparison` says what changed; the rules of ``--compare-fail``
-(:mod:`.compare_fail`) say how much of a drop is acceptable; :func:`regressions` applies the
-one to the other.
+A comparison (:class:`~pytest_hevval.results.changes.Comparison`) says what changed; the
+rules of ``--compare-fail`` (:mod:`.compare_fail`) say how much of a drop is acceptable;
+:func:`regressions` applies the one to the other.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core.registry import describe
-from .compare import Comparison, FieldDelta
+from ..results.changes import Comparison, FieldDelta
 from .compare_fail import Rule
 
 __all__ = ["Regression", "regressions"]

@@ -1,4 +1,5 @@
-"""Text, Markdown and JSON views of a :class:`~.compare.Comparison` (pure: data in, text out)."""
+"""Text, Markdown and JSON views of a comparison
+(:class:`~pytest_hevval.results.changes.Comparison`; pure: data in, text out)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import Any
 
 from ..core.registry import describe
 from ..escape import markdown, markdown_code
-from .compare import Comparison, FieldDelta, SignalComparison
+from ..results.changes import Comparison, FieldDelta, SignalComparison
 from .regressions import Regression
 
 __all__ = ["FORMATS", "comparison_json", "comparison_markdown", "comparison_table", "render"]

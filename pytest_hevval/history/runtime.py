@@ -12,11 +12,12 @@ fastest of (docs/reports.md, "Model runtime").
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 from ..defaults import split_key
+from ..results.recorded import RecordedRun, RecordedSpec
 from ..results.runtime import RUNTIME_MIN_GROWTH_S, RUNTIME_SLOWDOWN, ModelRuntime
 
 __all__ = ["RuntimeChange", "runtime_change_lines", "runtime_changes"]
@@ -64,23 +65,21 @@ class RuntimeChange:
         }
 
 
-def _runtimes(specs: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, ModelRuntime]]:
+def _runtimes(specs: Sequence[RecordedSpec]) -> dict[str, dict[str, ModelRuntime]]:
     """Spec file → recording key → runtime, for every result that has one."""
     out: dict[str, dict[str, ModelRuntime]] = {}
     for spec in specs:
-        raw = spec.get("runtime")
-        key = str(spec.get("spec", spec.get("name", "")))
-        if isinstance(raw, Mapping):
-            out.setdefault(split_key(key)[0], {})[key] = ModelRuntime.from_dict(raw)
+        if spec.runtime is not None:
+            out.setdefault(split_key(spec.key)[0], {})[spec.key] = spec.runtime
     return out
 
 
 def runtime_changes(
-    before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]]
+    before: Sequence[RecordedSpec] | RecordedRun, after: Sequence[RecordedSpec] | RecordedRun
 ) -> list[RuntimeChange]:
     """Each spec file's model runtime in ``before`` and ``after``. With one timed spec file on
     each side under different names (trip-v1 → trip-v2), those two are compared."""
-    old, new = _runtimes(before), _runtimes(after)
+    old, new = _runtimes(_specs(before)), _runtimes(_specs(after))
     pairs = [(name, old[name], new[name]) for name in new if name in old]
     if not pairs and len(old) == len(new) == 1:
         (name_old, runs_old), (name_new, runs_new) = (
@@ -113,6 +112,10 @@ def runtime_changes(
             )
         )
     return changes
+
+
+def _specs(side: Sequence[RecordedSpec] | RecordedRun) -> Sequence[RecordedSpec]:
+    return side.specs if isinstance(side, RecordedRun) else side
 
 
 def _factor(simulated: float, wall: float) -> float:

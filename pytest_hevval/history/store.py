@@ -40,6 +40,7 @@ from ..files import (
     write_temporary,
 )
 from ..flags import PYTEST, FrontEnd
+from ..results.recorded import RecordedPoint, RecordedRun
 from ._base import HistoryError
 from .index import (
     TREND_RUNS,
@@ -188,6 +189,10 @@ class HistoryStore:
         """Every readable record, oldest first; unreadable files go to :attr:`problems`."""
         return [entry.record for entry in self.entries()]
 
+    def runs(self) -> list[RecordedRun]:
+        """Every readable record, oldest first, as history compares runs and draws trends."""
+        return [RecordedRun.from_json(record) for record in self.records()]
+
     def latest(self, before: datetime | None = None) -> dict[str, Any] | None:
         """The newest record, or the newest one started strictly before ``before``."""
         found = self.newest(1, before=before)
@@ -264,12 +269,12 @@ class HistoryStore:
 
     def trends(
         self, keys: Iterable[tuple[str, str]] | None = None
-    ) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    ) -> dict[tuple[str, str], list[RecordedPoint]]:
         """The recorded points of each (spec path, signal path), oldest first: the newest
-        :attr:`trend_runs` runs that hold the signal, each as ``{"version", "phi",
-        "lambdas"}``; of the given ``keys`` only, when given. No record the index already
-        knows is read; without an index, the trends of given keys are read from the newest
-        records, until each has its runs or every record is read."""
+        :attr:`trend_runs` runs that hold the signal; of the given ``keys`` only, when
+        given. No record the index already knows is read; without an index, the trends of
+        given keys are read from the newest records, until each has its runs or every record
+        is read."""
         wanted = None if keys is None else set(keys)
         index = None
         if wanted is not None:
@@ -290,11 +295,9 @@ class HistoryStore:
             index = self._catalogue()
         return {
             key: [
-                {
-                    "version": index.records[point.name].model_version,
-                    "phi": point.phi,
-                    "lambdas": point.lambdas,
-                }
+                RecordedPoint.from_json(
+                    index.records[point.name].model_version, point.phi, point.lambdas
+                )
                 for point in trend.points
             ]
             for key, trend in index.trends.items()

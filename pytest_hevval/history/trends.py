@@ -20,8 +20,8 @@ import numpy.typing as npt
 from ..core.registry import describe, order_names
 from ..escape import plot_text
 from ..files import write_atomic
-from ..results.codec import interval_bounds, interval_table, json_number, lambdas_or_none
-from ._base import HistoryError, spec_key
+from ..results.recorded import RecordedRun, RecordedSignal, RecordedSpec
+from ._base import HistoryError
 
 __all__ = [
     "HistoryRow",
@@ -81,21 +81,19 @@ class HistoryRow:
         }
 
 
-def _matches_spec(spec: Mapping[str, Any], pattern: str | None) -> bool:
+def _matches_spec(spec: RecordedSpec, pattern: str | None) -> bool:
     if pattern is None:
         return True
-    key = spec_key(spec)
-    name = str(spec.get("name", ""))
+    key, name = spec.key, spec.name or ""
     return pattern in (key, name) or fnmatchcase(key, pattern) or fnmatchcase(name, pattern)
 
 
-def _matches_signal(signal: Mapping[str, Any], pattern: str) -> bool:
-    path = str(signal.get("path", ""))
-    return pattern in (path, signal.get("name")) or fnmatchcase(path, pattern)
+def _matches_signal(signal: RecordedSignal, pattern: str) -> bool:
+    return pattern in (signal.path, signal.name) or fnmatchcase(signal.path, pattern)
 
 
 def history_table(
-    records: Iterable[Mapping[str, Any]], spec: str | None = None, signal: str | None = None
+    runs: Iterable[RecordedRun], spec: str | None = None, signal: str | None = None
 ) -> list[HistoryRow]:
     """Rows of Φ (and, when ``signal`` is given, λ1–λ7 and lag) over the recorded runs.
 
@@ -104,52 +102,41 @@ def history_table(
     Rows are ordered by run time, then spec, then signal.
     """
     rows: list[HistoryRow] = []
-    for record in sorted(records, key=lambda r: str(r.get("started_utc", ""))):
-        version = str(record.get("model_version", "unknown"))
-        started = str(record.get("started_utc", ""))
-        for spec_result in record.get("specs", []):
-            if not isinstance(spec_result, Mapping) or not _matches_spec(spec_result, spec):
+    for run in sorted(runs, key=lambda r: r.started_utc or ""):
+        for spec_result in run.specs:
+            if not _matches_spec(spec_result, spec):
                 continue
-            passed = spec_result.get("passed")
             spec_row = HistoryRow(
-                started_utc=started,
-                model_version=version,
-                spec=spec_key(spec_result),
-                spec_name=str(spec_result.get("name", spec_key(spec_result))),
+                started_utc=run.started_utc or "",
+                model_version=run.model_version or "unknown",
+                spec=spec_result.key,
+                spec_name=spec_result.title,
                 signal=None,
-                phi=json_number(spec_result.get("phi")),
+                phi=spec_result.phi,
                 lambdas={},
                 lag_s=None,
-                passed=passed if isinstance(passed, bool) else None,
-                intervals=_phi_interval(spec_result.get("phi_interval")),
+                passed=spec_result.passed,
+                intervals={}
+                if spec_result.phi_interval is None
+                else {"phi": spec_result.phi_interval},
             )
             if signal is None:
                 rows.append(spec_row)
                 continue
-            for sig in spec_result.get("signals", []):
-                if not isinstance(sig, Mapping) or not _matches_signal(sig, signal):
+            for sig in spec_result.signals:
+                if not _matches_signal(sig, signal):
                     continue
-                lambdas = sig.get("lambdas")
-                passed = sig.get("passed")
                 rows.append(
                     replace(
                         spec_row,
-                        signal=str(sig["path"]),
-                        lambdas=lambdas_or_none(lambdas),
-                        lag_s=json_number(sig.get("lag_s")),
-                        passed=passed if isinstance(passed, bool) else None,
-                        intervals={
-                            **spec_row.intervals,
-                            **interval_table(sig.get("intervals")),
-                        },
+                        signal=sig.path,
+                        lambdas=sig.lambdas,
+                        lag_s=sig.lag_s,
+                        passed=sig.passed,
+                        intervals={**spec_row.intervals, **sig.intervals},
                     )
                 )
     return rows
-
-
-def _phi_interval(raw: Any) -> dict[str, tuple[float, float]]:
-    bounds = interval_bounds(raw)
-    return {} if bounds is None else {"phi": bounds}
 
 
 def characteristic_names(rows: Sequence[HistoryRow]) -> list[str]:

@@ -3,20 +3,19 @@
 Made for a pull-request comment: which record the run was compared with, what got worse and
 what got better and by how much (with both runs' 95 % intervals where recorded), the
 regressions first, the worst changes in a short table and every change behind a
-``<details>``. It reads the comparison as plain data (``Comparison.to_dict()``), as every
-report reads its results, and the regressions from the run's verdict.
+``<details>``. It reads the typed comparison, as every report reads typed results, and the
+regressions from the run's verdict.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 from ..core.registry import describe
 from ..escape import markdown, markdown_code
-from ..results.codec import json_number
+from ..results.changes import Comparison, FieldDelta
 from ..results.verdict import RunVerdict
 from .text import regression_lines
 
@@ -58,47 +57,39 @@ class Change:
         return self.field if symbol == self.field else f"{symbol} {self.field}"
 
 
-def _interval(raw: Any) -> tuple[float, float] | None:
-    if not isinstance(raw, Sequence) or len(raw) != 2:
-        return None
-    low, high = json_number(raw[0]), json_number(raw[1])
-    return None if low is None or high is None else (low, high)
-
-
 def _change(
-    spec: str, signal: str | None, field: str, delta: Mapping[str, Any], regressed: set[Any]
+    spec: str, signal: str | None, delta: FieldDelta, regressed: set[tuple[str, str | None, str]]
 ) -> Change | None:
-    before, after = json_number(delta.get("before")), json_number(delta.get("after"))
+    before, after = delta.before, delta.after
     if before is None or after is None or abs(after - before) < SHOWN_CHANGE:
         return None
-    raw = delta.get("intervals")
-    intervals: Mapping[str, Any] = raw if isinstance(raw, Mapping) else {}
+    # Intervals are shown where both runs recorded one: only then can they be set side by side.
+    beyond_noise = delta.beyond_noise
     return Change(
         spec,
         signal,
-        field,
+        delta.field,
         before,
         after,
-        _interval(intervals.get("before")),
-        _interval(intervals.get("after")),
-        (spec, signal, field) in regressed,
-        delta.get("beyond_noise") if isinstance(delta.get("beyond_noise"), bool) else None,
+        delta.before_interval if beyond_noise is not None else None,
+        delta.after_interval if beyond_noise is not None else None,
+        (spec, signal, delta.field) in regressed,
+        beyond_noise,
     )
 
 
-def changes(comparison: Mapping[str, Any], verdict: RunVerdict | None = None) -> list[Change]:
+def changes(comparison: Comparison, verdict: RunVerdict | None = None) -> list[Change]:
     """Every Φ and λ that changed, the regressions first, then the drops, largest first, then
     the rises, largest first."""
     found_regressions = verdict.regressions if verdict is not None else ()
     regressed = {(r.spec, r.signal, r.field) for r in found_regressions}
     found: list[Change] = []
-    for spec in comparison.get("specs", []):
-        key = str(spec.get("spec", ""))
-        phi = _change(key, None, "phi", spec.get("phi") or {}, regressed)
+    for spec in comparison.specs:
+        phi = _change(spec.key, None, spec.phi, regressed)
         found += [phi] if phi is not None else []
-        for signal in spec.get("signals", []):
-            for field, delta in (signal.get("lambdas") or {}).items():
-                change = _change(key, str(signal.get("path")), field, delta, regressed)
+        for signal in spec.signals:
+            for delta in signal.lambdas:
+                change = _change(spec.key, signal.path, delta, regressed)
                 found += [change] if change is not None else []
     found.sort(key=lambda c: (not c.regression, c.delta > 0, -abs(c.delta)))
     return found
@@ -138,7 +129,7 @@ def _table(rows: Sequence[Change]) -> list[str]:
 
 
 def comparison_markdown(
-    comparison: Mapping[str, Any], verdict: RunVerdict, *, heading: str = "####"
+    comparison: Comparison, verdict: RunVerdict, *, heading: str = "####"
 ) -> list[str]:
     """The comparison's lines: what it was compared with, the counts, the worst changes, the
     best ones, then every change behind a ``<details>``."""
@@ -146,7 +137,7 @@ def comparison_markdown(
     worse = [c for c in found if c.regression or c.delta < 0]
     better = [c for c in found if not c.regression and c.delta > 0]
     baseline = verdict.baseline
-    against = markdown(baseline if baseline is not None else comparison.get("before", "baseline"))
+    against = markdown(baseline if baseline is not None else comparison.before_label)
     accepted = verdict.regressions_accepted
     count = len(verdict.regressions)
     said = (
@@ -163,18 +154,14 @@ def comparison_markdown(
     ]
     if count:
         lines += ["", *regression_lines(verdict)]
-    notes = [markdown(note) for note in comparison.get("pairings", [])]
+    notes = [markdown(note) for note in comparison.pairings]
     notes += [
-        f"{markdown_code(spec['spec'])}: data changed ({markdown(', '.join(spec['data_changed']))})"
-        for spec in comparison.get("specs", [])
-        if spec.get("data_changed")
+        f"{markdown_code(spec.key)}: data changed ({markdown(', '.join(spec.data_changed))})"
+        for spec in comparison.specs
+        if spec.data_changed
     ]
-    notes += [
-        f"{markdown_code(key)}: new spec (no baseline)" for key in comparison.get("added_specs", [])
-    ]
-    notes += [
-        f"{markdown_code(key)}: not in this run" for key in comparison.get("removed_specs", [])
-    ]
+    notes += [f"{markdown_code(key)}: new spec (no baseline)" for key in comparison.added_specs]
+    notes += [f"{markdown_code(key)}: not in this run" for key in comparison.removed_specs]
     if notes:
         lines += ["", *(f"- {note}" for note in notes)]
     if worse:

@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..results.recorded import RecordedPoint
 from ..results.spec_result import SignalResult, SpecResult
 
 __all__ = ["SignalPanels"]
@@ -28,8 +29,8 @@ class SignalPanels:
     #: Diagnosis payloads (:func:`pytest_hevval.report.diagnosis.payload`, or why a signal
     #: could not be diagnosed), as :func:`pytest_hevval.publish.diagnosis_panels` keys them.
     diagnoses: Mapping[SignalKey, Mapping[str, Any]] = field(default_factory=dict)
-    #: The recorded runs that hold each signal, oldest first (``version``, ``phi``, ``lambdas``).
-    trends: Mapping[SignalKey, Sequence[Mapping[str, Any]]] = field(default_factory=dict)
+    #: The recorded runs that hold each signal, oldest first.
+    trends: Mapping[SignalKey, Sequence[RecordedPoint]] = field(default_factory=dict)
     #: This run's model version: the trend's last point.
     model_version: str = ""
 
@@ -41,20 +42,12 @@ class SignalPanels:
             found = self.diagnoses.get((result.spec, signal.origins[0]))
         return found if found is not None else signal.diagnosis
 
-    def history(
-        self, result: SpecResult, signal: SignalResult, lambdas: object = None
-    ) -> list[Mapping[str, Any]] | None:
-        """The signal's recorded runs, then this run (its λ values ``lambdas`` where given
-        as the result's JSON holds them); None where the history holds none."""
+    def history(self, result: SpecResult, signal: SignalResult) -> list[RecordedPoint] | None:
+        """The signal's recorded runs, then this run; None where the history holds none."""
         recorded = self.trends.get((result.spec, signal.path))
         if not recorded:
             return None
-        now = {
-            "version": self.model_version,
-            "phi": result.phi,
-            "lambdas": dict(signal.lambdas) if lambdas is None else lambdas,
-        }
-        return [*recorded, now]
+        return [*recorded, RecordedPoint.of(self.model_version, result, signal)]
 
     def decorate(self, result: SpecResult, data: Mapping[str, Any]) -> dict[str, Any]:
         """``data`` (the JSON of ``result``) with each signal's diagnosis and trend beside it,
@@ -65,8 +58,8 @@ class SignalPanels:
             found = self.diagnosis(result, signal)
             if found is not None:
                 entry["diagnosis"] = dict(found)
-            history = self.history(result, signal, item["lambdas"])
+            history = self.history(result, signal)
             if history is not None:
-                entry["history"] = history
+                entry["history"] = [point.to_dict() for point in history]
             signals.append(entry)
         return {**data, "signals": signals}

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core.registry import order_names
-from ..results.codec import keyed_lambdas
+from ..results.recorded import RecordedPoint
 from ..results.spec_result import SignalResult
 from .model import CHARACTERISTIC_COLOURS, SHORT_LABELS, is_finite_number
 
@@ -583,22 +583,20 @@ def _bucket_note(data: Mapping[str, Any], drawn: int) -> str:
     return "1 sample"
 
 
-def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
+def history_svg(history: Sequence[RecordedPoint]) -> str | None:
     """λ1…λ7 (thin, coloured) and Φ (thick, dark) over recorded versions."""
-    entries = [h for h in history if isinstance(h, Mapping)]
+    entries = list(history)
     if not entries:
         return None
     lines: dict[str, FloatArray] = {}
-    keyed = [_trend_lambdas(h) for h in entries]
+    keyed = [h.lambdas for h in entries]
     for name in order_names(n for values_of in keyed for n in values_of):
         values = []
         for values_of in keyed:
             value = values_of.get(name)
             values.append(float(value) if is_finite_number(value) else np.nan)
         lines[name] = np.array(values, dtype=np.float64)
-    phi = np.array(
-        [h["phi"] if is_finite_number(h.get("phi")) else np.nan for h in entries], dtype=np.float64
-    )
+    phi = np.array([np.nan if h.phi is None else h.phi for h in entries], dtype=np.float64)
     x = np.arange(len(entries), dtype=np.float64)
     width, height = 720, 230
     panel = Panel(
@@ -610,7 +608,7 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
         parts.append(
             f'<text class="hv-tick" x="{float(panel.px(xi)):.1f}" '
             f'y="{panel.y + panel.height + 14:.1f}" '
-            f'text-anchor="middle">{_esc(h.get("version", int(xi) + 1))}</text>'
+            f'text-anchor="middle">{_esc(h.version)}</text>'
         )
     legend_y = panel.y + 6
     for name, ys in lines.items():
@@ -644,11 +642,3 @@ def history_svg(history: Sequence[Mapping[str, Any]]) -> str | None:
         "<title>characteristics over recorded versions"
         f"</title>{''.join(parts)}</svg>"
     )
-
-
-def _trend_lambdas(entry: Mapping[str, Any]) -> dict[str, float | None]:
-    """λ values by name of one recorded run in a trend (a list in paper order is read too)."""
-    try:
-        return keyed_lambdas(entry.get("lambdas"))
-    except ValueError:
-        return {}

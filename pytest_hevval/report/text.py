@@ -16,6 +16,7 @@ from .. import __version__
 from ..defaults import split_key
 from ..escape import markdown, markdown_code
 from ..results.campaign import CampaignVerdict, RecordingOutcome
+from ..results.changes import Comparison
 from ..results.codec import plain_json
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
@@ -63,7 +64,7 @@ def _worst_json(spec_results: Sequence[SpecResult]) -> list[dict[str, Any]]:
 def report_document(
     results: Sequence[SpecResult],
     verdict: RunVerdict | None = None,
-    comparison: Mapping[str, Any] | None = None,
+    comparison: Comparison | None = None,
     *,
     panels: SignalPanels | None = None,
     data: Sequence[Mapping[str, Any]] | None = None,
@@ -73,7 +74,7 @@ def report_document(
     (with the run's verdict, ``summary.passed``), the worst-signal table, the campaigns'
     verdicts and, when the run decided one, ``verdict``: its regressions against the baseline
     and the specs that could not be scored; and the ``comparison`` with the baseline when one
-    ran (``Comparison.to_dict()``)."""
+    ran."""
     panels = panels if panels is not None else SignalPanels()
     found = data if data is not None else [result.to_dict() for result in results]
     campaigns = model.campaigns_of(results, verdict)
@@ -82,7 +83,7 @@ def report_document(
         "generated_by": f"pytest-hevval {__version__}",
         "summary": model.summary(results, verdict),
         **({"verdict": verdict.to_dict()} if verdict is not None else {}),
-        **({"comparison": comparison} if comparison is not None else {}),
+        **({"comparison": comparison.to_dict()} if comparison is not None else {}),
         "worst": _worst_json(results),
         "specs": [
             panels.decorate(result, item) for result, item in zip(results, found, strict=True)
@@ -94,7 +95,7 @@ def report_document(
 def render_json(
     results: Sequence[SpecResult],
     verdict: RunVerdict | None = None,
-    comparison: Mapping[str, Any] | None = None,
+    comparison: Comparison | None = None,
     *,
     panels: SignalPanels | None = None,
     data: Sequence[Mapping[str, Any]] | None = None,
@@ -306,12 +307,12 @@ def headline(spec_results: Sequence[SpecResult], verdict: RunVerdict | None) -> 
 def render_markdown(
     spec_results: Sequence[SpecResult],
     verdict: RunVerdict | None = None,
-    comparison: Mapping[str, Any] | None = None,
+    comparison: Comparison | None = None,
 ) -> str:
     """A short summary for a GitHub step summary or PR comment; its headline is the run's
     verdict (``verdict``, else the verdict of the results alone). With ``comparison`` (the
-    comparison with the baseline as ``Comparison.to_dict()`` gives it, and ``verdict``), the
-    comparison follows the spec table (:mod:`.comparison`)."""
+    comparison with the baseline) and ``verdict``, the comparison follows the spec table
+    (:mod:`.comparison`)."""
     regressed = verdict.regressed if verdict is not None else {}
     lines = [
         headline(spec_results, verdict),
@@ -420,7 +421,7 @@ def _verdict_markdown(verdict: RunVerdict, *, regressions: bool) -> list[str]:
 
 
 def render_comparison(
-    spec_results: Sequence[SpecResult], verdict: RunVerdict, comparison: Mapping[str, Any]
+    spec_results: Sequence[SpecResult], verdict: RunVerdict, comparison: Comparison
 ) -> str:
     """comparison.md: the run's headline and its comparison with the baseline, alone, for a
     workflow that posts just that as a pull-request comment."""

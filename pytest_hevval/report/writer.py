@@ -15,6 +15,7 @@ from typing import Any
 from ..errors import HevvalError, did_you_mean
 from ..files import output_error, write_atomic
 from ..flags import PYTEST, FrontEnd
+from ..results.changes import Comparison
 from ..results.spec_result import SpecResult
 from ..results.verdict import RunVerdict
 from .panels import SignalPanels
@@ -83,7 +84,7 @@ def write_reports(
     title: str = "hevval validation report",
     generated_utc: str | None = None,
     verdict: RunVerdict | None = None,
-    comparison: Mapping[str, Any] | None = None,
+    comparison: Comparison | None = None,
     facts: Mapping[str, Any] | None = None,
     panels: SignalPanels | None = None,
     data: Sequence[Mapping[str, Any]] | None = None,
@@ -91,7 +92,7 @@ def write_reports(
 ) -> list[Path]:
     """Write report.html / report.json / report.md / evidence.json for ``formats`` into
     ``directory``; each says ``verdict``, the run's (else the verdict of the results alone).
-    With ``comparison`` (the comparison with the baseline, ``Comparison.to_dict()``) and a
+    With ``comparison`` (the comparison with the baseline) and a
     verdict, report.json and report.md carry it, and with ``md`` it is also written alone to
     comparison.md. ``facts`` are the run's model version, start and tool versions, which the
     evidence record holds (docs/evidence.md). ``panels``: each signal's diagnosis and history

@@ -34,6 +34,7 @@ from .record_schema import (
     migrate_record,
     normalised_spec,
 )
+from .recorded import RecordedRun
 from .spec_result import RESULT_SCHEMA_VERSION
 from .verdict import RunVerdict
 
@@ -139,6 +140,10 @@ class RunDocument:
             return self.content
         facts = self.content.get("run") if self.kind == "run" else None
         return dict(facts) if isinstance(facts, Mapping) else {}
+
+    def recorded(self) -> RecordedRun:
+        """The run as history compares it: its results and facts, typed."""
+        return RecordedRun.from_json(self.content, self.specs)
 
 
 def read_document(document: Any, *, file: str | None = None) -> RunDocument:

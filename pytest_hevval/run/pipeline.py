@@ -293,7 +293,7 @@ class Run:
         errors = [f"{key}: {error}" for key, error in self.unscored.items()]
         if not results:
             return RunVerdict.decide(results, errors=errors)
-        found = self.publisher.found_regressions(results, self.result_data)
+        found = self.publisher.found_regressions(results)
         return RunVerdict.decide(
             results,
             regressions=[RegressedItem(r.spec, r.signal, r.field, str(r)) for r in found],
