@@ -653,3 +653,36 @@ def test_compare_names_the_windows_and_cells_a_model_change_fixed(tmp_path: Path
     text = comparison_table(comparison)
     assert "better in: 1200–1230 s" in text or "better in: 1230–1260 s" in text
     assert "worse in:" in text
+
+
+def test_a_recorded_run_with_windows_reads_back_for_evidence_and_trace(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A history record keeps the windows without their λ; `hevval evidence` and `hevval
+    trace` read the newest record back as results, windows and all."""
+    from datetime import datetime, timezone
+
+    from pytest_hevval.cli import main
+    from pytest_hevval.history import HistoryStore, make_record
+    from pytest_hevval.results.spec_result import SpecResult
+
+    write_trip(tmp_path, stretch=True, fast=False)
+    spec_text = SPEC.replace("name: localised", "name: localised\nrequirements: [REQ-1]")
+    result = _evaluate(tmp_path, spec_text).result  # type: ignore[attr-defined]
+    record = make_record(
+        [result.to_dict()], model_version="v1", started_utc=datetime.now(timezone.utc)
+    )
+    HistoryStore(tmp_path / ".hevval" / "history").append(record)
+    read = SpecResult.from_dict(record["specs"][0])
+    windows = read.signals[0].local.windows  # type: ignore[union-attr]
+    assert windows.labels == result.signals[0].local.windows.labels
+    assert list(windows.rms) == pytest.approx(list(result.signals[0].local.windows.rms))
+    assert not windows.lambdas  # the record keeps no window λ
+    monkeypatch.chdir(tmp_path)
+    assert main(["evidence", "--output", "evidence.json"]) == 0
+    assert json.loads((tmp_path / "evidence.json").read_text())["run"]["model_version"] == "v1"
+    capsys.readouterr()
+    main(["trace"])
+    out = capsys.readouterr()
+    assert "REQ-1" in out.out
+    assert "Traceback" not in out.err

@@ -6,6 +6,7 @@ items read them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -158,16 +159,27 @@ class GroupTable:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> GroupTable:
-        def numbers(values: Sequence[Any]) -> list[float]:
-            return [number_or_nan(v) for v in values]
+        """The inverse of :meth:`to_dict`. A history record keeps the windows without their λ
+        and error shares (:func:`~pytest_hevval.results.record_schema.normalised_spec`): a
+        column missing reads as none (λ) or undefined (NaN)."""
+        labels = tuple(data["labels"])
+
+        def numbers(key: str) -> npt.NDArray[Any]:
+            values = data.get(key)
+            if values is None:
+                return _column([math.nan] * len(labels))
+            return _column([number_or_nan(v) for v in values])
 
         return cls(
-            labels=tuple(data["labels"]),
+            labels=labels,
             n=_column([int(v) for v in data["n"]], np.int64),
-            lambdas={k: _column(numbers(vs)) for k, vs in data["lambdas"].items()},
-            error_share=_column(numbers(data["error_share"])),
-            rms=_column(numbers(data["rms"])),
-            mean_error=_column(numbers(data["mean_error"])),
+            lambdas={
+                k: _column([number_or_nan(v) for v in vs])
+                for k, vs in dict(data.get("lambdas") or {}).items()
+            },
+            error_share=numbers("error_share"),
+            rms=numbers("rms"),
+            mean_error=numbers("mean_error"),
         )
 
 
@@ -213,7 +225,7 @@ class LocalResult:
         windows = data["windows"]
         return cls(
             windows=GroupTable.from_dict(windows),
-            spans_s=tuple((float(a), float(b)) for a, b in windows["spans_s"]),
+            spans_s=tuple((float(a), float(b)) for a, b in windows.get("spans_s") or ()),
             concentration=dict(data.get("concentration", {})),
             phases=GroupTable.from_dict(data["phases"]) if data.get("phases") else None,
             conditions={
