@@ -59,7 +59,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from pytest_hevval.report.diagnosis import fix_expression, payload
+from pytest_hevval.report.diagnosis_text import fix_expression, payload
 from pytest_hevval.scoring.candidates import candidates_for
 from pytest_hevval.scoring.diagnosis import diagnose_origin, diagnose_signal
 from pytest_hevval.scoring.fixes import term_values

@@ -55,7 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pytest_hevval.core import local
 from pytest_hevval.core.characteristics import signal_characteristics
-from pytest_hevval.core.local import fixed_windows, region_grid
+from pytest_hevval.core.groups import fixed_windows, region_grid
 from pytest_hevval.scoring import local as scoring_local
 from pytest_hevval.scoring.local import Labels, score_local
 

@@ -13,7 +13,7 @@ times per trip, ``--repeat``; intervals off, since they do not touch the model).
 the baseline; its fastest calls set the gate (``min_realtime_factor`` on the default clock,
 CPU time) at the lowest real-time factor of a trip divided by ``--allowance`` (2). Then ``--runs``
 identical runs, each compared with the baseline by
-:func:`pytest_hevval.history.runtime.runtime_changes` and judged by the gate: every alarm
+:func:`pytest_hevval.history.runtime_changes.runtime_changes` and judged by the gate: every alarm
 there is a false one. Last, the same campaign with a model that runs the EV model three times
 per call (three times the work): it must fail the gate (on at least one trip: the gate is the
 campaign's) and be a runtime regression. ``--load N`` starts
@@ -87,7 +87,7 @@ def main() -> int:
         help="the gate: the lowest baseline real-time factor of a trip divided by this",
     )
     args = parser.parse_args()
-    from pytest_hevval.history.runtime import runtime_changes
+    from pytest_hevval.history.runtime_changes import runtime_changes
     from pytest_hevval.results.runtime import ModelRuntime
 
     spinners = [multiprocessing.Process(target=_spin, daemon=True) for _ in range(args.load)]

@@ -149,7 +149,7 @@ def _arg(args: argparse.Namespace, name: str) -> Any:
 def _diagnose(args: argparse.Namespace) -> int:
     """``hevval diagnose``: trace the residual of a signal to the effect the model lacks."""
     from .errors import SpecError
-    from .report.diagnosis import describe, payload, tried_lines, tried_payload
+    from .report.diagnosis_text import describe, payload, tried_lines, tried_payload
     from .scoring.candidates import candidates_for
     from .scoring.diagnosis import diagnose_signal
     from .scoring.fixes import try_term
@@ -283,7 +283,7 @@ def _compare(args: argparse.Namespace) -> int:
     from .history import compare, load_side, parse_compare_fail, regressions
     from .history.compare import campaign_change_lines
     from .history.render import render
-    from .history.runtime import runtime_change_lines, runtime_changes
+    from .history.runtime_changes import runtime_change_lines, runtime_changes
     from .results.codec import plain_json
 
     rules = (

@@ -437,6 +437,6 @@ class Publisher:
 def diagnosis_panels(
     payloads: Iterable[Mapping[str, Any]],
 ) -> dict[tuple[str, str], Mapping[str, Any]]:
-    """Diagnosis payloads (see :func:`pytest_hevval.report.diagnosis.payload`) keyed by the
+    """Diagnosis payloads (see :func:`pytest_hevval.report.diagnosis_text.payload`) keyed by the
     (spec, signal) a report shows them at."""
     return {(str(p.get("spec", "")), str(p["signal"])): p for p in payloads}

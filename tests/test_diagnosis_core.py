@@ -22,7 +22,7 @@ from pytest_hevval.core.residual import (
     ljung_box,
 )
 from pytest_hevval.errors import DegenerateSignalError, SpecError
-from pytest_hevval.report.diagnosis import note_text, summary
+from pytest_hevval.report.diagnosis_text import note_text, summary
 from pytest_hevval.results.codec import plain_json
 
 DT = 0.01

@@ -36,7 +36,7 @@ from pytest_hevval.scoring.candidates import candidates_for
 from pytest_hevval.scoring.diagnosis import (
     diagnose_failures, diagnose_origin, diagnose_signal,
 )
-from pytest_hevval.report.diagnosis import payload, summary
+from pytest_hevval.report.diagnosis_text import payload, summary
 from pytest_hevval.results.codec import plain_json
 from dataclasses import asdict
 from pytest_hevval.scoring.run import RunOptions, run_specs

@@ -10,7 +10,7 @@ from scipy import signal as sps
 
 from pytest_hevval.core.residual import MIN_SHARE, Candidate, diagnose_residual
 from pytest_hevval.errors import SpecError
-from pytest_hevval.report.diagnosis import summary
+from pytest_hevval.report.diagnosis_text import summary
 from pytest_hevval.spec.load import parse_spec_text
 from pytest_hevval.spec.model import DiagnosisSpec
 
@@ -286,8 +286,8 @@ def test_a_channel_with_few_steps_has_no_derivative() -> None:
 
 
 def test_a_lag_on_the_edge_of_the_search_says_so() -> None:
-    from pytest_hevval.report.diagnosis import describe, payload
-    from pytest_hevval.results.diagnosis import SignalDiagnosis
+    from pytest_hevval.report.diagnosis_text import describe, payload
+    from pytest_hevval.results.signal_diagnosis import SignalDiagnosis
 
     rng = np.random.default_rng(9)
     n = 4000
@@ -312,7 +312,7 @@ def test_the_diagnosis_reads_the_references_other_channels_through_the_data_cach
     for every signal, and let go with the file's other data once the spec is done."""
     import pandas as pd
 
-    from pytest_hevval.results.diagnosis import SignalDiagnosis
+    from pytest_hevval.results.signal_diagnosis import SignalDiagnosis
     from pytest_hevval.scoring.engine import DataCache, Evaluation
     from pytest_hevval.scoring.run import RunOptions, run_specs
     from pytest_hevval.spec.load import load_specs

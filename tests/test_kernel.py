@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from pytest_hevval import signal_characteristics
 from pytest_hevval.core import kernel
 from pytest_hevval.core.characteristics import SignalCharacteristics
-from pytest_hevval.core.local import LOCAL_CHARACTERISTICS, Grouping, labelled_table
+from pytest_hevval.core.groups import LOCAL_CHARACTERISTICS, Grouping, labelled_table
 from pytest_hevval.data import kernel_cache
 from pytest_hevval.errors import DegenerateSignalError, HevvalError
 from tests.conftest import _kernel_unavailable, needs_kernel

@@ -1,4 +1,4 @@
-"""λ1–λ6 over time windows and operating regions (pytest_hevval.core.local)."""
+"""λ1–λ6 over time windows and operating regions (pytest_hevval.core.groups)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval.core.characteristics import CHARACTERISTICS, signal_characteristics
-from pytest_hevval.core.local import (
+from pytest_hevval.core.groups import (
     LOCAL_CHARACTERISTICS,
     MIN_GROUP_SAMPLES,
     PHASES,
@@ -24,7 +24,7 @@ from pytest_hevval.core.local import (
     segment_sums,
 )
 from pytest_hevval.errors import DegenerateSignalError
-from pytest_hevval.results.local import concentration_sentence
+from pytest_hevval.results.local_tables import concentration_sentence
 from tests.strategies import signal_pairs
 
 

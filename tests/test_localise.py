@@ -11,7 +11,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_hevval import cli
-from pytest_hevval.core.local import (
+from pytest_hevval.core.groups import (
     Grouping,
     SumTable,
     grouped_tables,
@@ -180,8 +180,8 @@ def test_a_table_cannot_be_changed_by_its_reader(tmp_path: Path) -> None:
 
 
 def test_building_the_tables_leaves_the_callers_sums_writable() -> None:
-    from pytest_hevval.core.local import Sums
-    from pytest_hevval.results.local import GroupTable
+    from pytest_hevval.core.groups import Sums
+    from pytest_hevval.results.local_tables import GroupTable
 
     table = np.zeros((2, 10))
     table[:, 0] = [40, 50]

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from pytest_hevval.cli import main
 from pytest_hevval.errors import SpecError
-from pytest_hevval.history.runtime import runtime_change_lines, runtime_changes
+from pytest_hevval.history.runtime_changes import runtime_change_lines, runtime_changes
 from pytest_hevval.results.runtime import (
     RUNTIME_MIN_GROWTH_S,
     RUNTIME_SLOWDOWN,

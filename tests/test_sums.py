@@ -17,7 +17,7 @@ from pytest_hevval.core.characteristics import (
     power_of_two_scale,
     signal_characteristics,
 )
-from pytest_hevval.core.local import LOCAL_CHARACTERISTICS
+from pytest_hevval.core.groups import LOCAL_CHARACTERISTICS
 from pytest_hevval.core.sums import MIN_GROUP_SAMPLES, Sums, _coefficient, lambdas_from_sums
 from pytest_hevval.errors import DegenerateSignalError
 from tests.strategies import signal_pairs

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.signal import lfilter
 
 from pytest_hevval.core.characteristics import signal_characteristics
-from pytest_hevval.core.local import SUM_COLUMNS, SumTable, group_lambdas, labelled_table
+from pytest_hevval.core.groups import SUM_COLUMNS, SumTable, group_lambdas, labelled_table
 from pytest_hevval.core.uncertainty import (
     FINE_BLOCKS,
     MAX_BLOCKS,

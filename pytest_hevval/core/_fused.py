@@ -399,7 +399,7 @@ _SHORT_RUN = 16
 
 @numba.njit(cache=True, fastmath=_GROUPED_FAST, inline="always")
 def _add_terms(sums, ri, si, r_before, r_after, s_before, s_after, shift):  # type: ignore[no-untyped-def]
-    """``sums`` plus one sample's ``core.local.SUM_COLUMNS`` but the count."""
+    """``sums`` plus one sample's ``core.groups.SUM_COLUMNS`` but the count."""
     a1, a2, a3, a4, a5, a6, a7, a8, a9 = sums
     e = ri - si
     d = e - shift
@@ -422,7 +422,7 @@ def _add_terms(sums, ri, si, r_before, r_after, s_before, s_after, shift):  # ty
 
 @numba.njit(cache=True, fastmath=_GROUPED_FAST)
 def _grouped_span(r, s, lo, hi, shift, starts, stops, run_group, k, sums):  # type: ignore[no-untyped-def]
-    """Adds the ``core.local.SUM_COLUMNS`` of the samples in [lo, hi) to their groups' rows
+    """Adds the ``core.groups.SUM_COLUMNS`` of the samples in [lo, hi) to their groups' rows
     of ``sums``, run by run from run ``k`` (the first that ends after ``lo``); returns the
     first run that ends after ``hi``.
 
@@ -481,7 +481,7 @@ def _grouped_span(r, s, lo, hi, shift, starts, stops, run_group, k, sums):  # ty
 
 @numba.njit(cache=True, nogil=True)
 def grouped_sums(r, s, starts, stops, run_group, shift, chunk, sums):  # type: ignore[no-untyped-def]
-    """Adds every group's ``core.local.SUM_COLUMNS`` to its row of ``sums``, chunk by chunk
+    """Adds every group's ``core.groups.SUM_COLUMNS`` to its row of ``sums``, chunk by chunk
     as the main pass does (see ``_grouped_span``)."""
     n = r.shape[0]
     k = np.int64(0)  # not a literal 0 (see the module docstring)
@@ -616,7 +616,7 @@ def _head_shift(r, s, shift_samples):  # type: ignore[no-untyped-def]
 
 @numba.njit(cache=True, nogil=True)
 def fine_block_sums(r, s, fine, starts, stops, run_group, shift_samples, out):  # type: ignore[no-untyped-def]
-    """One signal's ``core.local.SUM_COLUMNS`` over runs of ``fine`` samples (the fine blocks
+    """One signal's ``core.groups.SUM_COLUMNS`` over runs of ``fine`` samples (the fine blocks
     ``starts``, ``stops``, ``run_group``, given as the windows' runs are, so the loops compile
     once for both) into ``out`` (rows, 10); returns (1, shift, ρ), or (scale, 0, 0) when the
     values need a power-of-two scale: the caller then sums copies scaled by it

@@ -107,7 +107,7 @@ class SignalCharacteristics:
     max_lag_s: float = math.nan
     lag_at_bound: bool = False
     lag_search: LagSearch | None = field(default=None, compare=False, repr=False)
-    #: The sums of the groups of ``group_runs`` (see ``core.local.grouped_tables``) when the
+    #: The sums of the groups of ``group_runs`` (see ``core.groups.grouped_tables``) when the
     #: compiled main pass took them along, else None.
     group_sums: FloatArray | None = field(default=None, compare=False, repr=False)
     #: The whole record's sums, from which the moment-based standard metrics are scored.
@@ -583,7 +583,7 @@ def signal_characteristics(
     workers:
         Threads for long signals; default ``min(2, os.cpu_count())``.
     group_runs:
-        Groups of samples (``core.local.Grouping.runs``) whose sums the compiled main pass
+        Groups of samples (``core.groups.Grouping.runs``) whose sums the compiled main pass
         takes along while each chunk is in cache, into ``group_sums`` of the result.
 
     Returns

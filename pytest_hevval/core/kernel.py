@@ -670,7 +670,7 @@ def interpolate_columns(
 
 class GroupRuns(NamedTuple):
     """A record's samples in runs of one group, in sample order, as the compiled passes take
-    them (``core.local.Grouping.runs``), and the shift of the error sums."""
+    them (``core.groups.Grouping.runs``), and the shift of the error sums."""
 
     starts: npt.NDArray[np.int64]
     stops: npt.NDArray[np.int64]
@@ -683,7 +683,7 @@ class GroupRuns(NamedTuple):
 def grouped_sums(
     module: ModuleType, ref: AnyFloatArray, sim: AnyFloatArray, runs: GroupRuns
 ) -> npt.NDArray[np.float64]:
-    """The (groups, 10) table of ``core.local.SUM_COLUMNS`` of every group of ``runs``, in one
+    """The (groups, 10) table of ``core.groups.SUM_COLUMNS`` of every group of ``runs``, in one
     sequential compiled pass: the table the main pass gives when it sums the groups.
 
     Sequential per signal, so the table is repeatable bit for bit; signals run side by side on

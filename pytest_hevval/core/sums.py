@@ -2,14 +2,14 @@
 are written.
 
 The whole record (:func:`~pytest_hevval.core.characteristics.signal_characteristics`), its
-windows, segments and region cells (:func:`~pytest_hevval.core.local.group_lambdas`) and the
+windows, segments and region cells (:func:`~pytest_hevval.core.groups.group_lambdas`) and the
 bootstrap replicates (:func:`~pytest_hevval.core.uncertainty.sums_lambdas`) all reduce a signal
 pair to the same few sums (n, Σe, Σ|e|, Σe², Σ(e − ē)², Σref·sim, Σref², Σsim², Σref, Σsim and
 the count of matching derivative signs), held in one :class:`Sums`, and take λ1–λ6 from it with
 :func:`lambdas_from_sums`. The standard metrics' moments
 (:class:`~pytest_hevval.core.standard._moments.Moments`) are built on the whole record's
 :class:`Sums` too. Sums that add up across groups, whose error sums are taken about a shift,
-are stored as a table (:class:`~pytest_hevval.core.local.SumTable`, columns
+are stored as a table (:class:`~pytest_hevval.core.groups.SumTable`, columns
 :data:`SUM_COLUMNS`), which :meth:`Sums.of_table` reads.
 
 The function works elementwise on either kind of operand and keeps the arithmetic of each:
@@ -58,7 +58,7 @@ MIN_GROUP_SAMPLES = 3
 _TINY = 1e-300
 
 
-#: Columns of a table of additive sums (:class:`~pytest_hevval.core.local.SumTable`), one row
+#: Columns of a table of additive sums (:class:`~pytest_hevval.core.groups.SumTable`), one row
 #: per group. Every column adds up across groups; the error sums are taken about a shift near
 #: the mean error (shifted sums), so the spread Σ(e − ē)² of any union of groups is
 #: S2 − S1²/n without losing it to a large bias.

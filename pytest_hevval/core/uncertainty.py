@@ -5,7 +5,7 @@ fewer independent samples than rows, and an interval that treats samples as inde
 too narrow. A block bootstrap keeps that dependence: the record is cut into non-overlapping
 blocks of ``b`` samples, a replicate record is made of blocks drawn with replacement, and its
 characteristics are computed again. Because λ1–λ6 are ratios of sums (see
-:mod:`pytest_hevval.core.local`), a replicate needs only the blocks' sums, not the samples:
+:mod:`pytest_hevval.core.groups`), a replicate needs only the blocks' sums, not the samples:
 each signal is read once more, into at most :data:`FINE_BLOCKS` rows of sums, and every
 replicate is then a weighted sum of those rows.
 
@@ -46,7 +46,7 @@ import numpy.typing as npt
 from ..errors import DegenerateSignalError
 from . import kernel
 from .characteristics import power_of_two_scale
-from .local import SHIFT_SAMPLES, SUM_COLUMNS, SumTable, labelled_table
+from .groups import SHIFT_SAMPLES, SUM_COLUMNS, SumTable, labelled_table
 from .sums import Sums, lambdas_from_sums
 
 __all__ = [
@@ -481,7 +481,7 @@ def sums_lambdas(
     read as :class:`~pytest_hevval.core.sums.Sums` (``Sums.of_columns``, as
     :meth:`SumTable.sums` reads a table) and λ from them by
     :func:`~pytest_hevval.core.sums.lambdas_from_sums`, as
-    :func:`~pytest_hevval.core.local.group_lambdas` takes them.
+    :func:`~pytest_hevval.core.groups.group_lambdas` takes them.
 
     ``columns`` maps the names of ``SUM_COLUMNS`` to arrays of one shape (``ref_sum`` and
     ``sim_sum`` only for ``pearson``), e.g. (replicates, signals); ``shift`` and

@@ -20,7 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..core import kernel
-from ..core.local import runs
+from ..core.groups import runs
 from ..errors import DataError
 from .record import Record
 

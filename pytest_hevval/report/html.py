@@ -19,7 +19,7 @@ from typing import Any
 from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
-from ..results.local import LocalFailure
+from ..results.local_tables import LocalFailure
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg

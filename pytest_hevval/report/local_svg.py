@@ -1,7 +1,8 @@
 """Where and when, drawn: λ per time window as a strip, λ, Φ and coverage per region cell.
 
-Plain SVG from the typed result (the signal's :class:`~pytest_hevval.results.local.LocalResult`)
-and the spec's grid of cells, like :mod:`.svg`; every piece of text is escaped.
+Plain SVG from the typed result (the signal's
+:class:`~pytest_hevval.results.local_tables.LocalResult`) and the spec's grid of cells, like
+:mod:`.svg`; every piece of text is escaped.
 """
 
 from __future__ import annotations

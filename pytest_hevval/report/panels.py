@@ -26,7 +26,7 @@ SignalKey = tuple[str, str]
 class SignalPanels:
     """Each signal's diagnosis payload and history trend, by (spec key, signal path)."""
 
-    #: Diagnosis payloads (:func:`pytest_hevval.report.diagnosis.payload`, or why a signal
+    #: Diagnosis payloads (:func:`pytest_hevval.report.diagnosis_text.payload`, or why a signal
     #: could not be diagnosed), as :func:`pytest_hevval.publish.diagnosis_panels` keys them.
     diagnoses: Mapping[SignalKey, Mapping[str, Any]] = field(default_factory=dict)
     #: The recorded runs that hold each signal, oldest first.

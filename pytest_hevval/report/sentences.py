@@ -13,7 +13,7 @@ from ..core.uncertainty import value_text
 from ..defaults import UNCERTAINTY_SIGMA
 from ..results.campaign import CampaignVerdict, campaign_of, campaign_verdicts
 from ..results.codec import number_or_nan
-from ..results.local import NAMED_GROUPS, LocalFailure
+from ..results.local_tables import NAMED_GROUPS, LocalFailure
 from ..results.measurement import ErrorCheck
 from ..results.spec_result import Failure, SignalResult, SpecResult
 from ..results.verdict import RunVerdict

@@ -25,7 +25,7 @@ from .codec import (
     json_numbers,
     lambdas_or_none,
 )
-from .local import GroupTable, LocalResult
+from .local_tables import GroupTable, LocalResult
 from .runtime import ModelRuntime
 from .spec_result import PHYSICAL_ERRORS, SignalResult, SpecResult
 

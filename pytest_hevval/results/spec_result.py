@@ -16,7 +16,7 @@ from ..core.characteristics import SignalCharacteristics
 from ..core.registry import FUSED_CHARACTERISTICS, describe, order_names
 from ..core.uncertainty import Interval, value_text
 from .codec import interval_bounds, json_number, keyed_lambdas
-from .local import LocalFailure, LocalResult
+from .local_tables import LocalFailure, LocalResult
 from .measurement import ErrorCheck
 from .runtime import ModelRuntime
 from .spec_facts import AlignmentFacts, CampaignFacts, DataSources, LocalGrid

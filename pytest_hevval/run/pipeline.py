@@ -129,7 +129,7 @@ class Run:
         """Score every spec at once (``hevval run``); ``progress`` is called with the number
         of specs done. Specs that cannot be scored are kept as errors, unless none can be:
         then the first error is raised."""
-        from ..report.diagnosis import target_payload
+        from ..report.diagnosis_text import target_payload
         from ..scoring.engine import Evaluation
         from ..scoring.run import run_specs
 
@@ -209,7 +209,7 @@ class Run:
         if evaluation is None or mode == "off" or (mode == "failed" and signal.passed):
             return None
         # Imported here: the diagnosis brings scipy.linalg, which a run without one never needs.
-        from ..report.diagnosis import target_payload
+        from ..report.diagnosis_text import target_payload
         from ..scoring.diagnosis import diagnosis_target
 
         target = diagnosis_target(signal)

@@ -14,7 +14,7 @@ import numpy.typing as npt
 from ..core.residual import Candidate
 from ..data.record import Record
 from ..errors import DataError, HevvalError
-from ..results.diagnosis import candidate_unit
+from ..results.signal_diagnosis import candidate_unit
 from ..spec.expressions import Expression
 from .data_cache import DataCache
 from .engine import Evaluation

@@ -20,7 +20,7 @@ import numpy.typing as npt
 from ..core.registry import FUSED_CHARACTERISTICS
 from ..core.residual import GENERIC_KINDS, MIN_SHARE, Candidate, Diagnosis, diagnose_residual
 from ..errors import DataError, HevvalError
-from ..results.diagnosis import SignalDiagnosis, candidate_unit
+from ..results.signal_diagnosis import SignalDiagnosis, candidate_unit
 from ..results.spec_result import SignalResult
 from .candidates import _with_derivatives, candidates_for, declared_unit
 from .engine import Evaluation

@@ -20,7 +20,7 @@ from ..core.tree import iter_nodes
 from ..data import kernel_cache
 from ..data.align import AlignedData
 from ..errors import HevvalError
-from ..results.diagnosis import SignalDiagnosis
+from ..results.signal_diagnosis import SignalDiagnosis
 from ..results.spec_result import SpecResult
 from ..spec.model import Spec
 from .align_spec import align_spec, labels_of

@@ -15,7 +15,7 @@ from ..core.characteristics import SignalCharacteristics, signal_characteristics
 from ..core.registry import FUSED_CHARACTERISTICS
 from ..core.residual import PREDICTED_CHARACTERISTICS, Candidate, Diagnosis, Effect
 from ..errors import DataError, ExpressionError, SpecError
-from ..results.diagnosis import SignalAbove
+from ..results.signal_diagnosis import SignalAbove
 from ..spec.expressions import parse_signal
 from .candidates import _full_reference, _on_grid
 from .engine import Evaluation

@@ -2,8 +2,8 @@
 
 The samples of a spec's record are labelled once (time window × driving phase × conditions ×
 region cell, one *fine* label per sample, shared by every signal) and sorted into the groups
-they visit (:class:`pytest_hevval.core.local.Grouping`); each signal's sums over them (windows,
-phases, conditions, cells) come from one pass of :func:`pytest_hevval.core.local.grouped_tables`
+they visit (:class:`pytest_hevval.core.groups.Grouping`); each signal's sums over them (windows,
+phases, conditions, cells) come from one pass of :func:`pytest_hevval.core.groups.grouped_tables`
 on its scoring thread (:func:`local_sums`), and the λ of every signal's tables from one
 vectorised call after the pass (:func:`local_results`). The tables, the
 concentration of the error and the window and cell gates end up in each signal's result; the
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..core.local import (
+from ..core.groups import (
     LOCAL_CHARACTERISTICS,
     PHASES,
     Grouping,
@@ -34,7 +34,7 @@ from ..core.local import (
 )
 from ..core.tree import global_metric_arrays
 from ..results.codec import json_numbers
-from ..results.local import GroupTable, LocalFailure, LocalResult, concentration_sentence
+from ..results.local_tables import GroupTable, LocalFailure, LocalResult, concentration_sentence
 from ..results.spec_facts import LocalGrid, RegionGrid
 from ..spec.model import LocalGate, SignalSpec, Spec
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 from ..core.tree import ScoredNode, error_origins, global_metric, iter_nodes
 from ..core.uncertainty import BlockSums
 from ..data.align import AlignedData
-from ..results.local import LocalFailure
+from ..results.local_tables import LocalFailure
 from ..results.runtime import ModelRuntime
 from ..results.spec_facts import (
     AlignmentFacts,

@@ -22,7 +22,7 @@ from ..core.uncertainty import BlockSums, block_sums_many, block_sums_stacked
 from ..core.upooling import u_distribution_of
 from ..data.align import AlignedData
 from ..errors import CharacteristicError, DegenerateSignalError, HevvalError
-from ..results.local import LocalResult
+from ..results.local_tables import LocalResult
 from ..spec.model import SignalSpec, Spec
 from .local import Labels, LocalSums, local_results, local_sums
 from .signal_arrays import SignalArrays, Signature

@@ -32,7 +32,7 @@ def check_local_scored(
     context: Context, table: Mapping[str, float], node: SignalSpec | None, key: str
 ) -> None:
     """Windows and cells are scored on λ1–λ6 only: λ7 and whole-record metrics have no part."""
-    from ..core.local import LOCAL_CHARACTERISTICS
+    from ..core.groups import LOCAL_CHARACTERISTICS
 
     for name in table:
         if name not in LOCAL_CHARACTERISTICS:

@@ -10,8 +10,8 @@ from collections.abc import Collection, Sequence
 import numpy as np
 import numpy.typing as npt
 
+from ..groups import concentration, fixed_windows, group_lambdas, segment_sums
 from ..importance import explained_sums
-from ..local import concentration, fixed_windows, group_lambdas, segment_sums
 from ..stats import FloatArray, dot
 from .candidates import _Scale, _Series
 from .findings import Effect, Localisation

@@ -202,7 +202,7 @@ class Response:
 
 @dataclass(frozen=True)
 class Localisation:
-    """Where in time the residual concentrates (:func:`pytest_hevval.core.local.concentration`).
+    """Where in time the residual concentrates (:func:`pytest_hevval.core.groups.concentration`).
 
     Attributes
     ----------
@@ -226,7 +226,8 @@ class Localisation:
 @dataclass(frozen=True)
 class Note:
     """Something the diagnosis dropped or changed, and why: what happened and the names and
-    numbers it concerns, for the report to word (:func:`pytest_hevval.report.diagnosis.note_text`).
+    numbers it concerns, for the report to word
+    (:func:`pytest_hevval.report.diagnosis_text.note_text`).
 
     Attributes
     ----------

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..core.local import (
+from ..core.groups import (
     HOT_FACTOR,
     MIN_GROUP_SAMPLES,
     Concentration,
@@ -91,7 +91,7 @@ class GroupTable:
         total_sq: float,
         scale: float = 1.0,
     ) -> GroupTable:
-        """``sums`` of samples times ``scale`` (see :class:`~pytest_hevval.core.local.SumTable`);
+        """``sums`` of samples times ``scale`` (see :class:`~pytest_hevval.core.groups.SumTable`);
         ``reference_range`` and the errors kept are in the signal's unit."""
         return cls.many([labels], sums, reference_range, correlation, total_sq, scale)[0]
 
@@ -144,7 +144,7 @@ class GroupTable:
 
     def judged(self, min_samples: int = MIN_GROUP_SAMPLES) -> list[int]:
         """The groups with enough samples to be judged (never fewer than
-        :data:`~pytest_hevval.core.local.MIN_GROUP_SAMPLES`), in order."""
+        :data:`~pytest_hevval.core.groups.MIN_GROUP_SAMPLES`), in order."""
         return [int(k) for k in np.flatnonzero(self.n >= max(min_samples, MIN_GROUP_SAMPLES))]
 
     def to_dict(self) -> dict[str, Any]:

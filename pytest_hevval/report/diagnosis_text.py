@@ -21,7 +21,7 @@ from ..core.residual import (
     Response,
 )
 from ..errors import HevvalError
-from ..results.diagnosis import SignalDiagnosis, candidate_unit
+from ..results.signal_diagnosis import SignalDiagnosis, candidate_unit
 from .sentences import lag_bound_text
 
 __all__ = [
