@@ -19,9 +19,10 @@ from typing import Any
 
 from ..core.uncertainty import Interval
 from ..results.codec import json_number, plain_json
+from ..results.spec_facts import FileData, ModelData
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
-from .model import campaigns_of, model_facts, reference_facts
+from .model import campaigns_of
 
 __all__ = ["EVIDENCE_SCHEMA_VERSION", "RunFacts", "evidence_record", "render_evidence", "schema"]
 
@@ -92,32 +93,32 @@ def _signal(signal: SignalResult) -> dict[str, Any]:
     }
 
 
-def _source(side: Mapping[str, Any] | None) -> dict[str, Any]:
-    side = side or {}
+def _source(side: FileData | None) -> dict[str, Any]:
     return {
-        "path": side.get("path"),
-        "hash": side.get("hash"),
-        "digest": side.get("digest"),
+        "path": side.path if side is not None else None,
+        "hash": side.hash if side is not None else None,
+        "digest": side.digest if side is not None else None,
     }
 
 
-def _model(model: Mapping[str, Any] | None) -> dict[str, Any]:
-    model = model or {}
-    out: dict[str, Any] = {"kind": model.get("kind", "file")}
-    out.update({key: model[key] for key in _MODEL_KEYS if key in model})
+def _model(model: ModelData | None) -> dict[str, Any]:
+    # The record names what the result recorded of its model, in the result's own JSON form.
+    recorded = model.to_dict() if model is not None else {}
+    out: dict[str, Any] = {"kind": recorded.get("kind", "file")}
+    out.update({key: recorded[key] for key in _MODEL_KEYS if key in recorded})
     out.setdefault("params", {})
     return out
 
 
 def _spec(spec: SpecResult) -> dict[str, Any]:
-    model = _model(model_facts(spec))
+    model = _model(spec.data.model)
     out: dict[str, Any] = {
         "key": spec.spec,
         "name": spec.name,
         "spec_sha256": spec.spec_hash or None,
         "recording": spec.recording,
         "role": spec.role,
-        "reference": _source(reference_facts(spec)),
+        "reference": _source(spec.data.reference),
         "model": model,
         "verdict": {
             "passed": spec.passed,

@@ -40,9 +40,7 @@ __all__ = [
     "is_finite_number",
     "margin",
     "measurement_lines",
-    "model_facts",
     "ordered_signals",
-    "reference_facts",
     "region_grid",
     "signal_order",
     "standard_metric_rows",
@@ -404,26 +402,14 @@ def campaigns_of(
 
 
 # -- the result's facts, as the templates and tables read them ---------------------------------
-# The facts are typed (results/spec_facts.py); the HTML template, the evidence record and the
-# trace read them by their JSON keys, so each accessor hands over that one part's JSON form.
+# The facts are typed (results/spec_facts.py); the HTML template and report.md read them by
+# their JSON keys, so each accessor hands a template that one part's JSON form.
 
 
 def data_quality(spec: SpecResult) -> Mapping[str, Any] | None:
     """The data-quality findings on the spec's measurement (``action``, ``findings``)."""
     quality = spec.data.quality
     return quality.to_dict() if quality is not None else None
-
-
-def model_facts(spec: SpecResult) -> Mapping[str, Any]:
-    """What the result records of its model: ``kind``, its path or callable, its digest."""
-    found = spec.data.model
-    return found.to_dict() if found is not None else {}
-
-
-def reference_facts(spec: SpecResult) -> Mapping[str, Any]:
-    """What the result records of its measured data file: ``path``, ``hash``, ``digest``."""
-    found = spec.data.reference
-    return found.to_dict() if found is not None else {}
 
 
 def alignment_of(spec: SpecResult) -> Mapping[str, Any]:

@@ -13,7 +13,7 @@ from ..results.campaign import CampaignVerdict
 from ..results.runtime import ModelRuntime
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
-from .model import campaigns_of, model_facts
+from .model import campaigns_of
 from .sentences import (
     failure_lines,
     failure_text,
@@ -138,7 +138,8 @@ def runtime_text(runtime: ModelRuntime | None, model_kind: object) -> str:
 
 def runtime_of(spec: SpecResult) -> tuple[ModelRuntime | None, object]:
     """A spec result's runtime and its model's kind, for :func:`runtime_text`."""
-    return spec.runtime, model_facts(spec).get("kind")
+    model = spec.data.model
+    return spec.runtime, model.kind if model is not None else None
 
 
 def runtime_report(result: SpecResult, line: int) -> str:

@@ -22,8 +22,8 @@ from ..core.uncertainty import Interval, value_text
 from ..defaults import requirement_id_problem
 from ..errors import HevvalError
 from ..files import read_input
+from ..results.spec_facts import FileData, ModelData
 from ..results.spec_result import SpecResult
-from .model import model_facts, reference_facts
 from .text import _md
 
 __all__ = [
@@ -101,16 +101,18 @@ class TraceRow:
         }
 
 
-def _model_text(model: Mapping[str, Any]) -> str | None:
-    if model.get("callable"):
-        return f"callable {model['callable']}"
-    path = model.get("path")
-    return None if path is None else f"{model.get('kind', 'file')} {path}"
+def _model_text(model: ModelData | None) -> str | None:
+    if model is None:
+        return None
+    if model.callable:
+        return f"callable {model.callable}"
+    return None if model.path is None else f"{model.kind or 'file'} {model.path}"
 
 
-def _digest_text(source: Mapping[str, Any]) -> str | None:
-    digest = source.get("digest")
-    return None if not digest else f"{source.get('hash', '')}:{digest}".lstrip(":")
+def _digest_text(source: FileData | None) -> str | None:
+    if source is None or not source.digest:
+        return None
+    return f"{source.hash or ''}:{source.digest}".lstrip(":")
 
 
 def trace_rows(
@@ -138,7 +140,7 @@ def trace_rows(
                 if requirement not in whole:
                     by_requirement.setdefault(str(requirement), []).append(signal.path)
         signals = {s.path: s for s in spec.signals}
-        reference = reference_facts(spec)
+        reference = spec.data.reference
         interval = spec.phi_interval
         facts: dict[str, Any] = {
             "spec": spec.name,
@@ -147,9 +149,9 @@ def trace_rows(
             "phi_low": interval.low if interval is not None else None,
             "phi_high": interval.high if interval is not None else None,
             "model_version": versions.get(spec.spec, model_version),
-            "reference": reference.get("path"),
+            "reference": reference.path if reference is not None else None,
             "reference_digest": _digest_text(reference),
-            "model": _model_text(model_facts(spec)),
+            "model": _model_text(spec.data.model),
         }
         for requirement in whole:
             rows.append(
