@@ -20,6 +20,7 @@ from .. import __version__
 from ..core.registry import describe
 from ..errors import MissingExtraError
 from ..results.local_tables import LocalFailure
+from ..results.spec_facts import RegionGrid
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from . import local_svg, model, plots, svg
@@ -66,7 +67,7 @@ def _signal_view(
     anchors: Mapping[str, str],
     share: svg.PathShare,
     panels: SignalPanels,
-    region_grid: Mapping[str, Any] | None,
+    region_grid: RegionGrid | None,
 ) -> dict[str, Any]:
     diagnosis = panels.diagnosis(result, signal)
     history = panels.history(result, signal)
@@ -94,7 +95,7 @@ def _signal_view(
     }
 
 
-def _local_view(signal: SignalResult, region_grid: Mapping[str, Any] | None) -> dict[str, Any]:
+def _local_view(signal: SignalResult, region_grid: RegionGrid | None) -> dict[str, Any]:
     """Where and when: the window strip, phase and condition tables, the cell heat maps."""
     local = signal.local
     if local is None:
@@ -167,9 +168,9 @@ def _spec_view(
         "tree": tree,
         "signals": signals,
         "failing": [v for v in signals if v["failed"]],
-        "region_min_samples": region_grid.get("min_samples") if region_grid else None,
+        "region_min_samples": region_grid.min_samples if region_grid else None,
         "region_phi": (
-            local_svg.heatmap_svg(region_grid, region_grid.get("phi", []), "Φ per cell")
+            local_svg.heatmap_svg(region_grid, region_grid.phi, "Φ per cell")
             if region_grid is not None
             else None
         ),
@@ -177,15 +178,15 @@ def _spec_view(
             local_svg.coverage_svg(region_grid) if region_grid is not None else None
         ),
         "region_unvisited": (
-            [region_grid["labels"][_flat(region_grid, i)] for i in region_grid.get("unvisited", [])]
+            [region_grid.labels[_flat(region_grid, i)] for i in region_grid.unvisited]
             if region_grid is not None
             else []
         ),
     }
 
 
-def _flat(region: Mapping[str, Any], index: Sequence[int]) -> int:
-    shape = list(region.get("shape", []))
+def _flat(region: RegionGrid, index: Sequence[int]) -> int:
+    shape = list(region.shape)
     flat = 0
     for size, i in zip(shape, index, strict=True):
         flat = flat * int(size) + int(i)

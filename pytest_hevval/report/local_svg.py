@@ -8,12 +8,13 @@ Plain SVG from the typed result (the signal's
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from html import escape
 from typing import Any
 
 from ..core.registry import describe, order_names
 from ..results.codec import number_or_nan
+from ..results.spec_facts import RegionGrid
 from ..results.spec_result import SignalResult
 
 __all__ = ["coverage_svg", "heatmap_svg", "timeline_svg"]
@@ -95,13 +96,13 @@ def timeline_svg(signal: SignalResult) -> str | None:
     return "".join(parts)
 
 
-def _grid_geometry(region: Mapping[str, Any]) -> tuple[int, int]:
-    shape = [int(v) for v in region.get("shape", [])]
+def _grid_geometry(region: RegionGrid) -> tuple[int, int]:
+    shape = [int(v) for v in region.shape]
     return (shape[0], shape[1]) if len(shape) == 2 else (shape[0] if shape else 0, 1)
 
 
 def _grid_svg(
-    region: Mapping[str, Any],
+    region: RegionGrid,
     fills: Sequence[str],
     texts: Sequence[str],
     tips: Sequence[str],
@@ -111,8 +112,8 @@ def _grid_svg(
     columns, rows = _grid_geometry(region)
     if columns * rows == 0 or len(fills) != columns * rows:
         return None
-    edges = region.get("edges", [])
-    by = [str(v) for v in region.get("by", [])]
+    edges = region.edges
+    by = [str(v) for v in region.by]
     cell_w, cell_h, left, top = 58, 24, 120, 28
     width = left + cell_w * columns + 20
     height = top + cell_h * rows + 44
@@ -160,16 +161,16 @@ def _grid_svg(
 
 
 def heatmap_svg(
-    region: Mapping[str, Any],
+    region: RegionGrid,
     values: Sequence[Any],
     title: str,
     threshold: float | None = None,
     missed: Sequence[str] = (),
 ) -> str | None:
     """A value in [0, 1] per cell (λ or Φ); cells with too few samples grey, misses outlined."""
-    counts = [int(c) for c in region.get("counts", [])]
-    labels = [str(v) for v in region.get("labels", [])]
-    minimum = int(region.get("min_samples", 1))
+    counts = [int(c) for c in region.counts]
+    labels = [str(v) for v in region.labels]
+    minimum = int(region.min_samples)
     numbers = [number_or_nan(v) for v in values]
     if len(numbers) != len(counts):
         return None
@@ -188,10 +189,10 @@ def heatmap_svg(
     return _grid_svg(region, fills, texts, tips, title, outlined)
 
 
-def coverage_svg(region: Mapping[str, Any]) -> str | None:
+def coverage_svg(region: RegionGrid) -> str | None:
     """Samples per cell; cells of the declared space never visited are left white."""
-    counts = [int(c) for c in region.get("counts", [])]
-    labels = [str(v) for v in region.get("labels", [])]
+    counts = [int(c) for c in region.counts]
+    labels = [str(v) for v in region.labels]
     if not counts:
         return None
     top = max(max(counts), 1)

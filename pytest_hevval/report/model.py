@@ -18,6 +18,7 @@ from ..core.registry import describe, order_names, registered_characteristics
 from ..core.uncertainty import Interval
 from ..results.campaign import CampaignVerdict, campaign_verdicts
 from ..results.codec import is_finite_number
+from ..results.spec_facts import RegionGrid
 from ..results.spec_result import SignalResult, SpecResult
 from ..results.verdict import RunVerdict
 from .sentences import failure_sentence, verdict_line
@@ -417,7 +418,6 @@ def alignment_of(spec: SpecResult) -> Mapping[str, Any]:
     return spec.alignment.to_dict()
 
 
-def region_grid(spec: SpecResult) -> Mapping[str, Any] | None:
+def region_grid(spec: SpecResult) -> RegionGrid | None:
     """The spec's grid of operating-region cells (shape, labels, counts, Φ per cell)."""
-    regions = spec.local.regions if spec.local is not None else None
-    return regions.to_dict() if regions is not None else None
+    return spec.local.regions if spec.local is not None else None
