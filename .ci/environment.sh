@@ -7,11 +7,13 @@
 #   marks it complete. pip builds the project from a copy of its sources in DIR/src
 #   (pyproject.toml, README.md, the package): setuptools writes pytest_hevval.egg-info into the
 #   tree it builds, and the README's `pip install -e .` may be building this tree meanwhile.
-# env_test DIR [PYTEST_ARGS...]: installs the project from this tree into DIR/env (editable,
-#   without dependencies: the environment is then the one `pip install -e ".[all,test]"` makes
-#   here) and runs the suite with it: -n 2, a fixed Hypothesis seed, neither the browser test
-#   nor the emulated workflow (.ci/min-versions says why). When DIR/installed is missing it
-#   prints the end of DIR/install.log (where the scripts' `install DIR` form writes) and fails.
+# env_ready DIR: installs the project from this tree into DIR/env (editable, without
+#   dependencies: the environment is then the one `pip install -e ".[all,test]"` makes here)
+#   and prints its versions. When DIR/installed is missing it prints the end of
+#   DIR/install.log (where the scripts' `install DIR` form writes) and fails.
+# env_test DIR [PYTEST_ARGS...]: env_ready, then runs the suite with it: -n 2, a fixed
+#   Hypothesis seed, neither the browser test nor the emulated workflow (.ci/min-versions
+#   says why).
 
 env_install() {
     local dir="$1" python="$2" constraints="${3:-}"
@@ -30,9 +32,8 @@ env_install() {
     touch "$dir/installed"
 }
 
-env_test() {
+env_ready() {
     local dir="$1"
-    shift
     if [ ! -e "$dir/installed" ]; then
         echo "the environment in $dir was not installed; the end of its install log:"
         tail -n 80 "$dir/install.log" 2>/dev/null || echo "(no log: $dir/install.log)"
@@ -44,6 +45,12 @@ import platform, numpy, scipy, pandas, pytest
 print(f"Python {platform.python_version()}, numpy {numpy.__version__}, "
       f"scipy {scipy.__version__}, pandas {pandas.__version__}, pytest {pytest.__version__}")
 PY
+}
+
+env_test() {
+    local dir="$1"
+    shift
+    env_ready "$dir" || return 1
     "$dir/env/bin/python" -m pytest -q -p no:cacheprovider -n 2 --hypothesis-seed=0 \
         -m "not browser and not deployment" "$@"
 }
