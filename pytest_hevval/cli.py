@@ -691,7 +691,12 @@ def _main(argv: Sequence[str] | None) -> int:
         from .core.registry import load_entry_points
 
         load_entry_points()
-        return _dispatch(args)
+        code = _dispatch(args)
+        # What is still buffered is written here, so that a reader that went away while it
+        # waited is handled below as one that left mid-run (at the interpreter's exit, the
+        # failed write would print an ignored BrokenPipeError and exit with 120).
+        sys.stdout.flush()
+        return code
     except HevvalError as exc:
         print(f"hevval {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

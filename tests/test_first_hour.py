@@ -3,6 +3,7 @@ given, one bad spec, the messages they get."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -182,14 +183,23 @@ def test_project_root(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert project_root([str(inner / "a.hevval.yaml")]) == inner
 
 
-def test_a_closed_pipe_ends_hevval_run_without_a_traceback(pytester: pytest.Pytester) -> None:
+@pytest.mark.parametrize("unbuffered", [False, True], ids=["buffered", "unbuffered"])
+def test_a_closed_pipe_ends_hevval_run_without_a_traceback(
+    pytester: pytest.Pytester, unbuffered: bool
+) -> None:
+    """Buffered, as a user's shell runs it, the whole output is written as the run ends; with
+    PYTHONUNBUFFERED, line by line while it runs. Either way the closed pipe is handled."""
     _write(pytester.path, inputs=", inputs: [heater_kw]")
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    if unbuffered:
+        environment["PYTHONUNBUFFERED"] = "1"
     child = subprocess.Popen(
         [sys.executable, "-m", "pytest_hevval", "run", "trip.hevval.yaml", "--details"],
         cwd=pytester.path,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env=environment,
     )
     assert child.stdout is not None
     assert child.stderr is not None
