@@ -119,3 +119,21 @@ def test_paths_are_made_relative_where_the_result_names_files() -> None:
     assert moved["model"]["module_file"] == "rel/bus/model.py"
     campaign = CampaignFacts.from_dict(CAMPAIGN).with_paths(lambda path: f"rel/{path}")
     assert campaign.unused_models == ("rel/exports/B9.csv",)
+
+
+@pytest.mark.parametrize(
+    "data",
+    [
+        FILE_MODEL,
+        CALLABLE_MODEL,
+        {"path": "old.csv", "sha256": "77"},
+        {"path": "unread.csv"},
+        # A callable's JSON names no digest, whatever was set beside it.
+        {**CALLABLE_MODEL, "digest": "ff", "hash": "xxh3_128"},
+    ],
+)
+def test_a_model_s_identity_is_the_one_its_json_names(data: dict[str, Any]) -> None:
+    from pytest_hevval.results.codec import data_identity
+
+    model = ModelData.from_dict(data)
+    assert model.identity == data_identity(model.to_dict())

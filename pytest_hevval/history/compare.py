@@ -24,7 +24,15 @@ from ..results.changes import (
     SpecComparison,
     campaign_changes,
 )
-from ..results.recorded import DATA_SIDES, GroupRows, RecordedRun, RecordedSignal, RecordedSpec
+from ..results.recorded import (
+    DATA_SIDES,
+    GroupRows,
+    RecordedRun,
+    RecordedSignal,
+    RecordedSpec,
+    Side,
+    recorded_specs,
+)
 from ._base import ERROR_FIELDS
 
 __all__ = ["campaign_change_lines", "compare", "local_changes"]
@@ -34,9 +42,6 @@ __all__ = ["campaign_change_lines", "compare", "local_changes"]
 LOCAL_CHANGE = 0.10
 #: Groups with fewer samples on either side are not compared.
 LOCAL_MIN_SAMPLES = REGION_MIN_SAMPLES
-
-#: A run to compare: a recorded run, or results of the current run.
-Side = RecordedRun | Sequence[RecordedSpec]
 
 
 def local_changes(
@@ -80,10 +85,6 @@ def campaign_change_lines(comparison: Comparison) -> list[str]:
     ]
 
 
-def _specs(side: Side) -> Sequence[RecordedSpec]:
-    return side.specs if isinstance(side, RecordedRun) else side
-
-
 def _label(side: Side, default: str) -> str:
     if isinstance(side, RecordedRun) and side.model_version:
         return side.model_version
@@ -106,8 +107,8 @@ def compare(
     written as a new spec file (``trip-v1`` → ``trip-v2``) is compared with the one before.
     Signals are matched by tree path.
     """
-    before_specs = _by_key(_specs(baseline))
-    after_specs = _by_key(_specs(current))
+    before_specs = _by_key(recorded_specs(baseline))
+    after_specs = _by_key(recorded_specs(current))
     pairs = _pair(before_specs, after_specs, pair_single=pair_single)
     compared = [
         _compare_spec(key, before_specs[before_key], after_specs[key], before_key, matched_by)

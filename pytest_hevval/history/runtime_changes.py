@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..defaults import split_key
-from ..results.recorded import RecordedRun, RecordedSpec
+from ..results.recorded import RecordedSpec, Side, recorded_specs
 from ..results.runtime import RUNTIME_MIN_GROWTH_S, RUNTIME_SLOWDOWN, ModelRuntime
 
 __all__ = ["RuntimeChange", "runtime_change_lines", "runtime_changes"]
@@ -74,12 +74,10 @@ def _runtimes(specs: Sequence[RecordedSpec]) -> dict[str, dict[str, ModelRuntime
     return out
 
 
-def runtime_changes(
-    before: Sequence[RecordedSpec] | RecordedRun, after: Sequence[RecordedSpec] | RecordedRun
-) -> list[RuntimeChange]:
+def runtime_changes(before: Side, after: Side) -> list[RuntimeChange]:
     """Each spec file's model runtime in ``before`` and ``after``. With one timed spec file on
     each side under different names (trip-v1 → trip-v2), those two are compared."""
-    old, new = _runtimes(_specs(before)), _runtimes(_specs(after))
+    old, new = _runtimes(recorded_specs(before)), _runtimes(recorded_specs(after))
     pairs = [(name, old[name], new[name]) for name in new if name in old]
     if not pairs and len(old) == len(new) == 1:
         (name_old, runs_old), (name_new, runs_new) = (
@@ -112,10 +110,6 @@ def runtime_changes(
             )
         )
     return changes
-
-
-def _specs(side: Sequence[RecordedSpec] | RecordedRun) -> Sequence[RecordedSpec]:
-    return side.specs if isinstance(side, RecordedRun) else side
 
 
 def _factor(simulated: float, wall: float) -> float:

@@ -21,6 +21,7 @@ __all__ = [
     "checked_number",
     "data_identity",
     "dumps",
+    "finite_bounds",
     "interval_bounds",
     "interval_table",
     "is_finite_number",
@@ -114,13 +115,18 @@ def lambdas_or_none(raw: Any) -> dict[str, float | None]:
         return {}
 
 
+def finite_bounds(low: Any, high: Any) -> tuple[float, float] | None:
+    """(low, high) as floats; ``None`` where either is not a finite number (unknown)."""
+    low, high = json_number(low), json_number(high)
+    return None if low is None or high is None else (low, high)
+
+
 def interval_bounds(raw: Any) -> tuple[float, float] | None:
     """(low, high) of a result's ``{"low": …, "high": …}`` interval; ``None`` where it is
     missing or either bound is not a finite number (``null``: unknown)."""
     if not isinstance(raw, Mapping):
         return None
-    low, high = json_number(raw.get("low")), json_number(raw.get("high"))
-    return None if low is None or high is None else (low, high)
+    return finite_bounds(raw.get("low"), raw.get("high"))
 
 
 def interval_table(raw: Any) -> dict[str, tuple[float, float]]:

@@ -19,6 +19,7 @@ from typing import Any
 
 from .codec import (
     data_identity,
+    finite_bounds,
     interval_bounds,
     interval_table,
     json_number,
@@ -36,6 +37,8 @@ __all__ = [
     "RecordedRun",
     "RecordedSignal",
     "RecordedSpec",
+    "Side",
+    "recorded_specs",
     "spec_key",
 ]
 
@@ -51,7 +54,11 @@ Interval = tuple[float, float]
 
 def spec_key(spec: Mapping[str, Any]) -> str:
     """Identity of a spec's JSON result across runs: its file path when known, else its name."""
-    key = spec.get("spec") or spec.get("name")
+    return _key(spec.get("spec"), spec.get("name"))
+
+
+def _key(path: Any, name: Any) -> str:
+    key = path or name
     return str(key) if key is not None else "?"
 
 
@@ -142,7 +149,7 @@ class RecordedSignal:
             intervals={
                 name: bounds
                 for name, interval in signal.intervals.items()
-                if (bounds := _bounds(interval.low, interval.high)) is not None
+                if (bounds := finite_bounds(interval.low, interval.high)) is not None
             },
             errors={name: json_number(measured[name]) for name in PHYSICAL_ERRORS},
             passed=signal.passed,
@@ -164,11 +171,6 @@ class RecordedSignal:
             passed=_flag(raw.get("passed")),
             local=_local_json(raw.get("local")),
         )
-
-
-def _bounds(low: float, high: float) -> Interval | None:
-    a, b = json_number(low), json_number(high)
-    return None if a is None or b is None else (a, b)
 
 
 @dataclass(frozen=True)
@@ -195,19 +197,20 @@ class RecordedSpec:
 
     @classmethod
     def of(cls, result: SpecResult) -> RecordedSpec:
-        sources = {"reference": result.data.reference, "model": result.data.model}
         return cls(
-            key=result.spec or result.name or "?",
+            key=_key(result.spec, result.name),
             name=result.name or None,
             phi=json_number(result.phi),
             phi_interval=None
             if result.phi_interval is None
-            else _bounds(result.phi_interval.low, result.phi_interval.high),
+            else finite_bounds(result.phi_interval.low, result.phi_interval.high),
             passed=result.passed,
             signals=tuple(RecordedSignal.of(signal) for signal in result.signals),
             data={
-                side: data_identity(found.to_dict())
-                for side, found in sources.items()
+                side: found.identity
+                for side, found in zip(
+                    DATA_SIDES, (result.data.reference, result.data.model), strict=True
+                )
                 if found is not None
             },
             runtime=result.runtime,
@@ -291,6 +294,15 @@ class RecordedRun:
         started = self.started_utc or ""
         shown = f"commit {self.commit[:12]}, " if self.commit else ""
         return f"{self.model_version} ({shown}{started[:10]} {started[11:16]} UTC)"
+
+
+#: A run to compare: a recorded run, or the results of the run in hand.
+Side = RecordedRun | Sequence[RecordedSpec]
+
+
+def recorded_specs(side: Side) -> Sequence[RecordedSpec]:
+    """The spec results of a run to compare."""
+    return side.specs if isinstance(side, RecordedRun) else side
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,13 @@ def _present(pairs: Iterable[tuple[str, Any]]) -> dict[str, Any]:
     return {key: value for key, value in pairs if value is not None}
 
 
+def _content_identity(
+    hash: str | None, digest: str | None, sha256: str | None
+) -> tuple[str, str] | None:
+    """(algorithm, digest) of a file's content, as its JSON form names it; None without one."""
+    return data_identity(_present(zip(_FILE_KEYS[1:], (hash, digest, sha256), strict=True)))
+
+
 def _str_or_none(value: Any) -> str | None:
     return None if value is None else str(value)
 
@@ -65,9 +72,7 @@ class FileData:
     @property
     def identity(self) -> tuple[str, str] | None:
         """(algorithm, digest) of the file's content; None when it has none."""
-        return data_identity(
-            _present(zip(_FILE_KEYS[1:], (self.hash, self.digest, self.sha256), strict=True))
-        )
+        return _content_identity(self.hash, self.digest, self.sha256)
 
     def with_paths(self, relative: Callable[[str], str]) -> FileData:
         return replace(self, path=relative(self.path)) if self.path else self
@@ -126,6 +131,14 @@ class ModelData:
     module_file: str | None = None
     module_sha256: str | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def identity(self) -> tuple[str, str] | None:
+        """(algorithm, digest) of the model file's content; None for a callable (its JSON form
+        names no digest) and for a file without one."""
+        if self.callable is not None:
+            return None
+        return _content_identity(self.hash, self.digest, self.sha256)
 
     def with_paths(self, relative: Callable[[str], str]) -> ModelData:
         return replace(
